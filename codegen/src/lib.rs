@@ -1,0 +1,1 @@
+//! Code generator (work in progress).
