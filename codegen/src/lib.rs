@@ -1,1 +1,214 @@
-//! Code generator (work in progress).
+//! Generates Rust message types from a Paparazzi `messages.xml`.
+//!
+//! Pipeline: XML parser -> typed, validated [`Protocol`] model -> emitter -> one Rust
+//! source file that a crate `include!`s. The generated code is `no_std`, allocation-free
+//! and builds on the [`pprz_messages`] runtime crate: per message a struct with typed
+//! fields implementing [`pprz_messages::Message`] and [`pprz_messages::Decode`], per
+//! class an `AnyMessage` enum that decodes by id, enums for `values` attributes, and a
+//! `MESSAGES` descriptor table for generic tools.
+//!
+//! # From a `build.rs` (as prost-build or mavlink-bindgen are used)
+//!
+//! ```toml
+//! [dependencies]
+//! pprz-messages = "0.1"
+//! [build-dependencies]
+//! pprz-codegen = { version = "0.1", default-features = false }
+//! ```
+//!
+//! ```no_run
+//! // build.rs (body of `fn main`)
+//! if let Err(e) = pprz_codegen::Generator::new("messages.xml")
+//!     .classes(["telemetry", "datalink"])   // optional: only what the firmware uses
+//!     .write_to_out_dir("pprz_messages.rs")
+//! {
+//!     eprintln!("{e}");
+//!     std::process::exit(1);
+//! }
+//! ```
+//!
+//! ```ignore
+//! // src/lib.rs or main.rs
+//! pub mod messages {
+//!     include!(concat!(env!("OUT_DIR"), "/pprz_messages.rs"));
+//! }
+//! ```
+//!
+//! Generating to a string, e.g. for a test:
+//!
+//! ```
+//! let xml = r#"<protocol><msg_class name="telemetry" id="1">
+//!   <message name="DL_VALUE" id="31" priority="192">
+//!     <field name="index" type="uint8"/><field name="value" type="float"/>
+//!   </message></msg_class></protocol>"#;
+//! let code = pprz_codegen::Generator::from_str("inline.xml", xml).generate().unwrap();
+//! assert!(code.contains("pub struct DlValue"));
+//! ```
+//!
+//! Errors name the file, line, message and field:
+//!
+//! ```
+//! let xml = r#"<protocol><msg_class name="telemetry" id="1">
+//!   <message name="BAD" id="1"><field name="x" type="uint9"/></message>
+//! </msg_class></protocol>"#;
+//! let err = pprz_codegen::Generator::from_str("bad.xml", xml).generate().unwrap_err();
+//! assert!(err.to_string().starts_with("error: bad.xml:2:30: message BAD, field x: unknown type `uint9`"));
+//! ```
+//!
+//! A command-line front end, `pprz-codegen`, is built with the `cli` feature (default).
+
+#![warn(missing_docs)]
+#![deny(unsafe_code)]
+
+mod emit;
+mod error;
+pub mod model;
+mod names;
+pub mod reference;
+
+use std::path::{Path, PathBuf};
+
+pub use error::{Diagnostic, Error, ErrorKind};
+pub use model::{Class, FieldDef, MessageDef, Protocol, Units};
+
+/// Where the messages come from.
+#[derive(Debug, Clone)]
+enum Source {
+    File(PathBuf),
+    Text { name: String, xml: String },
+}
+
+/// Configures and runs the generator.
+#[derive(Debug, Clone)]
+pub struct Generator {
+    source: Source,
+    units: Option<PathBuf>,
+    classes: Vec<String>,
+    messages: Vec<String>,
+    runtime: String,
+    default_priority: u8,
+}
+
+impl Generator {
+    /// A generator for a `messages.xml` file.
+    pub fn new(messages_xml: impl Into<PathBuf>) -> Self {
+        Self::with_source(Source::File(messages_xml.into()))
+    }
+
+    /// A generator for `messages.xml` text; `name` names it in diagnostics.
+    pub fn from_str(name: &str, xml: &str) -> Self {
+        Self::with_source(Source::Text {
+            name: name.to_owned(),
+            xml: xml.to_owned(),
+        })
+    }
+
+    fn with_source(source: Source) -> Self {
+        Self {
+            source,
+            units: None,
+            classes: Vec::new(),
+            messages: Vec::new(),
+            runtime: "::pprz_messages".to_owned(),
+            default_priority: pprz_messages::priority::DEFAULT,
+        }
+    }
+
+    /// Fills missing `alt_unit_coef` from a Paparazzi `units.xml`.
+    pub fn units(mut self, units_xml: impl Into<PathBuf>) -> Self {
+        self.units = Some(units_xml.into());
+        self
+    }
+
+    /// Generates only these classes (by name or id), plus any [`messages`](Self::messages).
+    pub fn classes<S: Into<String>>(mut self, classes: impl IntoIterator<Item = S>) -> Self {
+        self.classes.extend(classes.into_iter().map(Into::into));
+        self
+    }
+
+    /// Generates only these messages (`NAME`, or `class.NAME` where names repeat across
+    /// classes), plus any [`classes`](Self::classes).
+    pub fn messages<S: Into<String>>(mut self, messages: impl IntoIterator<Item = S>) -> Self {
+        self.messages.extend(messages.into_iter().map(Into::into));
+        self
+    }
+
+    /// Path of the `pprz-messages` crate as seen from the generated code
+    /// (default `::pprz_messages`; e.g. `crate` inside that crate, or a re-export).
+    pub fn runtime_crate(mut self, path: impl Into<String>) -> Self {
+        self.runtime = path.into();
+        self
+    }
+
+    /// Priority of messages without a `priority` attribute (default
+    /// [`pprz_messages::priority::DEFAULT`]).
+    pub fn default_priority(mut self, priority: u8) -> Self {
+        self.default_priority = priority;
+        self
+    }
+
+    /// Reads, validates and selects the message set without generating code.
+    ///
+    /// # Errors
+    /// Every problem of the inputs, with file, line, message and field.
+    pub fn protocol(&self) -> Result<Protocol, Error> {
+        let mut protocol = match &self.source {
+            Source::File(path) => Protocol::from_file(path)?,
+            Source::Text { name, xml } => Protocol::parse(name, xml)?,
+        };
+        if let Some(units) = &self.units {
+            protocol.apply_units(&Units::from_file(units)?);
+        }
+        protocol.select(&self.classes, &self.messages)
+    }
+
+    /// Generates the Rust source.
+    ///
+    /// # Errors
+    /// As [`protocol`](Self::protocol).
+    pub fn generate(&self) -> Result<String, Error> {
+        let protocol = self.protocol()?;
+        Ok(emit::emit(
+            &protocol,
+            &emit::Options {
+                runtime: self.runtime.clone(),
+                default_priority: self.default_priority,
+            },
+        ))
+    }
+
+    /// Generates the Rust source into `path`.
+    ///
+    /// # Errors
+    /// As [`protocol`](Self::protocol), or the file cannot be written.
+    pub fn write_to(&self, path: impl AsRef<Path>) -> Result<(), Error> {
+        let path = path.as_ref();
+        let code = self.generate()?;
+        std::fs::write(path, code).map_err(|e| {
+            Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string()))
+        })
+    }
+
+    /// For a `build.rs`: generates into `$OUT_DIR/<file_name>` and tells Cargo to rerun
+    /// when an input changes.
+    ///
+    /// # Errors
+    /// As [`write_to`](Self::write_to), or `OUT_DIR` is not set (not run by Cargo).
+    pub fn write_to_out_dir(&self, file_name: &str) -> Result<PathBuf, Error> {
+        if let Source::File(path) = &self.source {
+            println!("cargo:rerun-if-changed={}", path.display());
+        }
+        if let Some(units) = &self.units {
+            println!("cargo:rerun-if-changed={}", units.display());
+        }
+        let out_dir = std::env::var_os("OUT_DIR").ok_or_else(|| {
+            Error::single(
+                file_name,
+                ErrorKind::Io("OUT_DIR is not set: call this from a build script".into()),
+            )
+        })?;
+        let path = PathBuf::from(out_dir).join(file_name);
+        self.write_to(&path)?;
+        Ok(path)
+    }
+}

@@ -112,7 +112,7 @@ impl<'a, T: Scalar> VarArray<'a, T> {
     /// A view of little-endian wire bytes; `None` unless the length is a whole number of
     /// elements.
     pub fn from_wire(bytes: &'a [u8]) -> Option<Self> {
-        (bytes.len() % T::SIZE == 0).then_some(Self {
+        bytes.len().is_multiple_of(T::SIZE).then_some(Self {
             repr: Repr::Wire(bytes),
         })
     }
@@ -340,6 +340,28 @@ impl<'a> Reader<'a> {
         Self {
             buf: payload,
             pos: 0,
+        }
+    }
+
+    /// A cursor over a payload that must be exactly `len` bytes long (fixed-size
+    /// messages check their length once, up front).
+    ///
+    /// # Errors
+    /// [`DecodeError::Truncated`] or [`DecodeError::TrailingBytes`] for any other length.
+    #[inline(always)]
+    pub const fn exact(payload: &'a [u8], len: usize) -> Result<Self, DecodeError> {
+        if payload.len() < len {
+            Err(DecodeError::Truncated {
+                needed: len,
+                actual: payload.len(),
+            })
+        } else if payload.len() > len {
+            Err(DecodeError::TrailingBytes {
+                expected: len,
+                actual: payload.len(),
+            })
+        } else {
+            Ok(Self::new(payload))
         }
     }
 

@@ -1,0 +1,203 @@
+//! Generator errors: every problem names the file, line and column, and the message and
+//! field it is about.
+
+use std::fmt;
+
+/// Where a problem is and what it is about.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Diagnostic {
+    /// The input file (as given to the generator).
+    pub file: String,
+    /// 1-based line, 0 when the problem is about the file as a whole.
+    pub line: u32,
+    /// 1-based column, 0 when unknown.
+    pub column: u32,
+    /// The message the problem is in, if any.
+    pub message: Option<String>,
+    /// The field the problem is in, if any.
+    pub field: Option<String>,
+    /// What is wrong.
+    pub kind: ErrorKind,
+}
+
+/// What is wrong with an input.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ErrorKind {
+    /// The file could not be read.
+    Io(String),
+    /// The file is not well-formed XML.
+    Xml(String),
+    /// The root element or a child element is not what the format allows.
+    UnexpectedElement {
+        /// Element found.
+        found: String,
+        /// Element(s) allowed there.
+        expected: &'static str,
+    },
+    /// A required attribute is absent.
+    MissingAttribute {
+        /// Element the attribute belongs to.
+        element: &'static str,
+        /// Attribute name.
+        attribute: &'static str,
+    },
+    /// An attribute that must be a number is not one in range.
+    InvalidNumber {
+        /// Attribute name.
+        attribute: &'static str,
+        /// Value found.
+        value: String,
+        /// Range allowed.
+        expected: &'static str,
+    },
+    /// The `priority` attribute is not an integer in 0..=255.
+    PriorityOutOfRange(String),
+    /// A name is not usable as an identifier (`[A-Za-z_][A-Za-z0-9_]*`).
+    InvalidName(String),
+    /// Two classes, two messages of one class, or two fields of one message share an id
+    /// or a name (after conversion to a Rust identifier where that applies).
+    Duplicate {
+        /// What is duplicated: `class id`, `message name`, `field name`...
+        what: &'static str,
+        /// The duplicated value.
+        value: String,
+        /// Line of the first occurrence.
+        first_line: u32,
+    },
+    /// A field type that is not one of the Paparazzi types.
+    UnknownType(String),
+    /// A field type with a malformed array suffix (`uint8[`, `float[0]`, `int16[x]`...).
+    MalformedArray(String),
+    /// The payload cannot fit a PPRZ v2 frame even with every variable array empty.
+    PayloadTooLarge {
+        /// Smallest payload of the message, in bytes.
+        min_len: usize,
+        /// Largest payload a PPRZ v2 frame carries.
+        max: usize,
+    },
+    /// A `values` list has more labels than the field's type can index.
+    TooManyValues {
+        /// Number of labels.
+        count: usize,
+        /// The field's type.
+        ty: String,
+    },
+    /// A class or message named in the selection does not exist.
+    UnknownSelection(String),
+    /// Something else in a telemetry configuration.
+    Telemetry(String),
+}
+
+impl fmt::Display for ErrorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io(e) => write!(f, "cannot read file: {e}"),
+            Self::Xml(e) => write!(f, "malformed XML: {e}"),
+            Self::UnexpectedElement { found, expected } => {
+                write!(f, "unexpected element <{found}>, expected {expected}")
+            }
+            Self::MissingAttribute { element, attribute } => {
+                write!(f, "<{element}> is missing the required attribute `{attribute}`")
+            }
+            Self::InvalidNumber {
+                attribute,
+                value,
+                expected,
+            } => write!(f, "attribute `{attribute}` = `{value}` is not {expected}"),
+            Self::PriorityOutOfRange(v) => {
+                write!(f, "priority `{v}` is out of range: expected an integer 0..=255")
+            }
+            Self::InvalidName(n) => write!(
+                f,
+                "name `{n}` is not a valid identifier (letters, digits and `_`, not starting with a digit)"
+            ),
+            Self::Duplicate {
+                what,
+                value,
+                first_line,
+            } => write!(f, "duplicate {what} `{value}` (first defined on line {first_line})"),
+            Self::UnknownType(t) => write!(
+                f,
+                "unknown type `{t}`: expected one of int8 uint8 int16 uint16 int32 uint32 int64 uint64 float double char string, optionally as T[N] or T[]"
+            ),
+            Self::MalformedArray(t) => write!(
+                f,
+                "malformed array type `{t}`: expected T[N] with N in 1..=255, or T[]"
+            ),
+            Self::PayloadTooLarge { min_len, max } => write!(
+                f,
+                "payload of at least {min_len} bytes cannot fit a PPRZ v2 frame ({max} bytes of fields at most)"
+            ),
+            Self::TooManyValues { count, ty } => {
+                write!(f, "{count} `values` labels cannot all be indexed by a {ty}")
+            }
+            Self::UnknownSelection(n) => write!(f, "selected `{n}` does not exist in the input"),
+            Self::Telemetry(e) => f.write_str(e),
+        }
+    }
+}
+
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if self.line > 0 {
+            write!(f, ":{}", self.line)?;
+            if self.column > 0 {
+                write!(f, ":{}", self.column)?;
+            }
+        }
+        f.write_str(": ")?;
+        if let Some(m) = &self.message {
+            write!(f, "message {m}")?;
+            if let Some(field) = &self.field {
+                write!(f, ", field {field}")?;
+            }
+            f.write_str(": ")?;
+        }
+        write!(f, "{}", self.kind)
+    }
+}
+
+/// One or more problems found in the inputs. All problems are collected before
+/// reporting, so one run shows every mistake of a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Error {
+    diagnostics: Vec<Diagnostic>,
+}
+
+impl Error {
+    pub(crate) fn new(diagnostics: Vec<Diagnostic>) -> Self {
+        Self { diagnostics }
+    }
+
+    pub(crate) fn single(file: &str, kind: ErrorKind) -> Self {
+        Self::new(vec![Diagnostic {
+            file: file.to_owned(),
+            line: 0,
+            column: 0,
+            message: None,
+            field: None,
+            kind,
+        }])
+    }
+
+    /// Every problem found, in file order.
+    pub fn diagnostics(&self) -> &[Diagnostic] {
+        &self.diagnostics
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, d) in self.diagnostics.iter().enumerate() {
+            if i > 0 {
+                f.write_str("\n")?;
+            }
+            write!(f, "error: {d}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for Error {}

@@ -1,0 +1,778 @@
+//! The typed model of a `messages.xml`, and its parser and validator.
+//!
+//! Parsing collects every problem of a file (see [`crate::Error`]) rather than stopping
+//! at the first, and never panics on any input.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use pprz_messages::{BaseType, FieldDescriptor, FieldType, MessageDescriptor};
+use roxmltree::{Document, Node, ParsingOptions};
+
+use crate::error::{Diagnostic, Error, ErrorKind};
+use crate::names;
+
+/// Largest number of field bytes a PPRZ v2 frame carries (255 - STX, LEN, 2 checksum
+/// bytes and the 4-byte v2 header).
+pub const MAX_PAYLOAD: usize = 247;
+
+/// A parsed and validated message set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Protocol {
+    /// Name of the file it was read from (for diagnostics).
+    pub file: String,
+    /// Message classes in file order.
+    pub classes: Vec<Class>,
+}
+
+/// A `<msg_class>`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Class {
+    /// Class name (`telemetry`).
+    pub name: String,
+    /// Class id (`telemetry` = 1).
+    pub id: u8,
+    /// Line of the element.
+    pub line: u32,
+    /// Messages in file order.
+    pub messages: Vec<MessageDef>,
+}
+
+/// A `<message>`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MessageDef {
+    /// Message name (`GPS`).
+    pub name: String,
+    /// Message id within its class.
+    pub id: u8,
+    /// Line of the element.
+    pub line: u32,
+    /// The `priority` attribute, if given.
+    pub priority: Option<u8>,
+    /// The `link` attribute (`forwarded`, `broadcasted`), if given.
+    pub link: Option<String>,
+    /// The `<description>` text.
+    pub description: Option<String>,
+    /// Fields in wire order.
+    pub fields: Vec<FieldDef>,
+}
+
+/// A `<field>`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldDef {
+    /// Field name as written.
+    pub name: String,
+    /// Line of the element.
+    pub line: u32,
+    /// The `type` attribute as written (trimmed).
+    pub xml_type: String,
+    /// Wire shape.
+    pub ty: FieldType,
+    /// `unit` attribute.
+    pub unit: Option<String>,
+    /// `alt_unit` attribute.
+    pub alt_unit: Option<String>,
+    /// `alt_unit_coef` attribute, or the `units.xml` default once applied.
+    pub alt_unit_coef: Option<f64>,
+    /// `format` attribute.
+    pub format: Option<String>,
+    /// `values` labels.
+    pub values: Vec<String>,
+    /// The element's text.
+    pub description: Option<String>,
+}
+
+impl MessageDef {
+    /// Smallest payload (variable arrays empty).
+    pub fn min_len(&self) -> usize {
+        self.fields.iter().map(|f| f.ty.min_size()).sum()
+    }
+
+    /// Largest payload (variable arrays at 255 elements).
+    pub fn max_len(&self) -> usize {
+        self.fields.iter().map(|f| f.ty.max_size()).sum()
+    }
+
+    /// Whether the payload length is the same for every value.
+    pub fn is_fixed_size(&self) -> bool {
+        self.fields.iter().all(|f| f.ty.fixed_size().is_some())
+    }
+
+    /// A descriptor for this message with the given fields (see
+    /// [`FieldDef::descriptor`]).
+    pub fn descriptor<'a>(
+        &'a self,
+        class: &'a Class,
+        default_priority: u8,
+        fields: &'a [FieldDescriptor<'a>],
+    ) -> MessageDescriptor<'a> {
+        MessageDescriptor {
+            class_id: class.id,
+            class_name: &class.name,
+            id: self.id,
+            name: &self.name,
+            priority: self.priority.unwrap_or(default_priority),
+            fields,
+        }
+    }
+}
+
+impl FieldDef {
+    /// The descriptor of this field, borrowing its strings; `values` are its labels as
+    /// string slices (see [`value_labels`](Self::value_labels)).
+    pub fn descriptor<'a>(&'a self, values: &'a [&'a str]) -> FieldDescriptor<'a> {
+        FieldDescriptor {
+            name: &self.name,
+            ty: self.ty,
+            unit: self.unit.as_deref(),
+            alt_unit: self.alt_unit.as_deref(),
+            alt_unit_coef: self.alt_unit_coef,
+            format: self.format.as_deref(),
+            values,
+        }
+    }
+
+    /// The `values` labels as string slices.
+    pub fn value_labels(&self) -> Vec<&str> {
+        self.values.iter().map(String::as_str).collect()
+    }
+}
+
+impl Protocol {
+    /// Reads and validates a `messages.xml` file.
+    ///
+    /// # Errors
+    /// Every problem found, each with file, line, message and field.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
+        let path = path.as_ref();
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+        Self::parse(&name, &text)
+    }
+
+    /// Parses and validates `messages.xml` text; `file` names it in diagnostics.
+    ///
+    /// # Errors
+    /// Every problem found, each with file, line, message and field.
+    pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
+        let doc = parse_xml(text).map_err(|e| {
+            let pos = e.pos();
+            Error::new(vec![Diagnostic {
+                file: file.to_owned(),
+                line: pos.row,
+                column: pos.col,
+                message: None,
+                field: None,
+                kind: ErrorKind::Xml(e.to_string()),
+            }])
+        })?;
+        let mut p = Parser {
+            file,
+            doc: &doc,
+            diagnostics: Vec::new(),
+        };
+        let protocol = p.protocol();
+        if p.diagnostics.is_empty() {
+            Ok(protocol)
+        } else {
+            Err(Error::new(p.diagnostics))
+        }
+    }
+
+    /// Finds a class by name.
+    pub fn class(&self, name: &str) -> Option<&Class> {
+        self.classes.iter().find(|c| c.name == name)
+    }
+
+    /// Finds a message by class name and message name.
+    pub fn message(&self, class: &str, name: &str) -> Option<&MessageDef> {
+        self.class(class)?.messages.iter().find(|m| m.name == name)
+    }
+
+    /// Number of messages in all classes.
+    pub fn message_count(&self) -> usize {
+        self.classes.iter().map(|c| c.messages.len()).sum()
+    }
+
+    /// Fills in `alt_unit_coef` from a units table where a field has `unit` and
+    /// `alt_unit` but no explicit coefficient.
+    pub fn apply_units(&mut self, units: &Units) {
+        for field in self
+            .classes
+            .iter_mut()
+            .flat_map(|c| c.messages.iter_mut())
+            .flat_map(|m| m.fields.iter_mut())
+        {
+            if field.alt_unit_coef.is_none()
+                && let (Some(from), Some(to)) = (&field.unit, &field.alt_unit)
+            {
+                field.alt_unit_coef = units.coef(from, to);
+            }
+        }
+    }
+
+    /// Keeps only the selected classes and messages.
+    ///
+    /// A message is kept if its class is in `classes` (by name or id) or it is in
+    /// `messages` (`NAME` in any class, or `class.NAME`). With both lists empty,
+    /// everything is kept.
+    ///
+    /// # Errors
+    /// A selected class or message that does not exist.
+    pub fn select(&self, classes: &[String], messages: &[String]) -> Result<Self, Error> {
+        if classes.is_empty() && messages.is_empty() {
+            return Ok(self.clone());
+        }
+        let class_matches = |c: &Class, sel: &str| c.name == sel || c.id.to_string() == sel;
+        let message_matches = |c: &Class, m: &MessageDef, sel: &str| match sel.split_once('.') {
+            Some((class, name)) => class_matches(c, class) && m.name == name,
+            None => m.name == sel,
+        };
+        let mut unknown: Vec<String> = Vec::new();
+        for sel in classes {
+            if !self.classes.iter().any(|c| class_matches(c, sel)) {
+                unknown.push(sel.clone());
+            }
+        }
+        for sel in messages {
+            if !self
+                .classes
+                .iter()
+                .any(|c| c.messages.iter().any(|m| message_matches(c, m, sel)))
+            {
+                unknown.push(sel.clone());
+            }
+        }
+        if !unknown.is_empty() {
+            return Err(Error::new(
+                unknown
+                    .into_iter()
+                    .map(|u| Diagnostic {
+                        file: self.file.clone(),
+                        line: 0,
+                        column: 0,
+                        message: None,
+                        field: None,
+                        kind: ErrorKind::UnknownSelection(u),
+                    })
+                    .collect(),
+            ));
+        }
+        let classes = self
+            .classes
+            .iter()
+            .filter_map(|c| {
+                let whole = classes.iter().any(|s| class_matches(c, s));
+                let messages: Vec<MessageDef> = c
+                    .messages
+                    .iter()
+                    .filter(|m| whole || messages.iter().any(|s| message_matches(c, m, s)))
+                    .cloned()
+                    .collect();
+                (!messages.is_empty()).then(|| Class {
+                    messages,
+                    ..c.clone()
+                })
+            })
+            .collect();
+        Ok(Self {
+            file: self.file.clone(),
+            classes,
+        })
+    }
+}
+
+/// Default unit conversions (`units.xml`): `<unit from="cm" to="m" coef="0.01"/>`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Units {
+    coefs: HashMap<(String, String), f64>,
+}
+
+impl Units {
+    /// Reads a `units.xml` file.
+    ///
+    /// # Errors
+    /// Unreadable file, malformed XML, or a `<unit>` without a numeric `coef`.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
+        let path = path.as_ref();
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+        Self::parse(&name, &text)
+    }
+
+    /// Parses `units.xml` text.
+    ///
+    /// # Errors
+    /// Malformed XML, or a `<unit>` without `from`, `to` or a numeric `coef`.
+    pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
+        let doc = parse_xml(text)
+            .map_err(|e| Error::single(file, ErrorKind::Xml(e.to_string())))?;
+        let mut p = Parser {
+            file,
+            doc: &doc,
+            diagnostics: Vec::new(),
+        };
+        let mut units = Units::default();
+        for node in doc.root_element().children().filter(|n| n.has_tag_name("unit")) {
+            let ctx = Ctx::default();
+            let from = p.required(node, "unit", "from", &ctx);
+            let to = p.required(node, "unit", "to", &ctx);
+            let coef = p.required(node, "unit", "coef", &ctx).and_then(|v| {
+                p.parse_f64(node, "coef", v, &ctx)
+            });
+            if let (Some(from), Some(to), Some(coef)) = (from, to, coef) {
+                units.coefs.insert((from.to_owned(), to.to_owned()), coef);
+            }
+        }
+        if p.diagnostics.is_empty() {
+            Ok(units)
+        } else {
+            Err(Error::new(p.diagnostics))
+        }
+    }
+
+    /// The coefficient from `from` to `to`, if known.
+    pub fn coef(&self, from: &str, to: &str) -> Option<f64> {
+        self.coefs.get(&(from.to_owned(), to.to_owned())).copied()
+    }
+}
+
+/// The message and field a diagnostic is about.
+#[derive(Default)]
+struct Ctx {
+    message: Option<String>,
+    field: Option<String>,
+}
+
+struct Parser<'a, 'input> {
+    file: &'a str,
+    doc: &'a Document<'input>,
+    diagnostics: Vec<Diagnostic>,
+}
+
+impl<'input> Parser<'_, 'input> {
+    fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
+        let pos = self.doc.text_pos_at(node.range().start);
+        (pos.row, pos.col)
+    }
+
+    fn report(&mut self, node: Node<'_, '_>, ctx: &Ctx, kind: ErrorKind) {
+        let (line, column) = self.line_col(node);
+        self.diagnostics.push(Diagnostic {
+            file: self.file.to_owned(),
+            line,
+            column,
+            message: ctx.message.clone(),
+            field: ctx.field.clone(),
+            kind,
+        });
+    }
+
+    fn required<'n>(
+        &mut self,
+        node: Node<'n, 'input>,
+        element: &'static str,
+        attribute: &'static str,
+        ctx: &Ctx,
+    ) -> Option<&'n str> {
+        let value = node.attribute(attribute).map(str::trim);
+        if value.is_none() {
+            self.report(node, ctx, ErrorKind::MissingAttribute { element, attribute });
+        }
+        value
+    }
+
+    fn parse_f64(&mut self, node: Node<'_, '_>, attribute: &'static str, v: &str, ctx: &Ctx) -> Option<f64> {
+        match v.parse::<f64>() {
+            Ok(x) if x.is_finite() => Some(x),
+            _ => {
+                self.report(
+                    node,
+                    ctx,
+                    ErrorKind::InvalidNumber {
+                        attribute,
+                        value: v.to_owned(),
+                        expected: "a finite number",
+                    },
+                );
+                None
+            }
+        }
+    }
+
+    fn parse_id(&mut self, node: Node<'_, '_>, v: &str, ctx: &Ctx) -> Option<u8> {
+        match v.parse::<u8>() {
+            Ok(id) => Some(id),
+            Err(_) => {
+                self.report(
+                    node,
+                    ctx,
+                    ErrorKind::InvalidNumber {
+                        attribute: "id",
+                        value: v.to_owned(),
+                        expected: "an integer in 0..=255",
+                    },
+                );
+                None
+            }
+        }
+    }
+
+    fn name(&mut self, node: Node<'_, 'input>, element: &'static str, ctx: &Ctx) -> Option<String> {
+        let name = self.required(node, element, "name", ctx)?;
+        if names::is_identifier(name) {
+            Some(name.to_owned())
+        } else {
+            self.report(node, ctx, ErrorKind::InvalidName(name.to_owned()));
+            None
+        }
+    }
+
+    fn protocol(&mut self) -> Protocol {
+        let root = self.doc.root_element();
+        let ctx = Ctx::default();
+        let mut classes = Vec::new();
+        if !root.has_tag_name("protocol") {
+            self.report(
+                root,
+                &ctx,
+                ErrorKind::UnexpectedElement {
+                    found: root.tag_name().name().to_owned(),
+                    expected: "<protocol> as the root element",
+                },
+            );
+            return Protocol {
+                file: self.file.to_owned(),
+                classes,
+            };
+        }
+        let mut seen = Seen::default();
+        for node in root.children().filter(Node::is_element) {
+            if !node.has_tag_name("msg_class") {
+                self.unexpected(node, &ctx, "<msg_class>");
+                continue;
+            }
+            if let Some(class) = self.class(node) {
+                let (line, _) = self.line_col(node);
+                seen.check(self, node, &ctx, "class name", class.name.clone(), line);
+                seen.check(self, node, &ctx, "class id", class.id.to_string(), line);
+                seen.check(
+                    self,
+                    node,
+                    &ctx,
+                    "module name of class",
+                    names::module_name(&class.name),
+                    line,
+                );
+                classes.push(class);
+            }
+        }
+        Protocol {
+            file: self.file.to_owned(),
+            classes,
+        }
+    }
+
+    fn unexpected(&mut self, node: Node<'_, '_>, ctx: &Ctx, expected: &'static str) {
+        self.report(
+            node,
+            ctx,
+            ErrorKind::UnexpectedElement {
+                found: node.tag_name().name().to_owned(),
+                expected,
+            },
+        );
+    }
+
+    fn class(&mut self, node: Node<'_, 'input>) -> Option<Class> {
+        let ctx = Ctx::default();
+        let name = self.name(node, "msg_class", &ctx);
+        let id = self
+            .required(node, "msg_class", "id", &ctx)
+            .and_then(|v| self.parse_id(node, v, &ctx));
+        let mut messages = Vec::new();
+        let mut seen = Seen::default();
+        for child in node.children().filter(Node::is_element) {
+            if !child.has_tag_name("message") {
+                self.unexpected(child, &ctx, "<message>");
+                continue;
+            }
+            if let Some(m) = self.message(child) {
+                let ctx = Ctx {
+                    message: Some(m.name.clone()),
+                    field: None,
+                };
+                seen.check(self, child, &ctx, "message name", m.name.clone(), m.line);
+                seen.check(self, child, &ctx, "message id", m.id.to_string(), m.line);
+                seen.check(
+                    self,
+                    child,
+                    &ctx,
+                    "Rust type name of message",
+                    names::camel_case(&m.name),
+                    m.line,
+                );
+                for f in &m.fields {
+                    if let Some(e) = crate::emit::values_enum(&m, f) {
+                        let fctx = Ctx {
+                            message: Some(m.name.clone()),
+                            field: Some(f.name.clone()),
+                        };
+                        seen.check(self, child, &fctx, "enum name of `values`", e, f.line);
+                    }
+                }
+                messages.push(m);
+            }
+        }
+        let (line, _) = self.line_col(node);
+        Some(Class {
+            name: name?,
+            id: id?,
+            line,
+            messages,
+        })
+    }
+
+    fn message(&mut self, node: Node<'_, 'input>) -> Option<MessageDef> {
+        let mut ctx = Ctx::default();
+        let name = self.name(node, "message", &ctx);
+        ctx.message = name.clone();
+        let id = self
+            .required(node, "message", "id", &ctx)
+            .and_then(|v| self.parse_id(node, v, &ctx));
+        let priority = match node.attribute("priority").map(str::trim) {
+            None => None,
+            Some(v) => match v.parse::<u8>() {
+                Ok(p) => Some(p),
+                Err(_) => {
+                    self.report(node, &ctx, ErrorKind::PriorityOutOfRange(v.to_owned()));
+                    None
+                }
+            },
+        };
+        let mut description = None;
+        let mut fields = Vec::new();
+        let mut seen = Seen::default();
+        for child in node.children().filter(Node::is_element) {
+            match child.tag_name().name() {
+                "description" => description = text(child),
+                "field" => {
+                    if let Some(f) = self.field(child, &ctx) {
+                        let fctx = Ctx {
+                            message: ctx.message.clone(),
+                            field: Some(f.name.clone()),
+                        };
+                        seen.check(self, child, &fctx, "field name", f.name.clone(), f.line);
+                        seen.check(
+                            self,
+                            child,
+                            &fctx,
+                            "Rust name of field",
+                            names::snake_case(&f.name),
+                            f.line,
+                        );
+                        fields.push(f);
+                    }
+                }
+                _ => self.unexpected(child, &ctx, "<description> or <field>"),
+            }
+        }
+        let (line, _) = self.line_col(node);
+        let message = MessageDef {
+            name: name?,
+            id: id?,
+            line,
+            priority,
+            link: node.attribute("link").map(str::to_owned),
+            description,
+            fields,
+        };
+        let min_len = message.min_len();
+        if min_len > MAX_PAYLOAD {
+            self.report(
+                node,
+                &ctx,
+                ErrorKind::PayloadTooLarge {
+                    min_len,
+                    max: MAX_PAYLOAD,
+                },
+            );
+        }
+        Some(message)
+    }
+
+    fn field(&mut self, node: Node<'_, 'input>, message: &Ctx) -> Option<FieldDef> {
+        let mut ctx = Ctx {
+            message: message.message.clone(),
+            field: None,
+        };
+        let name = self.name(node, "field", &ctx);
+        ctx.field = name.clone();
+        let xml_type = self.required(node, "field", "type", &ctx);
+        let ty = xml_type.and_then(|t| match parse_type(t) {
+            Ok(ty) => Some(ty),
+            Err(kind) => {
+                self.report(node, &ctx, kind);
+                None
+            }
+        });
+        let alt_unit_coef = node
+            .attribute("alt_unit_coef")
+            .and_then(|v| self.parse_f64(node, "alt_unit_coef", v.trim(), &ctx));
+        let values: Vec<String> = node
+            .attribute("values")
+            .map(|v| v.split('|').map(|s| s.trim().to_owned()).collect())
+            .unwrap_or_default();
+        if let Some(ty) = ty
+            && !values.is_empty()
+            && let FieldType::Scalar(base) = ty
+            && base.is_integer()
+        {
+            let capacity = 1u128 << (8 * base.size() - usize::from(is_signed(base)));
+            if values.len() as u128 > capacity {
+                self.report(
+                    node,
+                    &ctx,
+                    ErrorKind::TooManyValues {
+                        count: values.len(),
+                        ty: base.xml_name().to_owned(),
+                    },
+                );
+            }
+        }
+        let attr = |a: &str| node.attribute(a).map(|v| v.trim().to_owned());
+        let (line, _) = self.line_col(node);
+        Some(FieldDef {
+            name: name?,
+            line,
+            xml_type: xml_type?.to_owned(),
+            ty: ty?,
+            unit: attr("unit"),
+            alt_unit: attr("alt_unit"),
+            alt_unit_coef,
+            format: attr("format"),
+            values,
+            description: text(node),
+        })
+    }
+}
+
+/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry.
+fn parse_xml(text: &str) -> Result<Document<'_>, roxmltree::Error> {
+    Document::parse_with_options(
+        text,
+        ParsingOptions {
+            allow_dtd: true,
+            ..ParsingOptions::default()
+        },
+    )
+}
+
+fn is_signed(base: BaseType) -> bool {
+    matches!(
+        base,
+        BaseType::I8 | BaseType::I16 | BaseType::I32 | BaseType::I64
+    )
+}
+
+/// The trimmed text of an element, `None` if empty.
+fn text(node: Node<'_, '_>) -> Option<String> {
+    let t: String = node
+        .descendants()
+        .filter(Node::is_text)
+        .filter_map(|n| n.text())
+        .collect();
+    let t = t.split_whitespace().collect::<Vec<_>>().join(" ");
+    (!t.is_empty()).then_some(t)
+}
+
+/// Parses a field type: `uint8`, `float[3]`, `int16[]`, `char[]`, `string`.
+pub fn parse_type(t: &str) -> Result<FieldType, ErrorKind> {
+    let t = t.trim();
+    let (base_name, array) = match t.find('[') {
+        None => {
+            if t.contains(']') {
+                return Err(ErrorKind::MalformedArray(t.to_owned()));
+            }
+            (t, None)
+        }
+        Some(open) => {
+            let inner = t[open + 1..]
+                .strip_suffix(']')
+                .ok_or_else(|| ErrorKind::MalformedArray(t.to_owned()))?;
+            (&t[..open], Some(inner))
+        }
+    };
+    if base_name == "string" {
+        return match array {
+            None => Ok(FieldType::Vector(BaseType::Char)),
+            Some(_) => Err(ErrorKind::MalformedArray(t.to_owned())),
+        };
+    }
+    let base = BaseType::from_xml_name(base_name.trim())
+        .ok_or_else(|| ErrorKind::UnknownType(t.to_owned()))?;
+    match array {
+        None => Ok(FieldType::Scalar(base)),
+        Some("") => Ok(FieldType::Vector(base)),
+        Some(n) => match n.trim().parse::<u8>() {
+            Ok(n) if n > 0 => Ok(FieldType::Array(base, usize::from(n))),
+            _ => Err(ErrorKind::MalformedArray(t.to_owned())),
+        },
+    }
+}
+
+/// First occurrences of names and ids, to report duplicates.
+#[derive(Default)]
+struct Seen {
+    first: HashMap<(&'static str, String), u32>,
+}
+
+impl Seen {
+    fn check(
+        &mut self,
+        p: &mut Parser<'_, '_>,
+        node: Node<'_, '_>,
+        ctx: &Ctx,
+        what: &'static str,
+        value: String,
+        line: u32,
+    ) {
+        match self.first.get(&(what, value.clone())) {
+            Some(&first_line) => p.report(
+                node,
+                ctx,
+                ErrorKind::Duplicate {
+                    what,
+                    value,
+                    first_line,
+                },
+            ),
+            None => {
+                self.first.insert((what, value), line);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_types() {
+        assert_eq!(parse_type("uint8"), Ok(FieldType::Scalar(BaseType::U8)));
+        assert_eq!(parse_type("float[3]"), Ok(FieldType::Array(BaseType::F32, 3)));
+        assert_eq!(parse_type("int16[]"), Ok(FieldType::Vector(BaseType::I16)));
+        assert_eq!(parse_type("string"), Ok(FieldType::Vector(BaseType::Char)));
+        assert_eq!(parse_type(" char[5] "), Ok(FieldType::Array(BaseType::Char, 5)));
+        for bad in ["uint8[", "uint8]", "float[0]", "float[256]", "int16[x]", "string[]", "u[]x"] {
+            assert!(
+                matches!(parse_type(bad), Err(ErrorKind::MalformedArray(_))),
+                "{bad}"
+            );
+        }
+        assert_eq!(parse_type("uint9"), Err(ErrorKind::UnknownType("uint9".into())));
+    }
+}

@@ -1,0 +1,134 @@
+//! Turning `messages.xml` names into Rust identifiers.
+
+/// Rust keywords (strict and reserved, all editions) that cannot be field names.
+const KEYWORDS: &[&str] = &[
+    "abstract", "as", "async", "await", "become", "box", "break", "const", "continue", "crate",
+    "do", "dyn", "else", "enum", "extern", "false", "final", "fn", "for", "gen", "if", "impl",
+    "in", "let", "loop", "macro", "match", "mod", "move", "mut", "override", "priv", "pub",
+    "ref", "return", "self", "static", "struct", "super", "trait", "true", "try", "type",
+    "typeof", "union", "unsafe", "unsized", "use", "virtual", "where", "while", "yield",
+];
+
+/// Whether `name` is `[A-Za-z_][A-Za-z0-9_]*`.
+pub fn is_identifier(name: &str) -> bool {
+    let mut chars = name.chars();
+    matches!(chars.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+/// Splits a name into words at `_` and at lower-to-upper case changes
+/// (`GPS_INT` -> `GPS`, `INT`; `asAirsFilt` -> `as`, `Airs`, `Filt`).
+fn words(name: &str) -> Vec<String> {
+    let mut words = Vec::new();
+    let mut current = String::new();
+    let mut prev_lower_or_digit = false;
+    for c in name.chars() {
+        if c == '_' || c == '-' || c == ' ' || c == '.' {
+            if !current.is_empty() {
+                words.push(std::mem::take(&mut current));
+            }
+            prev_lower_or_digit = false;
+            continue;
+        }
+        if c.is_ascii_uppercase() && prev_lower_or_digit && !current.is_empty() {
+            words.push(std::mem::take(&mut current));
+        }
+        prev_lower_or_digit = c.is_ascii_lowercase() || c.is_ascii_digit();
+        current.push(c);
+    }
+    if !current.is_empty() {
+        words.push(current);
+    }
+    words
+}
+
+/// `GPS_INT` -> `GpsInt`, `DL_VALUE` -> `DlValue`.
+pub fn camel_case(name: &str) -> String {
+    words(name)
+        .iter()
+        .map(|w| {
+            let mut chars = w.chars();
+            match chars.next() {
+                Some(first) => {
+                    first.to_ascii_uppercase().to_string() + &chars.as_str().to_ascii_lowercase()
+                }
+                None => String::new(),
+            }
+        })
+        .collect()
+}
+
+/// `utm_east` -> `utm_east`, `asAirsFilt` -> `as_airs_filt`, `type` -> `type_`.
+pub fn snake_case(name: &str) -> String {
+    let ident = words(name)
+        .iter()
+        .map(|w| w.to_ascii_lowercase())
+        .collect::<Vec<_>>()
+        .join("_");
+    escape_keyword(ident)
+}
+
+/// `telemetry` -> `telemetry`; a module name from a class name.
+pub fn module_name(name: &str) -> String {
+    snake_case(name)
+}
+
+/// An enum variant from a `values` label: `NO_FIX` -> `NoFix`, `2D` -> `V2D`,
+/// `-1` -> `Minus1`, `v3` -> `V3`. `None` if nothing usable remains.
+pub fn variant_name(label: &str) -> Option<String> {
+    let trimmed = label.trim();
+    let (prefix, rest) = match trimmed.strip_prefix('-') {
+        Some(rest) => ("Minus", rest),
+        None => ("", trimmed),
+    };
+    let cleaned: String = rest
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let camel = format!("{prefix}{}", camel_case(&cleaned));
+    if camel.is_empty() {
+        return None;
+    }
+    if camel.starts_with(|c: char| c.is_ascii_digit()) {
+        Some(format!("V{camel}"))
+    } else {
+        Some(camel)
+    }
+}
+
+fn escape_keyword(ident: String) -> String {
+    if KEYWORDS.contains(&ident.as_str()) || ident.is_empty() {
+        ident + "_"
+    } else if ident.starts_with(|c: char| c.is_ascii_digit()) {
+        format!("_{ident}")
+    } else {
+        ident
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn converts_names() {
+        assert_eq!(camel_case("GPS_INT"), "GpsInt");
+        assert_eq!(camel_case("DL_VALUE"), "DlValue");
+        assert_eq!(camel_case("I2C_ERRORS"), "I2CErrors");
+        assert_eq!(snake_case("asAirsFilt"), "as_airs_filt");
+        assert_eq!(snake_case("Hx"), "hx");
+        assert_eq!(snake_case("YprU1"), "ypr_u1");
+        assert_eq!(snake_case("type"), "type_");
+        assert_eq!(snake_case("self"), "self_");
+        assert_eq!(snake_case("utm_east"), "utm_east");
+        assert_eq!(variant_name("NO_FIX").as_deref(), Some("NoFix"));
+        assert_eq!(variant_name("2D").as_deref(), Some("V2D"));
+        assert_eq!(variant_name("-1").as_deref(), Some("Minus1"));
+        assert_eq!(variant_name("1").as_deref(), Some("V1"));
+        assert_eq!(variant_name("v3").as_deref(), Some("V3"));
+        assert_eq!(variant_name("--"), Some("Minus".into()));
+        assert_eq!(variant_name(""), None);
+        assert!(is_identifier("GPS_INT") && is_identifier("_x"));
+        assert!(!is_identifier("1GPS") && !is_identifier("GPS INT") && !is_identifier(""));
+    }
+}
