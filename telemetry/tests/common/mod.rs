@@ -1,0 +1,2 @@
+//! Test helpers shared by several test files.
+pub mod roundtrip;
