@@ -8,8 +8,14 @@ use std::path::Path;
 
 fn main() {
     println!("cargo:rustc-check-cfg=cfg(pprz_reference)");
-    println!("cargo:rerun-if-env-changed={}", pprz_codegen::reference::DIR_VAR);
-    println!("cargo:rerun-if-env-changed={}", pprz_codegen::reference::REQUIRE_VAR);
+    println!(
+        "cargo:rerun-if-env-changed={}",
+        pprz_codegen::reference::DIR_VAR
+    );
+    println!(
+        "cargo:rerun-if-env-changed={}",
+        pprz_codegen::reference::REQUIRE_VAR
+    );
     let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
     let default = Path::new(&manifest).join("../../../shared/pprzlink");
     let dir = match pprz_codegen::reference::locate("pprz-reference-check", &default) {

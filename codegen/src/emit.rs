@@ -38,7 +38,9 @@ macro_rules! out {
 }
 
 fn has_lifetime(m: &MessageDef) -> bool {
-    m.fields.iter().any(|f| matches!(f.ty, FieldType::Vector(_)))
+    m.fields
+        .iter()
+        .any(|f| matches!(f.ty, FieldType::Vector(_)))
 }
 
 fn class_has_lifetime(c: &Class) -> bool {
@@ -199,7 +201,12 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
     out!(out, "#[derive(Debug, Clone, Copy, PartialEq)]");
     out!(out, "pub enum AnyMessage{l} {{");
     for c in &protocol.classes {
-        out!(out, "    /// A message of class `{}` (id {}).", c.name, c.id);
+        out!(
+            out,
+            "    /// A message of class `{}` (id {}).",
+            c.name,
+            c.id
+        );
         out!(
             out,
             "    {}({}::AnyMessage{}),",
@@ -211,10 +218,16 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
     out!(out, "}}\n");
     let input = if any_lt { "&'a [u8]" } else { "&[u8]" };
     out!(out, "impl{l} AnyMessage{l} {{");
-    out!(out, "    /// Decodes a payload (fields only) given its class and message id.");
+    out!(
+        out,
+        "    /// Decodes a payload (fields only) given its class and message id."
+    );
     out!(out, "    ///");
     out!(out, "    /// # Errors");
-    out!(out, "    /// Unknown class or message id, or a payload of the wrong length.");
+    out!(
+        out,
+        "    /// Unknown class or message id, or a payload of the wrong length."
+    );
     out!(
         out,
         "    pub fn decode(class_id: u8, msg_id: u8, payload: {input}) -> Result<Self, {rt}::DecodeError> {{"
@@ -262,8 +275,18 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
     }
     out!(out, "        }}");
     out!(out, "    }}\n");
-    delegate(out, "Message id within the class.", "id(&self) -> u8", "id()");
-    delegate(out, "Message name.", "name(&self) -> &'static str", "name()");
+    delegate(
+        out,
+        "Message id within the class.",
+        "id(&self) -> u8",
+        "id()",
+    );
+    delegate(
+        out,
+        "Message name.",
+        "name(&self) -> &'static str",
+        "name()",
+    );
     delegate(out, "Send priority.", "priority(&self) -> u8", "priority()");
     delegate(
         out,
@@ -307,7 +330,10 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     let life = has_lifetime(m);
     let l = lt(life);
     let priority = m.priority.unwrap_or(opts.default_priority);
-    let mut d = m.description.clone().unwrap_or_else(|| format!("`{}`", m.name));
+    let mut d = m
+        .description
+        .clone()
+        .unwrap_or_else(|| format!("`{}`", m.name));
     let _ = write!(
         d,
         "\n\n`{}`: class `{}` ({}), id {}, priority {priority}, {} payload bytes.",
@@ -352,9 +378,8 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         out!(out, "            Self {{");
         for f in &m.fields {
             let v = match f.ty {
-                FieldType::Scalar(_) => "Default::default()".to_owned(),
-                FieldType::Array(b, n) => format!("[0 as {}; {n}]", b.rust_name()),
-                FieldType::Vector(_) => "Default::default()".to_owned(),
+                FieldType::Array(_, n) => format!("[Default::default(); {n}]"),
+                FieldType::Scalar(_) | FieldType::Vector(_) => "Default::default()".to_owned(),
             };
             out!(out, "                {}: {v},", names::snake_case(&f.name));
         }
@@ -479,7 +504,10 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
             "            let {mutr}r = __rt::wire::Reader::exact(payload, {min})?;"
         );
     } else {
-        out!(out, "            let {mutr}r = __rt::wire::Reader::new(payload);");
+        out!(
+            out,
+            "            let {mutr}r = __rt::wire::Reader::new(payload);"
+        );
     }
     if m.fields.is_empty() {
         out!(out, "            let msg = Self;");
@@ -521,7 +549,10 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
                 "        /// `{}` as [`values::{e}`], `None` if the raw value has no label.",
                 f.name
             );
-            out!(out, "        pub fn {getter}(&self) -> Option<values::{e}> {{");
+            out!(
+                out,
+                "        pub fn {getter}(&self) -> Option<values::{e}> {{"
+            );
             out!(out, "            values::{e}::from_raw(self.{name})");
             out!(out, "        }}");
         }
@@ -544,10 +575,16 @@ fn emit_class_any(out: &mut String, class: &Class) {
     out!(out, "    }}\n");
     let input = if life { "&'a [u8]" } else { "&[u8]" };
     out!(out, "    impl{l} AnyMessage{l} {{");
-    out!(out, "        /// Decodes a payload (fields only) given its message id.");
+    out!(
+        out,
+        "        /// Decodes a payload (fields only) given its message id."
+    );
     out!(out, "        ///");
     out!(out, "        /// # Errors");
-    out!(out, "        /// Unknown message id, or a payload of the wrong length.");
+    out!(
+        out,
+        "        /// Unknown message id, or a payload of the wrong length."
+    );
     out!(
         out,
         "        pub fn decode(msg_id: u8, payload: {input}) -> Result<Self, __rt::DecodeError> {{"
@@ -569,27 +606,36 @@ fn emit_class_any(out: &mut String, class: &Class) {
     out!(out, "            }}");
     out!(out, "        }}\n");
     // `bind`: whether the arm uses the message value (`m`) or only its type.
-    let arms = |out: &mut String, doc: &str, sig: &str, bind: bool, body: &dyn Fn(&str) -> String| {
-        out!(out, "        /// {doc}");
-        out!(out, "        pub fn {sig} {{");
-        out!(out, "            match self {{");
-        for m in &class.messages {
-            let ty = names::camel_case(&m.name);
-            let pat = if bind { "m" } else { "_" };
-            out!(out, "                Self::{ty}({pat}) => {},", body(&ty));
-        }
-        out!(out, "            }}");
-        out!(out, "        }}\n");
-    };
+    let arms =
+        |out: &mut String, doc: &str, sig: &str, bind: bool, body: &dyn Fn(&str) -> String| {
+            out!(out, "        /// {doc}");
+            out!(out, "        pub fn {sig} {{");
+            out!(out, "            match self {{");
+            for m in &class.messages {
+                let ty = names::camel_case(&m.name);
+                let pat = if bind { "m" } else { "_" };
+                out!(out, "                Self::{ty}({pat}) => {},", body(&ty));
+            }
+            out!(out, "            }}");
+            out!(out, "        }}\n");
+        };
     arms(out, "Message id.", "id(&self) -> u8", false, &|ty| {
         format!("<{ty} as __rt::Message>::ID")
     });
-    arms(out, "Message name.", "name(&self) -> &'static str", false, &|ty| {
-        format!("<{ty} as __rt::Message>::NAME")
-    });
-    arms(out, "Send priority.", "priority(&self) -> u8", false, &|ty| {
-        format!("<{ty} as __rt::Message>::PRIORITY")
-    });
+    arms(
+        out,
+        "Message name.",
+        "name(&self) -> &'static str",
+        false,
+        &|ty| format!("<{ty} as __rt::Message>::NAME"),
+    );
+    arms(
+        out,
+        "Send priority.",
+        "priority(&self) -> u8",
+        false,
+        &|ty| format!("<{ty} as __rt::Message>::PRIORITY"),
+    );
     arms(
         out,
         "Description of the message.",
@@ -667,7 +713,10 @@ fn emit_values(out: &mut String, class: &Class) {
         }
         out!(out, "        }}\n");
         out!(out, "        impl {e} {{");
-        out!(out, "            /// Labels by raw value, as in `messages.xml`.");
+        out!(
+            out,
+            "            /// Labels by raw value, as in `messages.xml`."
+        );
         out!(
             out,
             "            pub const LABELS: &'static [&'static str] = &[{}];",
@@ -694,7 +743,10 @@ fn emit_values(out: &mut String, class: &Class) {
         out!(out, "                self as {repr}");
         out!(out, "            }}");
         out!(out, "            /// The label, as in `messages.xml`.");
-        out!(out, "            pub const fn label(self) -> &'static str {{");
+        out!(
+            out,
+            "            pub const fn label(self) -> &'static str {{"
+        );
         out!(out, "                match self {{");
         for (v, label) in vs.iter().zip(&f.values) {
             out!(out, "                    Self::{v} => {label:?},");

@@ -98,7 +98,10 @@ impl fmt::Display for ErrorKind {
                 write!(f, "unexpected element <{found}>, expected {expected}")
             }
             Self::MissingAttribute { element, attribute } => {
-                write!(f, "<{element}> is missing the required attribute `{attribute}`")
+                write!(
+                    f,
+                    "<{element}> is missing the required attribute `{attribute}`"
+                )
             }
             Self::InvalidNumber {
                 attribute,
@@ -106,7 +109,10 @@ impl fmt::Display for ErrorKind {
                 expected,
             } => write!(f, "attribute `{attribute}` = `{value}` is not {expected}"),
             Self::PriorityOutOfRange(v) => {
-                write!(f, "priority `{v}` is out of range: expected an integer 0..=255")
+                write!(
+                    f,
+                    "priority `{v}` is out of range: expected an integer 0..=255"
+                )
             }
             Self::InvalidName(n) => write!(
                 f,
@@ -116,7 +122,10 @@ impl fmt::Display for ErrorKind {
                 what,
                 value,
                 first_line,
-            } => write!(f, "duplicate {what} `{value}` (first defined on line {first_line})"),
+            } => write!(
+                f,
+                "duplicate {what} `{value}` (first defined on line {first_line})"
+            ),
             Self::UnknownType(t) => write!(
                 f,
                 "unknown type `{t}`: expected one of int8 uint8 int16 uint16 int32 uint32 int64 uint64 float double char string, optionally as T[N] or T[]"

@@ -114,7 +114,9 @@ impl Generator {
         }
     }
 
-    /// Fills missing `alt_unit_coef` from a Paparazzi `units.xml`.
+    /// Fills missing `alt_unit_coef` from a Paparazzi `units.xml` (its entries take
+    /// precedence over the built-in conversions of [`Units::builtin`], which are always
+    /// applied).
     pub fn units(mut self, units_xml: impl Into<PathBuf>) -> Self {
         self.units = Some(units_xml.into());
         self
@@ -156,9 +158,11 @@ impl Generator {
             Source::File(path) => Protocol::from_file(path)?,
             Source::Text { name, xml } => Protocol::parse(name, xml)?,
         };
-        if let Some(units) = &self.units {
-            protocol.apply_units(&Units::from_file(units)?);
+        let mut units = Units::builtin();
+        if let Some(file) = &self.units {
+            units.extend(&Units::from_file(file)?);
         }
+        protocol.apply_units(&units);
         protocol.select(&self.classes, &self.messages)
     }
 
@@ -184,9 +188,8 @@ impl Generator {
     pub fn write_to(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         let path = path.as_ref();
         let code = self.generate()?;
-        std::fs::write(path, code).map_err(|e| {
-            Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string()))
-        })
+        std::fs::write(path, code)
+            .map_err(|e| Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string())))
     }
 
     /// For a `build.rs`: generates into `$OUT_DIR/<file_name>` and tells Cargo to rerun

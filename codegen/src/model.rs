@@ -307,21 +307,25 @@ impl Units {
     /// # Errors
     /// Malformed XML, or a `<unit>` without `from`, `to` or a numeric `coef`.
     pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
-        let doc = parse_xml(text)
-            .map_err(|e| Error::single(file, ErrorKind::Xml(e.to_string())))?;
+        let doc =
+            parse_xml(text).map_err(|e| Error::single(file, ErrorKind::Xml(e.to_string())))?;
         let mut p = Parser {
             file,
             doc: &doc,
             diagnostics: Vec::new(),
         };
         let mut units = Units::default();
-        for node in doc.root_element().children().filter(|n| n.has_tag_name("unit")) {
+        for node in doc
+            .root_element()
+            .children()
+            .filter(|n| n.has_tag_name("unit"))
+        {
             let ctx = Ctx::default();
             let from = p.required(node, "unit", "from", &ctx);
             let to = p.required(node, "unit", "to", &ctx);
-            let coef = p.required(node, "unit", "coef", &ctx).and_then(|v| {
-                p.parse_f64(node, "coef", v, &ctx)
-            });
+            let coef = p
+                .required(node, "unit", "coef", &ctx)
+                .and_then(|v| p.parse_f64(node, "coef", v, &ctx));
             if let (Some(from), Some(to), Some(coef)) = (from, to, coef) {
                 units.coefs.insert((from.to_owned(), to.to_owned()), coef);
             }
@@ -331,6 +335,38 @@ impl Units {
         } else {
             Err(Error::new(p.diagnostics))
         }
+    }
+
+    /// Conversions between the units Paparazzi messages use, built in so generated
+    /// descriptors carry display coefficients without a `units.xml`:
+    /// length (m, cm, mm), speed (m/s, cm/s, mm/s), angles (rad, deg, decideg,
+    /// centideg) and angular rates and accelerations (rad/s, deg/s, rad/s2, deg/s2).
+    pub fn builtin() -> Self {
+        const RAD_TO_DEG: f64 = 180.0 / core::f64::consts::PI;
+        let pairs: [(&str, &str, f64); 10] = [
+            ("m", "cm", 100.0),
+            ("m", "mm", 1000.0),
+            ("m/s", "cm/s", 100.0),
+            ("m/s", "mm/s", 1000.0),
+            ("deg", "decideg", 10.0),
+            ("deg", "centideg", 100.0),
+            ("rad", "deg", RAD_TO_DEG),
+            ("rad/s", "deg/s", RAD_TO_DEG),
+            ("rad/s2", "deg/s2", RAD_TO_DEG),
+            ("m", "ft", 1.0 / 0.3048),
+        ];
+        let mut coefs = HashMap::new();
+        for (from, to, coef) in pairs {
+            coefs.insert((from.to_owned(), to.to_owned()), coef);
+            coefs.insert((to.to_owned(), from.to_owned()), 1.0 / coef);
+        }
+        Self { coefs }
+    }
+
+    /// Adds (or replaces) the conversions of `other`.
+    pub fn extend(&mut self, other: &Units) {
+        self.coefs
+            .extend(other.coefs.iter().map(|(k, v)| (k.clone(), *v)));
     }
 
     /// The coefficient from `from` to `to`, if known.
@@ -379,12 +415,22 @@ impl<'input> Parser<'_, 'input> {
     ) -> Option<&'n str> {
         let value = node.attribute(attribute).map(str::trim);
         if value.is_none() {
-            self.report(node, ctx, ErrorKind::MissingAttribute { element, attribute });
+            self.report(
+                node,
+                ctx,
+                ErrorKind::MissingAttribute { element, attribute },
+            );
         }
         value
     }
 
-    fn parse_f64(&mut self, node: Node<'_, '_>, attribute: &'static str, v: &str, ctx: &Ctx) -> Option<f64> {
+    fn parse_f64(
+        &mut self,
+        node: Node<'_, '_>,
+        attribute: &'static str,
+        v: &str,
+        ctx: &Ctx,
+    ) -> Option<f64> {
         match v.parse::<f64>() {
             Ok(x) if x.is_finite() => Some(x),
             _ => {
@@ -763,16 +809,33 @@ mod tests {
     #[test]
     fn parses_types() {
         assert_eq!(parse_type("uint8"), Ok(FieldType::Scalar(BaseType::U8)));
-        assert_eq!(parse_type("float[3]"), Ok(FieldType::Array(BaseType::F32, 3)));
+        assert_eq!(
+            parse_type("float[3]"),
+            Ok(FieldType::Array(BaseType::F32, 3))
+        );
         assert_eq!(parse_type("int16[]"), Ok(FieldType::Vector(BaseType::I16)));
         assert_eq!(parse_type("string"), Ok(FieldType::Vector(BaseType::Char)));
-        assert_eq!(parse_type(" char[5] "), Ok(FieldType::Array(BaseType::Char, 5)));
-        for bad in ["uint8[", "uint8]", "float[0]", "float[256]", "int16[x]", "string[]", "u[]x"] {
+        assert_eq!(
+            parse_type(" char[5] "),
+            Ok(FieldType::Array(BaseType::Char, 5))
+        );
+        for bad in [
+            "uint8[",
+            "uint8]",
+            "float[0]",
+            "float[256]",
+            "int16[x]",
+            "string[]",
+            "u[]x",
+        ] {
             assert!(
                 matches!(parse_type(bad), Err(ErrorKind::MalformedArray(_))),
                 "{bad}"
             );
         }
-        assert_eq!(parse_type("uint9"), Err(ErrorKind::UnknownType("uint9".into())));
+        assert_eq!(
+            parse_type("uint9"),
+            Err(ErrorKind::UnknownType("uint9".into()))
+        );
     }
 }

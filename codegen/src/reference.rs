@@ -47,7 +47,9 @@ pub fn locate(who: &str, default_dir: impl AsRef<Path>) -> Result<Option<PathBuf
         dir.display()
     );
     if required() {
-        return Err(format!("{who}: {reason}; {REQUIRE_VAR} is set, so this is an error"));
+        return Err(format!(
+            "{who}: {reason}; {REQUIRE_VAR} is set, so this is an error"
+        ));
     }
     let _ = writeln!(std::io::stderr(), "skipped {who}: {reason}");
     Ok(None)

@@ -74,9 +74,17 @@ fn wire_identical_to_the_reference() {
         // No id of ours may collide with a different reference message.
         for m in &class.messages {
             if let Some(r) = ref_class.messages.iter().find(|r| r.id == m.id) {
-                assert_eq!(r.name, m.name, "{} id {} is {} in the reference", class.name, m.id, r.name);
+                assert_eq!(
+                    r.name, m.name,
+                    "{} id {} is {} in the reference",
+                    class.name, m.id, r.name
+                );
             }
         }
     }
-    assert_eq!(compared, ours.message_count(), "every default message comes from the reference");
+    assert_eq!(
+        compared,
+        ours.message_count(),
+        "every default message comes from the reference"
+    );
 }

@@ -8,7 +8,8 @@
 const FIXTURE: &str = "tests/fixtures/small.xml";
 const SNAPSHOT: &str = "tests/snapshots/small.rs";
 
-#[allow(missing_docs)]
+// Private here, so items this test does not touch would be reported as dead code.
+#[allow(missing_docs, dead_code)]
 mod small {
     include!("snapshots/small.rs");
 }
@@ -51,13 +52,19 @@ fn snapshot_code_works() {
     assert_eq!(back.mode_value(), Some(MixedMode::V3D));
     assert_eq!(MixedMode::V2D.label(), "2D");
     assert_eq!(Mixed::default().big, [0; 40]);
-    assert_eq!((Mixed::MIN_LEN, Mixed::MAX_LEN), (1 + 1 + 12 + 1 + 4 + 40 + 4, 63 + 510 + 255));
+    assert_eq!(
+        (Mixed::MIN_LEN, Mixed::MAX_LEN),
+        (1 + 1 + 12 + 1 + 4 + 40 + 4, 63 + 510 + 255)
+    );
     assert_eq!(Mixed::PRIORITY, pprz_messages::priority::DEFAULT);
     assert_eq!(Empty::PRIORITY, 192);
     assert_eq!(small::datalink::Ping::PRIORITY, 10);
     let lat = Mixed::DESCRIPTOR.field("lat").unwrap();
     assert_eq!(lat.to_alt_unit(-5.0), -5e-7);
     assert_eq!(small::MESSAGES.len(), 3);
+    let any = small::AnyMessage::decode(1, 7, &buf[..n]).unwrap();
+    assert_eq!((any.class_id(), any.id(), any.name()), (1, 7, "MIXED"));
+    assert_eq!(any, small::AnyMessage::Telemetry(m.into()));
     for cut in 0..n {
         assert!(Mixed::decode(&buf[..cut]).is_err());
     }

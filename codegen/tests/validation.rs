@@ -12,7 +12,9 @@ fn errors(fixture: &str) -> (Vec<ErrorKind>, String) {
     let err = Generator::new(&path)
         .generate()
         .expect_err("the fixture is invalid");
-    let text = err.to_string().replace(&path.display().to_string(), fixture);
+    let text = err
+        .to_string()
+        .replace(&path.display().to_string(), fixture);
     (
         err.diagnostics().iter().map(|d| d.kind.clone()).collect(),
         text,
@@ -22,7 +24,13 @@ fn errors(fixture: &str) -> (Vec<ErrorKind>, String) {
 #[test]
 fn duplicate_message_id() {
     let (kinds, text) = errors("duplicate_id.xml");
-    assert!(matches!(kinds[..], [ErrorKind::Duplicate { what: "message id", .. }]));
+    assert!(matches!(
+        kinds[..],
+        [ErrorKind::Duplicate {
+            what: "message id",
+            ..
+        }]
+    ));
     assert_eq!(
         text,
         "error: duplicate_id.xml:4:5: message SECOND: duplicate message id `10` (first defined on line 3)"
@@ -144,7 +152,9 @@ fn inline_errors_name_the_source() {
     let xml = r#"<protocol><msg_class name="telemetry" id="1">
 <message name="9LIVES" id="300"><field name="bad name" type="float"/></message>
 <bogus/></msg_class><msg_class name="telemetry" id="1"/></protocol>"#;
-    let err = Generator::from_str("inline.xml", xml).generate().unwrap_err();
+    let err = Generator::from_str("inline.xml", xml)
+        .generate()
+        .unwrap_err();
     let text = err.to_string();
     for expected in [
         "inline.xml:2:1: name `9LIVES` is not a valid identifier",
@@ -166,7 +176,9 @@ fn too_many_values_for_the_type() {
 <field name="v" type="int8" values="{}"/></message></msg_class></protocol>"#,
         labels.join("|")
     );
-    let err = Generator::from_str("values.xml", &xml).generate().unwrap_err();
+    let err = Generator::from_str("values.xml", &xml)
+        .generate()
+        .unwrap_err();
     assert_eq!(
         err.diagnostics()[0].kind,
         ErrorKind::TooManyValues {

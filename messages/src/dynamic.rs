@@ -306,7 +306,9 @@ mod tests {
 
     #[test]
     fn decodes_fields_after_a_variable_array() {
-        let payload = [2, 1, 0, 0xFE, 0xFF, 9, 2, b'h', b'i', 0, 0, 0x80, 0x3F, 0, 0, 0, 0x40];
+        let payload = [
+            2, 1, 0, 0xFE, 0xFF, 9, 2, b'h', b'i', 0, 0, 0x80, 0x3F, 0, 0, 0, 0x40,
+        ];
         let v: Vec<_> = fields(&MSG, &payload).map(|r| r.unwrap()).collect();
         assert_eq!(v.len(), 4);
         assert_eq!(v[0].1.to_string(), "1,-2");

@@ -37,10 +37,16 @@ impl fmt::Display for DecodeError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             Self::Truncated { needed, actual } => {
-                write!(f, "payload truncated: needs at least {needed} bytes, got {actual}")
+                write!(
+                    f,
+                    "payload truncated: needs at least {needed} bytes, got {actual}"
+                )
             }
             Self::TrailingBytes { expected, actual } => {
-                write!(f, "payload too long: message ends after {expected} bytes, got {actual}")
+                write!(
+                    f,
+                    "payload too long: message ends after {expected} bytes, got {actual}"
+                )
             }
             Self::UnknownMessage { class_id, msg_id } => {
                 write!(f, "unknown message id {msg_id} in class {class_id}")
@@ -75,10 +81,16 @@ impl fmt::Display for EncodeError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             Self::BufferTooSmall { needed, available } => {
-                write!(f, "buffer too small: message needs {needed} bytes, buffer has {available}")
+                write!(
+                    f,
+                    "buffer too small: message needs {needed} bytes, buffer has {available}"
+                )
             }
             Self::ArrayTooLong { len } => {
-                write!(f, "variable array of {len} elements exceeds the 255-element wire limit")
+                write!(
+                    f,
+                    "variable array of {len} elements exceeds the 255-element wire limit"
+                )
             }
         }
     }

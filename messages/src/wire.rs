@@ -557,7 +557,9 @@ mod tests {
         assert_eq!(w.finish(), 15);
         assert_eq!(
             buf,
-            [2, 1, 0xFE, 0xFF, 0xFF, 0xFF, 0, 0, 0x80, 0x3F, 7, 8, 1, 4, 3]
+            [
+                2, 1, 0xFE, 0xFF, 0xFF, 0xFF, 0, 0, 0x80, 0x3F, 7, 8, 1, 4, 3
+            ]
         );
         let mut r = Reader::new(&buf);
         assert_eq!(r.scalar::<u16>(), Ok(0x0102));

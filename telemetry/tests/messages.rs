@@ -168,7 +168,10 @@ fn descriptor_table_is_sorted_and_complete() {
     assert!(MESSAGES.is_sorted());
     assert_eq!(MESSAGES.len(), 23);
     let dl = MESSAGES.find(1, 31).unwrap();
-    assert_eq!((dl.name, dl.priority, dl.fields.len()), ("DL_VALUE", priority::HIGH, 2));
+    assert_eq!(
+        (dl.name, dl.priority, dl.fields.len()),
+        ("DL_VALUE", priority::HIGH, 2)
+    );
     assert_eq!(MESSAGES.find_by_name("datalink", "SETTING").unwrap().id, 4);
     assert!(MESSAGES.find(1, 250).is_none());
 }

@@ -26,9 +26,21 @@ mod with_reference {
     fn all_367_messages_in_5_classes() {
         assert_eq!(MESSAGES.len(), 367);
         assert!(MESSAGES.is_sorted());
-        let per_class = |c: u8| MESSAGES.messages().iter().filter(|m| m.class_id == c).count();
+        let per_class = |c: u8| {
+            MESSAGES
+                .messages()
+                .iter()
+                .filter(|m| m.class_id == c)
+                .count()
+        };
         assert_eq!(
-            [per_class(1), per_class(2), per_class(3), per_class(4), per_class(5)],
+            [
+                per_class(1),
+                per_class(2),
+                per_class(3),
+                per_class(4),
+                per_class(5)
+            ],
             [246, 60, 42, 2, 17]
         );
     }

@@ -52,7 +52,10 @@ fn main() -> ExitCode {
     let result = if args.check || args.list {
         generator.protocol().map(|p| {
             if args.list {
-                println!("{:<10} {:>3}  {:<32} {:>8}  payload", "class", "id", "message", "priority");
+                println!(
+                    "{:<10} {:>3}  {:<32} {:>8}  payload",
+                    "class", "id", "message", "priority"
+                );
                 for c in &p.classes {
                     for m in &c.messages {
                         let size = if m.is_fixed_size() {

@@ -140,7 +140,7 @@ pub mod telemetry {
         pub mode: u8,
         #[doc = " `int16[]`, unit `adc`."]
         pub samples: __rt::VarArray<'a, i16>,
-        #[doc = " `float[3]`, unit `rad`, displayed in `deg`."]
+        #[doc = " `float[3]`, unit `rad`, displayed in `deg` (x 57.29577951308232)."]
         pub type_: [f32; 3],
         #[doc = " `char[]`."]
         pub name: __rt::Chars<'a>,
@@ -157,10 +157,10 @@ pub mod telemetry {
             Self {
                 mode: Default::default(),
                 samples: Default::default(),
-                type_: [0 as f32; 3],
+                type_: [Default::default(); 3],
                 name: Default::default(),
-                tag: [0 as u8; 4],
-                big: [0 as u8; 40],
+                tag: [Default::default(); 4],
+                big: [Default::default(); 40],
                 lat: Default::default(),
             }
         }
@@ -186,7 +186,7 @@ pub mod telemetry {
                 },
                 __rt::FieldDescriptor {
                     name: "type", ty: __rt::FieldType::Array(__rt::BaseType::F32, 3),
-                    unit: Some("rad"), alt_unit: Some("deg"), alt_unit_coef: None, format: None, values: &[],
+                    unit: Some("rad"), alt_unit: Some("deg"), alt_unit_coef: Some(57.29577951308232), format: None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "name", ty: __rt::FieldType::Vector(__rt::BaseType::Char),

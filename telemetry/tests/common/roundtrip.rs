@@ -59,7 +59,14 @@ pub fn check_all(set: &MessageSet<'static>, cases: u32, codec: &Codec) {
             let random = &entropy[..cut.min(entropy.len())];
             let typed = codec(desc.class_id, desc.id, random, &mut out);
             let generic = dynamic::check(desc, random);
-            prop_assert_eq!(typed.is_ok(), generic.is_ok(), "{}: typed {:?} vs generic {:?}", desc.name, typed, generic);
+            prop_assert_eq!(
+                typed.is_ok(),
+                generic.is_ok(),
+                "{}: typed {:?} vs generic {:?}",
+                desc.name,
+                typed,
+                generic
+            );
             if let Ok(m) = typed {
                 prop_assert_eq!(&out[..m], random);
             }
