@@ -1,0 +1,144 @@
+//! Run-time choice of transport without `dyn`.
+//!
+//! The runtime picks a transport per device (a radio with PPRZ v2, an SD log with
+//! PPRZLOG...) at run time; [`AnyTransport`] is a small `Copy` enum that dispatches
+//! to the concrete transports with a `match`, so it can be stored in a `static`
+//! table and used both to encode ([`Encoder`]) and to decode
+//! (`Decoder<AnyTransport>`).
+//!
+//! ```
+//! use pprz_transports::{AnyTransport, Decoder, Encoder, MsgHeader, PprzLog, TxMeta, XBee24};
+//! static LINKS: [AnyTransport; 2] = [
+//!     AnyTransport::XBee24(XBee24::new()),
+//!     AnyTransport::PprzLog(PprzLog::TELEMETRY),
+//! ];
+//! let meta = TxMeta::new(MsgHeader::new(7, 0, 1, 2)).at(1234);
+//! let mut buf = [0u8; pprz_transports::MAX_FRAME_LEN];
+//! for link in &LINKS {
+//!     let n = link.encode(&meta, &[1, 2, 3], &mut buf).unwrap();
+//!     let mut decoder: Decoder<AnyTransport> = Decoder::new(*link);
+//!     let mut input = &buf[..n];
+//!     let frame = decoder.feed(&mut input).unwrap();
+//!     assert_eq!(frame.payload(), &[1, 2, 3]);
+//! }
+//! ```
+
+use crate::pprz::{PprzV1, PprzV2};
+use crate::pprzlog::PprzLog;
+use crate::transport::{EncodeError, Encoder, Frame, Framing, RxError, TxMeta};
+use crate::xbee::{XBee24, XBee868};
+
+/// Which transport, without its configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum TransportKind {
+    /// PPRZ protocol v1.
+    PprzV1,
+    /// PPRZ protocol v2.
+    PprzV2,
+    /// XBee 802.15.4 API.
+    XBee24,
+    /// XBee 868 API.
+    XBee868,
+    /// PPRZLOG records.
+    PprzLog,
+}
+
+/// One of the transports of this crate, chosen at run time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum AnyTransport {
+    /// PPRZ protocol v1.
+    PprzV1(PprzV1),
+    /// PPRZ protocol v2.
+    PprzV2(PprzV2),
+    /// XBee 802.15.4 API.
+    XBee24(XBee24),
+    /// XBee 868 API.
+    XBee868(XBee868),
+    /// PPRZLOG records.
+    PprzLog(PprzLog),
+}
+
+impl AnyTransport {
+    /// Which transport this is.
+    pub const fn kind(&self) -> TransportKind {
+        match self {
+            Self::PprzV1(_) => TransportKind::PprzV1,
+            Self::PprzV2(_) => TransportKind::PprzV2,
+            Self::XBee24(_) => TransportKind::XBee24,
+            Self::XBee868(_) => TransportKind::XBee868,
+            Self::PprzLog(_) => TransportKind::PprzLog,
+        }
+    }
+}
+
+macro_rules! dispatch {
+    ($self:ident, $t:ident => $e:expr) => {
+        match $self {
+            AnyTransport::PprzV1($t) => $e,
+            AnyTransport::PprzV2($t) => $e,
+            AnyTransport::XBee24($t) => $e,
+            AnyTransport::XBee868($t) => $e,
+            AnyTransport::PprzLog($t) => $e,
+        }
+    };
+}
+
+macro_rules! impl_from {
+    ($($t:ident),*) => {$(
+        impl From<$t> for AnyTransport {
+            fn from(t: $t) -> Self {
+                Self::$t(t)
+            }
+        }
+    )*};
+}
+impl_from!(PprzV1, PprzV2, XBee24, XBee868, PprzLog);
+
+impl Encoder for AnyTransport {
+    fn header_len(&self) -> usize {
+        dispatch!(self, t => t.header_len())
+    }
+
+    fn tail_len(&self) -> usize {
+        dispatch!(self, t => t.tail_len())
+    }
+
+    fn max_payload_len(&self) -> usize {
+        dispatch!(self, t => t.max_payload_len())
+    }
+
+    fn finish_frame(
+        &self,
+        meta: &TxMeta,
+        frame: &mut [u8],
+        payload_len: usize,
+    ) -> Result<usize, EncodeError> {
+        dispatch!(self, t => t.finish_frame(meta, frame, payload_len))
+    }
+}
+
+impl Framing for AnyTransport {
+    fn start_byte(&self) -> u8 {
+        dispatch!(self, t => t.start_byte())
+    }
+
+    fn max_rx_frame_len(&self) -> usize {
+        dispatch!(self, t => t.max_rx_frame_len())
+    }
+
+    fn rx_frame_len(&self, head: &[u8]) -> Result<Option<usize>, RxError> {
+        dispatch!(self, t => t.rx_frame_len(head))
+    }
+
+    fn verify(&self, frame: &[u8]) -> Result<(), RxError> {
+        dispatch!(self, t => t.verify(frame))
+    }
+
+    fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
+        dispatch!(self, t => t.view(frame))
+    }
+}

@@ -1,0 +1,435 @@
+//! The incremental decoder: bytes in arbitrary chunks in, verified frames out.
+//!
+//! [`Decoder`] keeps the bytes of at most one frame candidate in a fixed buffer of
+//! `N` bytes and never allocates. Its algorithm, the same for every transport:
+//!
+//! 1. Bytes before a start byte are dropped (counted in
+//!    [`DecoderStats::dropped_bytes`]).
+//! 2. At a start byte, the [`Framing`] reads the frame length from the first bytes.
+//!    An impossible length, a frame longer than `N`, a bad checksum or (XBee) an
+//!    API id the transport does not carry *rejects* the candidate.
+//! 3. A rejected candidate loses **only its start byte**: the bytes after it, which
+//!    are still in the buffer, are scanned again. A good frame that begins inside
+//!    a bad one (for example after a false start byte in noise that announced a
+//!    long frame) is therefore found as soon as its own bytes have arrived.
+//! 4. A complete, verified frame is handed out as a borrowed [`Frame`] and its bytes
+//!    are consumed; scanning goes on after it.
+//!
+//! A false start byte that announces a long frame delays the frames after it until
+//! that many bytes have arrived (or until [`Decoder::flush`]); it never loses them.
+//! At the end of a stream (end of file, or a link that went silent), call
+//! [`Decoder::flush`] to give up on an incomplete candidate and rescan what is
+//! buffered.
+//!
+//! One corrupted frame may be counted several times (once per false start byte
+//! rescanned inside it); the counters measure rejected candidates, not lost frames.
+//!
+//! # Example
+//!
+//! ```
+//! use pprz_transports::{Decoder, PprzV2};
+//! let mut decoder: Decoder<PprzV2, 255> = Decoder::new(PprzV2::new());
+//! let stream = [0x12, 0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4];
+//! let mut found = 0;
+//! for chunk in stream.chunks(5) {
+//!     let mut input = chunk;
+//!     while let Some(frame) = decoder.feed(&mut input) {
+//!         assert_eq!((frame.source(), frame.msg_id()), (7, 2));
+//!         found += 1;
+//!     }
+//!     assert!(input.is_empty()); // feed returns None only once the chunk is used up
+//! }
+//! assert_eq!(found, 1);
+//! assert_eq!(decoder.stats().dropped_bytes, 1);
+//! ```
+
+use crate::transport::{Frame, Framing, RxError};
+
+/// Smallest decoder buffer accepted at compile time.
+pub const MIN_BUFFER_LEN: usize = 16;
+
+/// Counters of a [`Decoder`]. All wrap around on overflow.
+///
+/// Invariant (mod 2^32): `bytes_in == frame_bytes + dropped_bytes + buffered()`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DecoderStats {
+    /// Verified frames handed out.
+    pub frames: u32,
+    /// Bytes taken from the input.
+    pub bytes_in: u32,
+    /// Bytes of the frames handed out.
+    pub frame_bytes: u32,
+    /// Bytes dropped: garbage between frames and the start bytes of rejected
+    /// candidates.
+    pub dropped_bytes: u32,
+    /// Candidates rejected for a bad checksum.
+    pub checksum_errors: u32,
+    /// Candidates rejected for an impossible length field, or too short for the
+    /// message header.
+    pub length_errors: u32,
+    /// Candidates longer than the decoder's buffer (overruns).
+    pub too_long: u32,
+    /// XBee: well-formed API frames of a type the transport does not carry.
+    pub unknown_api: u32,
+    /// Incomplete candidates abandoned by [`Decoder::flush`].
+    pub truncated: u32,
+}
+
+impl DecoderStats {
+    /// Rejected candidates of every kind.
+    pub const fn errors(&self) -> u32 {
+        self.checksum_errors
+            .wrapping_add(self.length_errors)
+            .wrapping_add(self.too_long)
+            .wrapping_add(self.unknown_api)
+            .wrapping_add(self.truncated)
+    }
+}
+
+/// An incremental frame decoder; see [`Decoder`] for the one implementation.
+///
+/// Generic code (a datalink reader, a host tool) can take any `impl FrameDecoder`.
+pub trait FrameDecoder {
+    /// Takes bytes from the front of `input` and returns the next verified frame,
+    /// or `None` once `input` is empty and no complete frame is buffered.
+    ///
+    /// `feed` returns `None` only with `input` empty, so
+    /// `while let Some(f) = d.feed(&mut input) { .. }` uses up a whole chunk.
+    fn feed<'d>(&'d mut self, input: &mut &[u8]) -> Option<Frame<'d>>;
+
+    /// End of stream: abandons an incomplete candidate and rescans the buffered
+    /// bytes after its start byte. Call until it returns `None`.
+    fn flush(&mut self) -> Option<Frame<'_>>;
+
+    /// The counters.
+    fn stats(&self) -> &DecoderStats;
+
+    /// Bytes held in the buffer (a candidate frame waiting for its end).
+    fn buffered(&self) -> usize;
+}
+
+/// Incremental decoder for the transport `F`, with an `N`-byte buffer.
+///
+/// `N` should be at least `framing.max_rx_frame_len()` ([`crate::MAX_FRAME_LEN`],
+/// the default, fits every transport); a smaller buffer rejects longer frames as
+/// [`DecoderStats::too_long`], which is fine on a link that only carries short
+/// messages. `N` below [`MIN_BUFFER_LEN`] does not compile:
+///
+/// ```compile_fail
+/// let d: pprz_transports::Decoder<pprz_transports::PprzV2, 4> =
+///     pprz_transports::Decoder::new(pprz_transports::PprzV2::new());
+/// ```
+///
+/// `new` is `const`, so a decoder can live in a `static` (behind a mutex).
+///
+/// # Time complexity
+///
+/// Each input byte is copied once into the buffer. A rejected candidate costs a
+/// rescan of the buffered bytes after its start byte, so the worst case (noise full
+/// of start bytes announcing long frames) is O(`N`) per input byte; normal traffic
+/// is O(1) per byte plus one checksum pass per frame.
+#[derive(Clone, Debug)]
+pub struct Decoder<F, const N: usize = { crate::MAX_FRAME_LEN }> {
+    framing: F,
+    /// Invariant: `start <= end <= N`; `buf[start..end]` are the buffered bytes.
+    buf: [u8; N],
+    start: usize,
+    end: usize,
+    stats: DecoderStats,
+}
+
+impl<F, const N: usize> Decoder<F, N> {
+    const VALID: () = assert!(N >= MIN_BUFFER_LEN, "decoder buffer too small");
+
+    /// A decoder with an empty buffer and zero counters.
+    pub const fn new(framing: F) -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::VALID;
+        Self {
+            framing,
+            buf: [0; N],
+            start: 0,
+            end: 0,
+            stats: DecoderStats {
+                frames: 0,
+                bytes_in: 0,
+                frame_bytes: 0,
+                dropped_bytes: 0,
+                checksum_errors: 0,
+                length_errors: 0,
+                too_long: 0,
+                unknown_api: 0,
+                truncated: 0,
+            },
+        }
+    }
+
+    /// The transport.
+    pub const fn framing(&self) -> &F {
+        &self.framing
+    }
+
+    /// Buffer size `N`.
+    pub const fn capacity(&self) -> usize {
+        N
+    }
+
+    /// Bytes held in the buffer.
+    pub const fn buffered(&self) -> usize {
+        self.end.saturating_sub(self.start)
+    }
+
+    /// The counters.
+    pub const fn stats(&self) -> &DecoderStats {
+        &self.stats
+    }
+
+    /// Sets every counter to zero.
+    pub fn reset_stats(&mut self) {
+        self.stats = DecoderStats::default();
+    }
+
+    /// Drops the buffered bytes (counted as dropped), e.g. after a link reset.
+    pub fn clear(&mut self) {
+        let n = self.buffered();
+        self.drop_bytes(n);
+        self.start = 0;
+        self.end = 0;
+    }
+
+    fn drop_bytes(&mut self, n: usize) {
+        let n = n.min(self.buffered());
+        self.start += n;
+        self.stats.dropped_bytes = self.stats.dropped_bytes.wrapping_add(n as u32);
+    }
+
+    fn reject(&mut self, error: RxError) {
+        let counter = match error {
+            RxError::Checksum => &mut self.stats.checksum_errors,
+            RxError::TooLong => &mut self.stats.too_long,
+            RxError::UnknownApiId(_) => &mut self.stats.unknown_api,
+            RxError::BadLength | RxError::BadStart | RxError::Truncated => {
+                &mut self.stats.length_errors
+            }
+        };
+        *counter = counter.wrapping_add(1);
+        self.drop_bytes(1);
+    }
+}
+
+impl<F: Framing, const N: usize> Decoder<F, N> {
+    /// Takes bytes from the front of `input` and returns the next verified frame,
+    /// or `None` once `input` is empty and no complete frame is buffered.
+    ///
+    /// `feed` returns `None` only with `input` empty, so
+    /// `while let Some(f) = d.feed(&mut input) { .. }` uses up a whole chunk. The
+    /// frame borrows the decoder until the next call.
+    pub fn feed<'d>(&'d mut self, input: &mut &[u8]) -> Option<Frame<'d>> {
+        loop {
+            if let Some((start, len)) = self.scan() {
+                return self.view(start, len);
+            }
+            if input.is_empty() {
+                return None;
+            }
+            self.refill(input);
+        }
+    }
+
+    /// End of stream: abandons an incomplete candidate (counted in
+    /// [`DecoderStats::truncated`]) and rescans the buffered bytes after its start
+    /// byte. Call until it returns `None`; the buffer is then empty.
+    pub fn flush(&mut self) -> Option<Frame<'_>> {
+        loop {
+            if let Some((start, len)) = self.scan() {
+                return self.view(start, len);
+            }
+            if self.buffered() == 0 {
+                return None;
+            }
+            self.stats.truncated = self.stats.truncated.wrapping_add(1);
+            self.drop_bytes(1);
+        }
+    }
+
+    fn view(&self, start: usize, len: usize) -> Option<Frame<'_>> {
+        let frame = self.buf.get(start..start.checked_add(len)?)?;
+        self.framing.view(frame).ok()
+    }
+
+    /// Copies bytes from `input` into the buffer.
+    fn refill(&mut self, input: &mut &[u8]) {
+        let taken = if self.buffered() == 0 {
+            // Nothing buffered: skip garbage without copying it.
+            self.start = 0;
+            self.end = 0;
+            let start_byte = self.framing.start_byte();
+            let skip = input
+                .iter()
+                .position(|&b| b == start_byte)
+                .unwrap_or(input.len());
+            self.stats.dropped_bytes = self.stats.dropped_bytes.wrapping_add(skip as u32);
+            skip
+        } else {
+            if self.end >= N {
+                self.buf.copy_within(self.start..self.end, 0);
+                self.end -= self.start;
+                self.start = 0;
+            }
+            0
+        };
+        let rest = input.get(taken..).unwrap_or_default();
+        let n = N.saturating_sub(self.end).min(rest.len());
+        if let (Some(dst), Some(src)) = (self.buf.get_mut(self.end..self.end + n), rest.get(..n)) {
+            dst.copy_from_slice(src);
+            self.end += n;
+        }
+        let consumed = taken + n;
+        self.stats.bytes_in = self.stats.bytes_in.wrapping_add(consumed as u32);
+        *input = input.get(consumed..).unwrap_or_default();
+        if consumed == 0 && !input.is_empty() {
+            // Unreachable by construction (scan never waits on a full buffer);
+            // guarantees progress anyway.
+            self.reject(RxError::TooLong);
+        }
+    }
+
+    /// Finds the next frame in the buffer: `Some((start, len))` (consumed already),
+    /// or `None` if more bytes are needed.
+    fn scan(&mut self) -> Option<(usize, usize)> {
+        let start_byte = self.framing.start_byte();
+        loop {
+            let avail = self.buf.get(self.start..self.end).unwrap_or_default();
+            let Some(&first) = avail.first() else {
+                self.start = 0;
+                self.end = 0;
+                return None;
+            };
+            if first != start_byte {
+                let skip = avail
+                    .iter()
+                    .position(|&b| b == start_byte)
+                    .unwrap_or(avail.len());
+                self.drop_bytes(skip);
+                continue;
+            }
+            let total = match self.framing.rx_frame_len(avail) {
+                Err(e) => {
+                    self.reject(e);
+                    continue;
+                }
+                Ok(None) if avail.len() >= N => {
+                    self.reject(RxError::TooLong);
+                    continue;
+                }
+                Ok(None) => return None,
+                Ok(Some(0)) => {
+                    self.reject(RxError::BadLength);
+                    continue;
+                }
+                Ok(Some(total)) if total > N => {
+                    self.reject(RxError::TooLong);
+                    continue;
+                }
+                Ok(Some(total)) => total,
+            };
+            // Not all of the candidate is here yet.
+            let frame = avail.get(..total)?;
+            let checked = self
+                .framing
+                .verify(frame)
+                .and_then(|()| self.framing.view(frame).map(|_| ()));
+            match checked {
+                Ok(()) => {
+                    let start = self.start;
+                    self.start += total;
+                    self.stats.frames = self.stats.frames.wrapping_add(1);
+                    self.stats.frame_bytes = self.stats.frame_bytes.wrapping_add(total as u32);
+                    return Some((start, total));
+                }
+                Err(e) => self.reject(e),
+            }
+        }
+    }
+}
+
+impl<F: Framing, const N: usize> FrameDecoder for Decoder<F, N> {
+    fn feed<'d>(&'d mut self, input: &mut &[u8]) -> Option<Frame<'d>> {
+        Decoder::feed(self, input)
+    }
+
+    fn flush(&mut self) -> Option<Frame<'_>> {
+        Decoder::flush(self)
+    }
+
+    fn stats(&self) -> &DecoderStats {
+        Decoder::stats(self)
+    }
+
+    fn buffered(&self) -> usize {
+        Decoder::buffered(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Encoder, MsgHeader, PprzV2, TxMeta};
+
+    fn frame(src: u8, fields: &[u8]) -> ([u8; 255], usize) {
+        let mut out = [0u8; 255];
+        let n = PprzV2
+            .encode(&TxMeta::new(MsgHeader::new(src, 0, 1, 9)), fields, &mut out)
+            .unwrap();
+        (out, n)
+    }
+
+    #[test]
+    fn frame_inside_false_start_is_found() {
+        // A false start announcing 200 bytes, then a good frame, then enough filler
+        // for the false candidate to fail its checksum.
+        let (good, n) = frame(3, &[1, 2, 3]);
+        let mut stream = [0u8; 260];
+        stream[0] = 0x99;
+        stream[1] = 200;
+        stream[2..2 + n].copy_from_slice(&good[..n]);
+        let mut d: Decoder<PprzV2, 255> = Decoder::new(PprzV2);
+        let mut input = &stream[..];
+        let f = d.feed(&mut input).expect("frame");
+        assert_eq!(f.source(), 3);
+        assert_eq!(d.stats().checksum_errors, 1);
+        while d.feed(&mut input).is_some() {}
+        assert!(d.flush().is_none());
+        let s = *d.stats();
+        assert_eq!(s.bytes_in, s.frame_bytes + s.dropped_bytes);
+    }
+
+    #[test]
+    fn flush_recovers_frame_behind_truncated_candidate() {
+        let (good, n) = frame(4, &[]);
+        let mut stream = [0u8; 64];
+        stream[0] = 0x99;
+        stream[1] = 250; // never completes
+        stream[2..2 + n].copy_from_slice(&good[..n]);
+        let mut d: Decoder<PprzV2> = Decoder::new(PprzV2);
+        let mut input = &stream[..2 + n];
+        assert!(d.feed(&mut input).is_none());
+        assert_eq!(d.flush().map(|f| f.source()), Some(4));
+        assert!(d.flush().is_none());
+        assert_eq!(d.stats().truncated, 1);
+        assert_eq!(d.buffered(), 0);
+    }
+
+    #[test]
+    fn small_buffer_counts_too_long() {
+        let (big, n) = frame(5, &[0xAA; 100]);
+        let (small, m) = frame(6, &[1]);
+        let mut d: Decoder<PprzV2, 32> = Decoder::new(PprzV2);
+        let mut input = &big[..n];
+        assert!(d.feed(&mut input).is_none());
+        let mut input = &small[..m];
+        assert_eq!(d.feed(&mut input).map(|f| f.source()), Some(6));
+        assert_eq!(d.stats().too_long, 1);
+    }
+}

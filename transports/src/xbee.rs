@@ -1,0 +1,727 @@
+//! XBee API transport (API mode 1, no escaping), 802.15.4 ("XBee 2.4") and 868 MHz.
+//!
+//! ```text
+//!  0      1         2         3                           3+LEN
+//! +------+---------+---------+---------------------------+----+
+//! | 0x7E | LEN_MSB | LEN_LSB | FRAME_DATA (LEN bytes)    | CK |
+//! +------+---------+---------+---------------------------+----+
+//!                              CK = 0xFF - (sum(FRAME_DATA) & 0xFF)
+//! ```
+//!
+//! `FRAME_DATA` starts with the API id. Inside the RF data there is only the PPRZ v2
+//! message header (4 bytes) and the fields: no 0x99, no PPRZ length or checksum.
+//!
+//! 802.15.4 ([`XBee24`]), offsets in `FRAME_DATA`:
+//!
+//! ```text
+//! TX16 (sent):     | 0x01 | frame_id | dest_hi | dest_lo | options | v2 hdr | fields |
+//! RX16 (received): | 0x81 | src_hi   | src_lo  | rssi    | options | v2 hdr | fields |
+//! ```
+//!
+//! A receiver also accepts 0x01 (a TX16 frame seen on a cable loopback). The RF
+//! payload is at most 100 bytes: 4-byte header + at most 96 field bytes.
+//!
+//! 868 MHz ([`XBee868`]), offsets in `FRAME_DATA`:
+//!
+//! ```text
+//! 0x10 (sent):     | 0x10 | frame_id | dest64 (8) | FF FE | radius 0 | options | v2 hdr | fields |
+//! 0x90 (received): | 0x90 | src64 (8) | src16 (2) | options | v2 hdr | fields |
+//! ```
+//!
+//! A receiver also accepts 0x10 (loopback). `LEN` counts every `FRAME_DATA` byte
+//! (the reference C code computes it as for 802.15.4, which is wrong for 868).
+//! The module's RF payload is at most 256 bytes; we send at most 247 field bytes
+//! (251 RF bytes), the PPRZ v2 limit, so every XBee 868 message can be relayed
+//! over PPRZ v2 unchanged. Receive accepts up to the full 256 RF bytes.
+//!
+//! Address mapping (both radios): receiver 0 (ground) -> `0x0100`, 0xFF (broadcast)
+//! -> `0xFFFF`, any other id -> the id itself. On 868 the same 16-bit value is the
+//! low half of the 64-bit destination (`0x000000000000FFFF` is the 868 broadcast
+//! address).
+//!
+//! # No-panic contract
+//!
+//! [`Packet::new_unchecked`] accessors may panic on a short buffer; once
+//! [`Packet::check_len`] (or [`Packet::new_checked`]) has succeeded, none of them can.
+
+use crate::checksum;
+use crate::transport::{
+    EncodeError, Encoder, Extra, Frame, Framing, MsgHeader, RxError, TxMeta, XBeeInfo,
+};
+
+/// Start delimiter of every API frame.
+pub const START: u8 = 0x7E;
+/// 802.15.4 transmit request, 16-bit address.
+pub const API_TX16: u8 = 0x01;
+/// 802.15.4 receive packet, 16-bit address.
+pub const API_RX16: u8 = 0x81;
+/// 868 transmit request.
+pub const API_TX_868: u8 = 0x10;
+/// 868 receive packet.
+pub const API_RX_868: u8 = 0x90;
+/// Frame id 0: the module sends no transmit status.
+pub const NO_FRAME_ID: u8 = 0;
+/// 16-bit address of the ground station's module.
+pub const GROUND_ADDRESS: u16 = 0x0100;
+/// 16-bit broadcast address.
+pub const BROADCAST_ADDRESS: u16 = 0xFFFF;
+/// Largest 802.15.4 RF payload.
+pub const MAX_RF_PAYLOAD_24: usize = 100;
+/// Largest 868 RF payload.
+pub const MAX_RF_PAYLOAD_868: usize = 256;
+/// Length of the checksum (the only byte after `FRAME_DATA`).
+pub const CHECKSUM_LEN: usize = 1;
+/// Bytes of framing around `FRAME_DATA`: start, length (2), checksum.
+pub const OVERHEAD: usize = 3 + CHECKSUM_LEN;
+
+/// Byte offsets in an API frame.
+pub mod field {
+    use crate::transport::field::Field;
+
+    /// Start delimiter.
+    pub const START: usize = 0;
+    /// Big-endian length of `FRAME_DATA`.
+    pub const LENGTH: Field = 1..3;
+    /// First `FRAME_DATA` byte: the API id.
+    pub const FRAME_DATA_START: usize = LENGTH.end;
+    /// API id.
+    pub const API_ID: usize = FRAME_DATA_START;
+
+    /// `FRAME_DATA` of a frame whose length field is `length`.
+    pub const fn frame_data(length: usize) -> Field {
+        FRAME_DATA_START..FRAME_DATA_START + length
+    }
+    /// Checksum offset in a frame whose length field is `length`.
+    pub const fn checksum(length: usize) -> usize {
+        FRAME_DATA_START + length
+    }
+
+    /// TX16 (0x01) offsets in `FRAME_DATA`.
+    pub mod tx16 {
+        use super::Field;
+        /// API id, 0x01.
+        pub const API_ID: usize = 0;
+        /// Frame id (0: no status).
+        pub const FRAME_ID: usize = 1;
+        /// Big-endian 16-bit destination.
+        pub const DEST: Field = 2..4;
+        /// Options.
+        pub const OPTIONS: usize = 4;
+        /// RF data.
+        pub const DATA: usize = 5;
+    }
+
+    /// RX16 (0x81) offsets in `FRAME_DATA`.
+    pub mod rx16 {
+        use super::Field;
+        /// API id, 0x81.
+        pub const API_ID: usize = 0;
+        /// Big-endian 16-bit source.
+        pub const SOURCE: Field = 1..3;
+        /// RSSI, `n` = `-n` dBm.
+        pub const RSSI: usize = 3;
+        /// Options.
+        pub const OPTIONS: usize = 4;
+        /// RF data.
+        pub const DATA: usize = 5;
+    }
+
+    /// 868 transmit request (0x10) offsets in `FRAME_DATA`.
+    pub mod tx868 {
+        use super::Field;
+        /// API id, 0x10.
+        pub const API_ID: usize = 0;
+        /// Frame id (0: no status).
+        pub const FRAME_ID: usize = 1;
+        /// Big-endian 64-bit destination.
+        pub const DEST64: Field = 2..10;
+        /// 16-bit destination, always `FF FE`.
+        pub const DEST16: Field = 10..12;
+        /// Broadcast radius (0 = maximum).
+        pub const RADIUS: usize = 12;
+        /// Options.
+        pub const OPTIONS: usize = 13;
+        /// RF data.
+        pub const DATA: usize = 14;
+    }
+
+    /// 868 receive packet (0x90) offsets in `FRAME_DATA`.
+    pub mod rx868 {
+        use super::Field;
+        /// API id, 0x90.
+        pub const API_ID: usize = 0;
+        /// Big-endian 64-bit source.
+        pub const SOURCE64: Field = 1..9;
+        /// 16-bit source (`FF FE`).
+        pub const SOURCE16: Field = 9..11;
+        /// Options.
+        pub const OPTIONS: usize = 11;
+        /// RF data.
+        pub const DATA: usize = 12;
+    }
+}
+
+/// Length of the API frame header before `FRAME_DATA`.
+pub const HEADER_LEN: usize = field::FRAME_DATA_START;
+
+/// 16-bit XBee address of a PPRZ receiver id: 0 (ground) -> `0x0100`,
+/// 0xFF (broadcast) -> `0xFFFF`, otherwise the id.
+pub const fn address16(receiver: u8) -> u16 {
+    match receiver {
+        crate::transport::GROUND_ID => GROUND_ADDRESS,
+        crate::transport::BROADCAST_ID => BROADCAST_ADDRESS,
+        id => id as u16,
+    }
+}
+
+/// 64-bit XBee 868 address of a PPRZ receiver id: [`address16`] in the low bits.
+pub const fn address64(receiver: u8) -> u64 {
+    address16(receiver) as u64
+}
+
+/// A zero-copy view of an XBee API frame in a byte buffer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Packet<T: AsRef<[u8]>> {
+    buffer: T,
+}
+
+impl<T: AsRef<[u8]>> Packet<T> {
+    /// Wraps a buffer without checking it.
+    pub const fn new_unchecked(buffer: T) -> Packet<T> {
+        Packet { buffer }
+    }
+
+    /// Wraps a buffer after [`check_len`](Packet::check_len).
+    pub fn new_checked(buffer: T) -> Result<Packet<T>, RxError> {
+        let packet = Self::new_unchecked(buffer);
+        packet.check_len()?;
+        Ok(packet)
+    }
+
+    /// Checks that the buffer holds the whole frame the length field announces
+    /// and that `FRAME_DATA` is not empty. Bytes after the frame are allowed.
+    pub fn check_len(&self) -> Result<(), RxError> {
+        let buf = self.buffer.as_ref();
+        let length = match buf.get(field::LENGTH) {
+            Some(&[hi, lo]) => usize::from(u16::from_be_bytes([hi, lo])),
+            _ => return Err(RxError::Truncated),
+        };
+        if length == 0 {
+            Err(RxError::BadLength)
+        } else if buf.len() < length + OVERHEAD {
+            Err(RxError::Truncated)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Returns the buffer.
+    pub fn into_inner(self) -> T {
+        self.buffer
+    }
+
+    /// The start delimiter.
+    pub fn start(&self) -> u8 {
+        self.buffer.as_ref()[field::START]
+    }
+
+    /// The length field: number of `FRAME_DATA` bytes.
+    pub fn length(&self) -> u16 {
+        let buf = self.buffer.as_ref();
+        u16::from_be_bytes([buf[field::LENGTH.start], buf[field::LENGTH.start + 1]])
+    }
+
+    /// Whole-frame length.
+    pub fn frame_len(&self) -> usize {
+        usize::from(self.length()) + OVERHEAD
+    }
+
+    /// The API id (first `FRAME_DATA` byte).
+    pub fn api_id(&self) -> u8 {
+        self.buffer.as_ref()[field::API_ID]
+    }
+
+    /// The checksum byte as received.
+    pub fn checksum(&self) -> u8 {
+        self.buffer.as_ref()[field::checksum(usize::from(self.length()))]
+    }
+
+    /// Whether `sum(FRAME_DATA) + CK == 0xFF (mod 256)`.
+    pub fn verify_checksum(&self) -> bool {
+        let buf = self.buffer.as_ref();
+        let data = &buf[field::frame_data(usize::from(self.length()))];
+        checksum::sum8(data).wrapping_add(self.checksum()) == 0xFF
+    }
+}
+
+impl<'a, T: AsRef<[u8]> + ?Sized> Packet<&'a T> {
+    /// `FRAME_DATA`: API id and the API frame's fields.
+    pub fn frame_data(&self) -> &'a [u8] {
+        &self.buffer.as_ref()[field::frame_data(usize::from(self.length()))]
+    }
+
+    /// The frame, without bytes after it.
+    pub fn frame(&self) -> &'a [u8] {
+        &self.buffer.as_ref()[..self.frame_len()]
+    }
+}
+
+impl<T: AsRef<[u8]> + AsMut<[u8]>> Packet<T> {
+    /// Sets the start delimiter.
+    pub fn set_start(&mut self, value: u8) {
+        self.buffer.as_mut()[field::START] = value;
+    }
+
+    /// Sets the length field.
+    pub fn set_length(&mut self, value: u16) {
+        self.buffer.as_mut()[field::LENGTH].copy_from_slice(&value.to_be_bytes());
+    }
+
+    /// Mutable `FRAME_DATA` (per the length field).
+    pub fn frame_data_mut(&mut self) -> &mut [u8] {
+        let range = field::frame_data(usize::from(self.length()));
+        &mut self.buffer.as_mut()[range]
+    }
+
+    /// Computes and writes the checksum (per the length field).
+    pub fn fill_checksum(&mut self) {
+        let length = usize::from(self.length());
+        let buf = self.buffer.as_mut();
+        buf[field::checksum(length)] = checksum::xbee(&buf[field::frame_data(length)]);
+    }
+}
+
+/// Frames `frame[..len]`: start, length, API header written by `api_header`, v2
+/// header, checksum. The fields are already in place after the v2 header.
+fn finish(
+    frame: &mut [u8],
+    len: usize,
+    header: &MsgHeader,
+    api_header_len: usize,
+    api_header: impl FnOnce(&mut [u8]),
+) -> Result<usize, EncodeError> {
+    header.check()?;
+    let available = frame.len();
+    let too_small = EncodeError::BufferTooSmall {
+        needed: len,
+        available,
+    };
+    let frame = frame.get_mut(..len).ok_or(too_small)?;
+    let length = u16::try_from(len - OVERHEAD).map_err(|_| too_small)?;
+    let mut packet = Packet::new_unchecked(frame);
+    packet.set_start(START);
+    packet.set_length(length);
+    let data = packet.frame_data_mut();
+    let (api, rest) = data.split_at_mut_checked(api_header_len).ok_or(too_small)?;
+    api_header(api);
+    header.emit_v2(rest)?;
+    packet.fill_checksum();
+    Ok(len)
+}
+
+/// Length field of `head`, if known, checked against `1..=max_length`.
+fn rx_len(head: &[u8], max_length: usize) -> Result<Option<usize>, RxError> {
+    match head.get(field::LENGTH) {
+        Some(&[hi, lo]) => {
+            let length = usize::from(u16::from_be_bytes([hi, lo]));
+            if length == 0 || length > max_length {
+                Err(RxError::BadLength)
+            } else {
+                Ok(Some(length + OVERHEAD))
+            }
+        }
+        _ => Ok(None),
+    }
+}
+
+/// Start, exact length, checksum, then the API id must be one of `accepted`.
+fn verify(frame: &[u8], accepted: [u8; 2]) -> Result<(), RxError> {
+    let packet = Packet::new_checked(frame)?;
+    if packet.start() != START {
+        return Err(RxError::BadStart);
+    }
+    if packet.frame_len() != frame.len() {
+        return Err(RxError::BadLength);
+    }
+    if !packet.verify_checksum() {
+        return Err(RxError::Checksum);
+    }
+    let api = packet.api_id();
+    if accepted.contains(&api) {
+        Ok(())
+    } else {
+        Err(RxError::UnknownApiId(api))
+    }
+}
+
+fn be_u64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0u64, |acc, &b| (acc << 8) | u64::from(b))
+}
+
+/// XBee 802.15.4 ("XBee 2.4", series 1) in API mode 1.
+///
+/// Sends TX16 (0x01); receives RX16 (0x81) and TX16 (0x01, cable loopback).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct XBee24 {
+    /// Frame id of sent frames ([`NO_FRAME_ID`]: the module sends no status).
+    pub frame_id: u8,
+    /// Options byte of sent frames (0x01 disables the MAC acknowledgement).
+    pub options: u8,
+}
+
+impl XBee24 {
+    /// Most field bytes per frame: 100-byte RF payload minus the 4-byte header.
+    pub const MAX_PAYLOAD_LEN: usize = MAX_RF_PAYLOAD_24 - MsgHeader::V2_LEN;
+    /// Largest `FRAME_DATA` accepted: RX16/TX16 header + a full RF payload.
+    pub const MAX_RX_LENGTH: usize = field::rx16::DATA + MAX_RF_PAYLOAD_24;
+
+    /// Frame id 0 and options 0, as the reference firmware.
+    pub const fn new() -> Self {
+        Self {
+            frame_id: NO_FRAME_ID,
+            options: 0,
+        }
+    }
+}
+
+impl Encoder for XBee24 {
+    fn header_len(&self) -> usize {
+        HEADER_LEN + field::tx16::DATA + MsgHeader::V2_LEN
+    }
+
+    fn tail_len(&self) -> usize {
+        CHECKSUM_LEN
+    }
+
+    fn max_payload_len(&self) -> usize {
+        Self::MAX_PAYLOAD_LEN
+    }
+
+    fn finish_frame(
+        &self,
+        meta: &TxMeta,
+        frame: &mut [u8],
+        payload_len: usize,
+    ) -> Result<usize, EncodeError> {
+        use field::tx16;
+        let len = self.frame_len(payload_len)?;
+        let dest = address16(meta.header.destination).to_be_bytes();
+        finish(frame, len, &meta.header, tx16::DATA, |api| {
+            api[tx16::API_ID] = API_TX16;
+            api[tx16::FRAME_ID] = self.frame_id;
+            api[tx16::DEST].copy_from_slice(&dest);
+            api[tx16::OPTIONS] = self.options;
+        })
+    }
+}
+
+impl Framing for XBee24 {
+    fn start_byte(&self) -> u8 {
+        START
+    }
+
+    fn max_rx_frame_len(&self) -> usize {
+        Self::MAX_RX_LENGTH + OVERHEAD
+    }
+
+    fn rx_frame_len(&self, head: &[u8]) -> Result<Option<usize>, RxError> {
+        rx_len(head, Self::MAX_RX_LENGTH)
+    }
+
+    fn verify(&self, frame: &[u8]) -> Result<(), RxError> {
+        verify(frame, [API_RX16, API_TX16])
+    }
+
+    fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
+        use field::{rx16, tx16};
+        let packet = Packet::new_checked(frame)?;
+        let fd = packet.frame_data();
+        let head = fd.get(..rx16::DATA).ok_or(RxError::BadLength)?;
+        let info = match packet.api_id() {
+            API_RX16 => XBeeInfo {
+                api_id: API_RX16,
+                address: be_u64(&head[rx16::SOURCE]),
+                rssi: Some(head[rx16::RSSI]),
+                options: head[rx16::OPTIONS],
+            },
+            API_TX16 => XBeeInfo {
+                api_id: API_TX16,
+                address: be_u64(&head[tx16::DEST]),
+                rssi: None,
+                options: head[tx16::OPTIONS],
+            },
+            other => return Err(RxError::UnknownApiId(other)),
+        };
+        let data = fd.get(rx16::DATA..).ok_or(RxError::BadLength)?;
+        Frame::from_v2(packet.frame(), data, Extra::XBee(info))
+    }
+}
+
+/// XBee 868 MHz modules in API mode 1.
+///
+/// Sends 0x10 (transmit request, 64-bit destination); receives 0x90 and 0x10
+/// (cable loopback).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct XBee868 {
+    /// Frame id of sent frames ([`NO_FRAME_ID`]: the module sends no status).
+    pub frame_id: u8,
+    /// Options byte of sent frames.
+    pub options: u8,
+}
+
+impl XBee868 {
+    /// Most field bytes per frame we send: the PPRZ v2 limit (see the module doc).
+    pub const MAX_PAYLOAD_LEN: usize = crate::pprz::V2_MAX_PAYLOAD_LEN;
+    /// Largest `FRAME_DATA` accepted: 0x10 header (the longer one) + 256 RF bytes.
+    pub const MAX_RX_LENGTH: usize = field::tx868::DATA + MAX_RF_PAYLOAD_868;
+
+    /// Frame id 0 and options 0, as the reference firmware.
+    pub const fn new() -> Self {
+        Self {
+            frame_id: NO_FRAME_ID,
+            options: 0,
+        }
+    }
+}
+
+impl Encoder for XBee868 {
+    fn header_len(&self) -> usize {
+        HEADER_LEN + field::tx868::DATA + MsgHeader::V2_LEN
+    }
+
+    fn tail_len(&self) -> usize {
+        CHECKSUM_LEN
+    }
+
+    fn max_payload_len(&self) -> usize {
+        Self::MAX_PAYLOAD_LEN
+    }
+
+    fn finish_frame(
+        &self,
+        meta: &TxMeta,
+        frame: &mut [u8],
+        payload_len: usize,
+    ) -> Result<usize, EncodeError> {
+        use field::tx868;
+        let len = self.frame_len(payload_len)?;
+        let dest = address64(meta.header.destination).to_be_bytes();
+        finish(frame, len, &meta.header, tx868::DATA, |api| {
+            api[tx868::API_ID] = API_TX_868;
+            api[tx868::FRAME_ID] = self.frame_id;
+            api[tx868::DEST64].copy_from_slice(&dest);
+            api[tx868::DEST16].copy_from_slice(&[0xFF, 0xFE]);
+            api[tx868::RADIUS] = 0;
+            api[tx868::OPTIONS] = self.options;
+        })
+    }
+}
+
+impl Framing for XBee868 {
+    fn start_byte(&self) -> u8 {
+        START
+    }
+
+    fn max_rx_frame_len(&self) -> usize {
+        Self::MAX_RX_LENGTH + OVERHEAD
+    }
+
+    fn rx_frame_len(&self, head: &[u8]) -> Result<Option<usize>, RxError> {
+        rx_len(head, Self::MAX_RX_LENGTH)
+    }
+
+    fn verify(&self, frame: &[u8]) -> Result<(), RxError> {
+        verify(frame, [API_RX_868, API_TX_868])
+    }
+
+    fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
+        use field::{rx868, tx868};
+        let packet = Packet::new_checked(frame)?;
+        let fd = packet.frame_data();
+        let (info, data_start) = match packet.api_id() {
+            API_RX_868 => {
+                let head = fd.get(..rx868::DATA).ok_or(RxError::BadLength)?;
+                let info = XBeeInfo {
+                    api_id: API_RX_868,
+                    address: be_u64(&head[rx868::SOURCE64]),
+                    rssi: None,
+                    options: head[rx868::OPTIONS],
+                };
+                (info, rx868::DATA)
+            }
+            API_TX_868 => {
+                let head = fd.get(..tx868::DATA).ok_or(RxError::BadLength)?;
+                let info = XBeeInfo {
+                    api_id: API_TX_868,
+                    address: be_u64(&head[tx868::DEST64]),
+                    rssi: None,
+                    options: head[tx868::OPTIONS],
+                };
+                (info, tx868::DATA)
+            }
+            other => return Err(RxError::UnknownApiId(other)),
+        };
+        let data = fd.get(data_start..).ok_or(RxError::BadLength)?;
+        if data.len() > MAX_RF_PAYLOAD_868 {
+            return Err(RxError::BadLength);
+        }
+        Frame::from_v2(packet.frame(), data, Extra::XBee(info))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ALIVE (class 1, id 2) from aircraft 7 to ground, fields 03 00 01 02, sent
+    /// over 802.15.4 with TX16:
+    ///   FRAME_DATA = 01 00 01 00 00 | 07 00 01 02 | 03 00 01 02   (13 bytes, LEN 0x000D)
+    ///   dest = ground -> 0x0100
+    ///   sum = 01+00+01+00+00+07+00+01+02+03+00+01+02 = 0x12, CK = 0xFF - 0x12 = 0xED
+    static TX16_FRAME: [u8; 17] = [
+        0x7E, 0x00, 0x0D, 0x01, 0x00, 0x01, 0x00, 0x00, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01,
+        0x02, 0xED,
+    ];
+
+    /// The same message received by the ground module from source 0x0007, RSSI 40
+    /// (-40 dBm = 0x28), options 0:
+    ///   FRAME_DATA = 81 00 07 28 00 | 07 00 01 02 | 03 00 01 02
+    ///   sum = 81+07+28+07+01+02+03+01+02 = 0xC0, CK = 0xFF - 0xC0 = 0x3F
+    static RX16_FRAME: [u8; 17] = [
+        0x7E, 0x00, 0x0D, 0x81, 0x00, 0x07, 0x28, 0x00, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01,
+        0x02, 0x3F,
+    ];
+
+    /// The same message sent over 868 to ground (dest64 = 0x0000000000000100):
+    ///   FRAME_DATA = 10 00 | 00 00 00 00 00 00 01 00 | FF FE | 00 | 00 | 07 00 01 02 | 03 00 01 02
+    ///   LEN = 14 + 4 + 4 = 22 = 0x0016
+    ///   sum = 10+01+FF+FE+07+01+02+03+01+02 = 0x21E -> 0x1E, CK = 0xFF - 0x1E = 0xE1
+    static TX868_FRAME: [u8; 26] = [
+        0x7E, 0x00, 0x16, 0x10, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x01, 0x00, 0xFF, 0xFE,
+        0x00, 0x00, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0xE1,
+    ];
+
+    /// Received over 868 from 0x0013A20040A1B2C3:
+    ///   FRAME_DATA = 90 | 00 13 A2 00 40 A1 B2 C3 | FF FE | 01 | 07 00 01 02 | 03 00 01 02
+    ///   LEN = 12 + 8 = 20 = 0x0014
+    ///   sum = 90+13+A2+40+A1+B2+C3+FF+FE+01+07+01+02+03+01+02 = 0x5A9 -> 0xA9,
+    ///   CK = 0xFF - 0xA9 = 0x56
+    static RX868_FRAME: [u8; 24] = [
+        0x7E, 0x00, 0x14, 0x90, 0x00, 0x13, 0xA2, 0x00, 0x40, 0xA1, 0xB2, 0xC3, 0xFF, 0xFE, 0x01,
+        0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x56,
+    ];
+
+    static FIELDS: [u8; 4] = [0x03, 0x00, 0x01, 0x02];
+
+    fn meta() -> TxMeta {
+        TxMeta::new(MsgHeader::new(7, 0, 1, 2))
+    }
+
+    #[test]
+    fn test_deconstruct() {
+        let p = Packet::new_checked(&RX16_FRAME[..]).unwrap();
+        assert_eq!(p.start(), 0x7E);
+        assert_eq!(p.length(), 13);
+        assert_eq!(p.frame_len(), 17);
+        assert_eq!(p.api_id(), API_RX16);
+        assert_eq!(p.frame_data(), &RX16_FRAME[3..16]);
+        assert_eq!(p.checksum(), 0x3F);
+        assert!(p.verify_checksum());
+        let p = Packet::new_checked(&RX868_FRAME[..]).unwrap();
+        assert_eq!(p.length(), 20);
+        assert_eq!(p.api_id(), API_RX_868);
+        assert!(p.verify_checksum());
+    }
+
+    #[test]
+    fn test_construct() {
+        let mut bytes = [0u8; 17];
+        let mut p = Packet::new_unchecked(&mut bytes[..]);
+        p.set_start(START);
+        p.set_length(13);
+        p.frame_data_mut().copy_from_slice(&RX16_FRAME[3..16]);
+        p.fill_checksum();
+        assert_eq!(bytes, RX16_FRAME);
+    }
+
+    #[test]
+    fn test_emit() {
+        let mut out = [0u8; 64];
+        let n = XBee24::new().encode(&meta(), &FIELDS, &mut out).unwrap();
+        assert_eq!(&out[..n], &TX16_FRAME);
+        let n = XBee868::new().encode(&meta(), &FIELDS, &mut out).unwrap();
+        assert_eq!(&out[..n], &TX868_FRAME);
+    }
+
+    #[test]
+    fn test_parse() {
+        let (f, n) = XBee24::new().parse(&RX16_FRAME).unwrap();
+        assert_eq!(n, 17);
+        assert_eq!(
+            (f.source(), f.destination(), f.class(), f.msg_id()),
+            (7, Some(0), 1, 2)
+        );
+        assert_eq!(f.payload(), &FIELDS);
+        assert_eq!(f.rssi(), Some(0x28));
+        assert_eq!(
+            f.extra(),
+            Extra::XBee(XBeeInfo {
+                api_id: 0x81,
+                address: 7,
+                rssi: Some(0x28),
+                options: 0
+            })
+        );
+        // Loopback of our own TX16 frame.
+        let (f, _) = XBee24::new().parse(&TX16_FRAME).unwrap();
+        assert_eq!(f.payload(), &FIELDS);
+        assert_eq!(f.rssi(), None);
+        let (f, _) = XBee868::new().parse(&RX868_FRAME).unwrap();
+        assert_eq!(
+            (f.source(), f.destination(), f.class(), f.msg_id()),
+            (7, Some(0), 1, 2)
+        );
+        assert_eq!(f.payload(), &FIELDS);
+        match f.extra() {
+            Extra::XBee(x) => {
+                assert_eq!(x.address, 0x0013_A200_40A1_B2C3);
+                assert_eq!(x.options, 1);
+            }
+            other => panic!("{other:?}"),
+        }
+        let (f, _) = XBee868::new().parse(&TX868_FRAME).unwrap();
+        assert_eq!(f.payload(), &FIELDS);
+    }
+
+    #[test]
+    fn wrong_radio_is_unknown_api() {
+        // LEN 20 is within the 802.15.4 limit and the checksum is good: only the API
+        // id is foreign.
+        assert_eq!(
+            XBee24::new().parse(&RX868_FRAME).unwrap_err(),
+            RxError::UnknownApiId(0x90)
+        );
+        assert_eq!(
+            XBee868::new().parse(&RX16_FRAME).unwrap_err(),
+            RxError::UnknownApiId(0x81)
+        );
+    }
+
+    #[test]
+    fn addresses() {
+        assert_eq!(address16(0), 0x0100);
+        assert_eq!(address16(0xFF), 0xFFFF);
+        assert_eq!(address16(42), 42);
+        assert_eq!(address64(0xFF), 0xFFFF);
+    }
+
+    #[test]
+    fn limits() {
+        assert_eq!(XBee24::MAX_PAYLOAD_LEN, 96);
+        assert_eq!(XBee24::new().max_frame_len(), 12 + 96 + 1);
+        assert_eq!(XBee868::new().max_frame_len(), 21 + 247 + 1);
+        assert_eq!(XBee868::new().max_rx_frame_len(), 274);
+    }
+}

@@ -1,0 +1,194 @@
+//! Helpers shared by the integration tests (std is fine here).
+#![allow(dead_code)]
+
+use pprz_transports::{
+    AnyTransport, Decoder, Encoder, Extra, Frame, Framing, MsgHeader, PprzLog, PprzV1, PprzV2,
+    TxMeta, XBee24, XBee868, xbee,
+};
+
+/// Every transport, with the configuration the tests use.
+pub fn all_transports() -> [AnyTransport; 5] {
+    [
+        AnyTransport::PprzV1(PprzV1::new(1)),
+        AnyTransport::PprzV2(PprzV2::new()),
+        AnyTransport::XBee24(XBee24::new()),
+        AnyTransport::XBee868(XBee868::new()),
+        AnyTransport::PprzLog(PprzLog::DATALINK),
+    ]
+}
+
+/// A received frame, owned, for comparisons.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Owned {
+    pub source: u8,
+    pub destination: Option<u8>,
+    pub class: u8,
+    pub component: u8,
+    pub msg_id: u8,
+    pub payload: Vec<u8>,
+    pub raw: Vec<u8>,
+    pub extra: Extra,
+}
+
+impl From<Frame<'_>> for Owned {
+    fn from(f: Frame<'_>) -> Self {
+        Self {
+            source: f.source(),
+            destination: f.destination(),
+            class: f.class(),
+            component: f.component(),
+            msg_id: f.msg_id(),
+            payload: f.payload().to_vec(),
+            raw: f.raw().to_vec(),
+            extra: f.extra(),
+        }
+    }
+}
+
+/// Encodes one frame.
+pub fn encode(t: &AnyTransport, meta: &TxMeta, payload: &[u8]) -> Vec<u8> {
+    let mut buf = [0u8; pprz_transports::MAX_FRAME_LEN];
+    let n = t.encode(meta, payload, &mut buf).expect("encode");
+    buf[..n].to_vec()
+}
+
+/// What a decoder must report for a frame `t` encoded from `meta` and `payload`.
+pub fn expected(t: &AnyTransport, meta: &TxMeta, payload: &[u8], raw: &[u8]) -> Owned {
+    let h = meta.header;
+    let mut o = Owned {
+        source: h.source,
+        destination: Some(h.destination),
+        class: h.class,
+        component: h.component,
+        msg_id: h.msg_id,
+        payload: payload.to_vec(),
+        raw: raw.to_vec(),
+        extra: Extra::None,
+    };
+    match t {
+        AnyTransport::PprzV1(v1) => {
+            o.destination = None;
+            o.class = v1.rx_class;
+            o.component = 0;
+        }
+        AnyTransport::XBee24(x) => {
+            o.extra = Extra::XBee(pprz_transports::XBeeInfo {
+                api_id: xbee::API_TX16,
+                address: u64::from(xbee::address16(h.destination)),
+                rssi: None,
+                options: x.options,
+            });
+        }
+        AnyTransport::XBee868(x) => {
+            o.extra = Extra::XBee(pprz_transports::XBeeInfo {
+                api_id: xbee::API_TX_868,
+                address: xbee::address64(h.destination),
+                rssi: None,
+                options: x.options,
+            });
+        }
+        AnyTransport::PprzLog(l) => {
+            o.extra = Extra::Log(pprz_transports::LogInfo {
+                source: l.source,
+                timestamp: meta.timestamp,
+            });
+        }
+        _ => {}
+    }
+    o
+}
+
+/// Feeds `stream` to a fresh decoder in chunks whose sizes come from `sizes`
+/// (cycled; 0 means 1), then flushes. Checks the stats invariant at every step.
+pub fn decode_chunked<const N: usize>(
+    t: AnyTransport,
+    stream: &[u8],
+    sizes: &[usize],
+) -> (Vec<Owned>, pprz_transports::DecoderStats) {
+    let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
+    let mut out = Vec::new();
+    let mut rest = stream;
+    let mut i = 0;
+    while !rest.is_empty() {
+        let size = sizes
+            .get(i % sizes.len().max(1))
+            .copied()
+            .unwrap_or(1)
+            .max(1);
+        i += 1;
+        let (chunk, tail) = rest.split_at(size.min(rest.len()));
+        rest = tail;
+        let mut input = chunk;
+        while let Some(f) = d.feed(&mut input) {
+            out.push(Owned::from(f));
+        }
+        assert!(input.is_empty(), "feed returned None with input left");
+        check_invariant(&d);
+    }
+    while let Some(f) = d.flush() {
+        out.push(Owned::from(f));
+    }
+    assert_eq!(d.buffered(), 0);
+    check_invariant(&d);
+    (out, *d.stats())
+}
+
+pub fn check_invariant<const N: usize>(d: &Decoder<AnyTransport, N>) {
+    let s = d.stats();
+    assert_eq!(
+        s.bytes_in,
+        s.frame_bytes
+            .wrapping_add(s.dropped_bytes)
+            .wrapping_add(d.buffered() as u32),
+        "stats invariant: {s:?}, buffered {}",
+        d.buffered()
+    );
+}
+
+/// Reference model: a whole-stream, non-incremental scan with the same acceptance
+/// rule (a valid frame no longer than `n` bytes at the current position is taken
+/// whole; anything else advances one byte). Returns `(offset, frame)`.
+pub fn oracle(t: &AnyTransport, n: usize, stream: &[u8]) -> Vec<(usize, Owned)> {
+    let mut out = Vec::new();
+    let mut pos = 0;
+    while pos < stream.len() {
+        let here = &stream[pos..];
+        if let Ok((frame, len)) = t.parse(here)
+            && len <= n
+        {
+            out.push((pos, Owned::from(frame)));
+            pos += len;
+            continue;
+        }
+        pos += 1;
+    }
+    out
+}
+
+/// A tiny deterministic PRNG (xorshift64*), so randomized tests that are not
+/// proptests are reproducible.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+    pub fn byte(&mut self) -> u8 {
+        self.next_u64() as u8
+    }
+    pub fn header(&mut self) -> MsgHeader {
+        MsgHeader::new(self.byte(), self.byte(), self.below(16) as u8, self.byte())
+            .with_component(self.below(16) as u8)
+    }
+}
