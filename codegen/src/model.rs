@@ -144,10 +144,7 @@ impl Protocol {
     /// # Errors
     /// Every problem found, each with file, line, message and field.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
-        let path = path.as_ref();
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+        let (name, text) = read_file(path.as_ref())?;
         Self::parse(&name, &text)
     }
 
@@ -156,17 +153,7 @@ impl Protocol {
     /// # Errors
     /// Every problem found, each with file, line, message and field.
     pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
-        let doc = parse_xml(text).map_err(|e| {
-            let pos = e.pos();
-            Error::new(vec![Diagnostic {
-                file: file.to_owned(),
-                line: pos.row,
-                column: pos.col,
-                message: None,
-                field: None,
-                kind: ErrorKind::Xml(e.to_string()),
-            }])
-        })?;
+        let doc = parse_xml(file, text)?;
         let mut p = Parser {
             file,
             doc: &doc,
@@ -295,10 +282,7 @@ impl Units {
     /// # Errors
     /// Unreadable file, malformed XML, or a `<unit>` without a numeric `coef`.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
-        let path = path.as_ref();
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+        let (name, text) = read_file(path.as_ref())?;
         Self::parse(&name, &text)
     }
 
@@ -307,8 +291,7 @@ impl Units {
     /// # Errors
     /// Malformed XML, or a `<unit>` without `from`, `to` or a numeric `coef`.
     pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
-        let doc =
-            parse_xml(text).map_err(|e| Error::single(file, ErrorKind::Xml(e.to_string())))?;
+        let doc = parse_xml(file, text)?;
         let mut p = Parser {
             file,
             doc: &doc,
@@ -705,8 +688,17 @@ impl<'input> Parser<'_, 'input> {
     }
 }
 
-/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry.
-fn parse_xml(text: &str) -> Result<Document<'_>, roxmltree::Error> {
+/// Reads a file, returning its name for diagnostics and its text.
+fn read_file(path: &Path) -> Result<(String, String), Error> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+    Ok((name, text))
+}
+
+/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry; a syntax error
+/// is reported at its position in `file`.
+fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
     Document::parse_with_options(
         text,
         ParsingOptions {
@@ -714,6 +706,17 @@ fn parse_xml(text: &str) -> Result<Document<'_>, roxmltree::Error> {
             ..ParsingOptions::default()
         },
     )
+    .map_err(|e| {
+        let pos = e.pos();
+        Error::new(vec![Diagnostic {
+            file: file.to_owned(),
+            line: pos.row,
+            column: pos.col,
+            message: None,
+            field: None,
+            kind: ErrorKind::Xml(e.to_string()),
+        }])
+    })
 }
 
 fn is_signed(base: BaseType) -> bool {
