@@ -3,7 +3,20 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod arena;
+pub mod downlink;
+pub mod queue;
+pub mod stats;
+pub mod writer;
+
 pub use pprz_messages;
+pub use pprz_transports;
+
+pub use arena::{AllocError, FrameArena, FrameBuf};
+pub use downlink::{DeviceConfig, Downlink, SendError, Targets};
+pub use queue::FrameQueue;
+pub use stats::{DeviceStats, DropReason};
+pub use writer::run_writer;
 
 /// The project's default message set, generated at build time from `messages.xml` at the
 /// root of the repository (telemetry and datalink classes).

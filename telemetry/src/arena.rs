@@ -1,0 +1,1038 @@
+//! The frame arena: one shared byte arena for the pending frames of all devices (the
+//! thesis' *Dynamic Memory Space*), with bounded, constant-time allocation and release.
+//!
+//! A [`FrameArena`] is a `static` block of `N` bytes. [`FrameArena::alloc`] hands out a
+//! [`FrameBuf`]: an exclusively owned, contiguous region of the arena (a *grant*, as in
+//! bbqueue). The frame is encoded into it, truncated to its final length, queued, and
+//! eventually written to a device, possibly by another task on another executor. Dropping
+//! the `FrameBuf`, when the write completes or the queue evicts the frame, releases its
+//! memory; there is no other way to release it, so memory cannot leak or be released twice.
+//!
+//! ```
+//! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+//! use pprz_telemetry::arena::FrameArena;
+//! # use critical_section as _;
+//!
+//! static ARENA: FrameArena<CriticalSectionRawMutex, 4096> = FrameArena::new();
+//!
+//! let mut frame = ARENA.alloc(64)?;        // room for the largest encoding
+//! frame[..3].copy_from_slice(&[0x99, 3, 7]); // encode...
+//! frame.truncate(3);                       // ...and keep what was written
+//! assert_eq!(&frame[..], &[0x99, 3, 7]);
+//! assert_eq!(ARENA.stats().live, 1);
+//! drop(frame);                             // the write completed: memory returns
+//! assert_eq!(ARENA.stats().live, 0);
+//! # Ok::<(), pprz_telemetry::arena::AllocError>(())
+//! ```
+//!
+//! # Allocator
+//!
+//! A purpose-built TLSF (two-level segregated fit, Masmano et al. 2004), chosen over
+//! wrapping the `rlsf` crate after measuring both on the same workload (see
+//! `tests/arena.rs`, `fill_at_first_failure`):
+//!
+//! * **No per-frame header.** A live frame's block is described by its [`FrameBuf`]
+//!   (start and size), so a frame costs only its length rounded up to
+//!   [`GRANULARITY`] (8 bytes). Free blocks carry their own header and footer, and one
+//!   *boundary bit* per 8-byte unit marks the first and last unit of every free block;
+//!   that bitmap is the only fixed overhead ([`FrameArena::RESERVED`], 1/65 of `N`).
+//!   `rlsf` puts a 2-word header in front of every block and rounds blocks to 4 words:
+//!   8 + up to 15 bytes per frame on a 32-bit MCU, 16 + up to 31 bytes on a 64-bit host.
+//! * **Exact size classes for frames.** With 16 second-level classes per power of two,
+//!   every size up to 32 units (256 bytes, which covers every PPRZ, XBee and PPRZLOG frame
+//!   of the default message set) has a class of its own, so the good-fit search finds a
+//!   free block whenever one is large enough; it fails only when no free block is.
+//! * **Same layout on every target.** Offsets and sizes are `u16` counts of 8-byte units,
+//!   so the host tests, Miri and the MCU exercise the very same block layout.
+//! * **Fully zero-initialised**, so a `static` arena lives in `.bss` and costs no flash.
+//!
+//! Measured with random frame sizes 8..=255 bytes in steady state (free a random frame,
+//! allocate until the first failure, 20 000 rounds; `cargo test -p pprz-telemetry --test
+//! arena fill -- --nocapture` prints the figures): the arena is on average 97 % used
+//! (97 % at the worst round) when an allocation first fails with `N = 16 KiB`, 93 % with
+//! `N = 4 KiB`. Used bytes count the boundary bitmap and rounding; requested payload bytes
+//! are a few percent lower, and are printed too.
+//!
+//! # Layout
+//!
+//! ```text
+//!  unit 0                                                       UNITS-1
+//!  |                                                                  |
+//!  +---------+--------------------+---------+--------------------------+--------------+
+//!  | frame A | free block         | frame B | free block               | boundary     |
+//!  | (owned  | size next prev ... | (owned  | size next prev ...  foot | bitmap, pad  |
+//!  | by its  |               foot | by its  |                          | (RESERVED    |
+//!  | FrameBuf)                    | FrameBuf)                          |  bytes)      |
+//!  +---------+--------------------+---------+--------------------------+--------------+
+//!            ^1                 1^          ^1                       1^    boundary bits
+//! ```
+//!
+//! A free block of `s` units starting at unit `b` stores, little-endian `u16`s: its size
+//! `s` at byte 0, the next and previous block of its free list at bytes 2 and 4 (unit
+//! index + 1, 0 = none), and `s` again at bytes 6..8 of its last unit (the footer). A
+//! one-unit free block holds all four fields. The allocator never reads or writes the
+//! bytes of a block owned by a `FrameBuf`.
+//!
+//! Free lists are indexed by size class `(fl, sl)`: sizes below 16 units have class
+//! `(0, s)`; a size `s` with `2^f <= s < 2^(f+1)`, `f >= 4`, has class
+//! `(f - 3, (s >> (f - 4)) - 16)`. A first-level bitmap and one second-level bitmap per
+//! first level say which lists are non-empty.
+//!
+//! # Time Complexity
+//!
+//! [`FrameArena::alloc`] and releasing a [`FrameBuf`] run in constant time whatever the
+//! fill level and fragmentation: a few bit scans (`trailing_zeros`), unlinking at most
+//! three free blocks and linking one. Nothing loops over blocks, lists or units. The lock
+//! is held only for that time.
+//!
+//! # Concurrency and `unsafe`
+//!
+//! The allocator metadata (lists, bitmaps, counters) is only touched with the
+//! [`Mutex<M, _>`](Mutex) held; on a board `M` is a critical section. The bytes of a live
+//! frame are read and written without the lock, through its `FrameBuf`: this module is
+//! allowed `unsafe` code for exactly that, disjoint `&mut [u8]` views into one
+//! [`UnsafeCell`] buffer, and for the allocator's raw reads and writes of free blocks'
+//! headers. The invariants that make it sound are written on [`FrameArena`]; property
+//! tests check them after every step and the tests run under Miri.
+
+// The crate denies `unsafe_code`; this module needs it to hand out disjoint mutable views
+// of one shared buffer (see "Concurrency and `unsafe`" above). Every block is justified.
+#![allow(unsafe_code)]
+
+use core::cell::{RefCell, UnsafeCell};
+use core::fmt;
+use core::ops::{Deref, DerefMut};
+
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
+
+/// Allocation granularity in bytes: every frame occupies a multiple of this.
+pub const GRANULARITY: usize = 8;
+
+/// Largest allocation of any arena, in bytes; an arena smaller than this has a smaller
+/// [`FrameArena::MAX_ALLOC`].
+pub const MAX_ALLOC_LIMIT: usize = 1024;
+
+/// Smallest usable size of an arena in bytes, checked at compile time.
+pub const MIN_USABLE: usize = 512;
+
+/// log2 of the number of second-level classes per power of two.
+const SLI: u32 = 4;
+/// Number of second-level classes per first level.
+const SL: usize = 1 << SLI;
+/// Number of first levels: sizes are below 2^16 units, so `fl = f - SLI + 1 <= 12`.
+const FL: usize = 16 - SLI as usize + 1;
+/// Largest number of units an arena may have (so that `unit + 1` fits a `u16` link).
+const MAX_UNITS: usize = u16::MAX as usize - 1;
+
+/// Byte offsets of the fields of a free block (relative to its first or last unit).
+mod field {
+    /// Size in units, at the start of the first unit.
+    pub const SIZE: usize = 0;
+    /// Next block in the free list (unit + 1, 0 = none), first unit.
+    pub const NEXT: usize = 2;
+    /// Previous block in the free list (unit + 1, 0 = none), first unit.
+    pub const PREV: usize = 4;
+    /// Size in units again, at the end of the last unit.
+    pub const FOOT: usize = 6;
+}
+
+/// Why [`FrameArena::alloc`] failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AllocError {
+    /// The request is larger than [`FrameArena::MAX_ALLOC`].
+    TooLarge {
+        /// Requested length in bytes.
+        len: usize,
+        /// The arena's largest allocation in bytes.
+        max: usize,
+    },
+    /// No free block is large enough right now; one will be after frames are released.
+    Full {
+        /// Requested length in bytes.
+        len: usize,
+    },
+}
+
+impl fmt::Display for AllocError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::TooLarge { len, max } => write!(
+                f,
+                "a frame of {len} bytes exceeds the arena's largest allocation ({max} bytes)"
+            ),
+            Self::Full { len } => write!(f, "frame arena full: no free block of {len} bytes"),
+        }
+    }
+}
+
+impl core::error::Error for AllocError {}
+
+/// A snapshot of an arena's fill level and counters ([`FrameArena::stats`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ArenaStats {
+    /// Bytes of storage, `N`.
+    pub capacity: usize,
+    /// Bytes not available to new frames: the blocks of live frames (lengths rounded up
+    /// to [`GRANULARITY`]) plus the fixed [`FrameArena::RESERVED`] bytes. `used /
+    /// capacity` is the fill level.
+    pub used: usize,
+    /// Live frames: allocated and not yet released.
+    pub live: usize,
+    /// Largest `used` since creation or the last [`FrameArena::reset_high_water`].
+    pub high_water: usize,
+    /// Number of free blocks; with `used`, a measure of fragmentation.
+    pub free_blocks: usize,
+    /// Successful allocations (wrapping).
+    pub allocs: u32,
+    /// Releases (wrapping); `allocs.wrapping_sub(frees) == live`.
+    pub frees: u32,
+    /// Allocations that failed with [`AllocError::Full`] or [`AllocError::TooLarge`]
+    /// (wrapping).
+    pub failures: u32,
+}
+
+/// One shared arena of `N` bytes for the pending frames of all devices.
+///
+/// `M` is the blocking mutex that protects the allocator metadata: a
+/// `CriticalSectionRawMutex` when frames are allocated or released from several executors
+/// or interrupts, a `ThreadModeRawMutex` for one thread-mode executor. It must be `Sync`
+/// ([`new`](Self::new) requires it), because the frames [`alloc`] returns are `Send` and
+/// release their memory wherever they are dropped:
+///
+/// ```compile_fail
+/// use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+/// use pprz_telemetry::arena::FrameArena;
+/// let arena = FrameArena::<NoopRawMutex, 1024>::new(); // error: `NoopRawMutex` is not `Sync`
+/// ```
+///
+/// `N` is checked at compile time: the usable part must be at least [`MIN_USABLE`] bytes
+/// and at most 65 534 units of [`GRANULARITY`] bytes (about 512 KiB).
+///
+/// ```compile_fail
+/// use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+/// use pprz_telemetry::arena::FrameArena;
+/// // Too small: fails to compile.
+/// static ARENA: FrameArena<CriticalSectionRawMutex, 256> = FrameArena::new();
+/// ```
+///
+/// A frame cannot outlive its arena:
+///
+/// ```compile_fail
+/// use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+/// use pprz_telemetry::arena::FrameArena;
+/// let frame = {
+///     let arena = FrameArena::<CriticalSectionRawMutex, 1024>::new();
+///     arena.alloc(16).unwrap()
+/// }; // error: `arena` does not live long enough
+/// drop(frame);
+/// ```
+///
+/// # Invariants
+///
+/// With `UNITS` the number of 8-byte units before the [`RESERVED`](Self::RESERVED) tail:
+///
+/// 1. Units `0..UNITS` are partitioned into consecutive blocks. Each is either *free*, in
+///    exactly one free list (that of its size class), or *owned* by exactly one live
+///    [`FrameBuf`] that records its start and size.
+/// 2. No two free blocks are adjacent (immediate coalescing), so there are at most
+///    `live + 1` free blocks.
+/// 3. The boundary bit of a unit is set iff the unit is the first or the last unit of a
+///    free block.
+/// 4. A free block's header and footer hold its size and list links. The allocator reads
+///    and writes only the headers and footers of free blocks and the boundary bitmap, and
+///    only with the lock held; the bytes of an owned block are accessed only through its
+///    `FrameBuf`.
+/// 5. Second-level bit `(fl, sl)` is set iff list `(fl, sl)` is non-empty; first-level bit
+///    `fl` is set iff any of its second-level bits is.
+/// 6. Every byte of the storage is initialised (zero at creation, then only ever written
+///    with initialised values), so a new frame's bytes may hold an older frame's data but
+///    are never uninitialised.
+///
+/// [`alloc`]: Self::alloc
+pub struct FrameArena<M: RawMutex, const N: usize> {
+    /// Allocator metadata; see the invariants above.
+    state: Mutex<M, RefCell<State>>,
+    /// Frame units, then the boundary bitmap, then padding.
+    storage: UnsafeCell<[u8; N]>,
+}
+
+// Safety: `FrameArena` is `!Sync` only because of `storage`. Concurrent access to it is
+// coordinated: the allocator touches free blocks and the bitmap only with the mutex held
+// (`M: Sync` makes the mutex a real lock between threads), and the bytes of a live frame
+// are reachable only through the one `FrameBuf` that owns the block (invariants 1 and 4).
+// Lock release/acquire orders a frame's last use before the reuse of its bytes.
+unsafe impl<M: RawMutex + Sync, const N: usize> Sync for FrameArena<M, N> {}
+
+impl<M: RawMutex, const N: usize> FrameArena<M, N> {
+    /// Number of units available to frames: the largest `u` with
+    /// `u * GRANULARITY + ceil(u / 8) <= N` (one boundary bit per unit).
+    const UNITS: usize = {
+        let mut u = N * 8 / (8 * GRANULARITY + 1);
+        while u * GRANULARITY + u.div_ceil(8) > N {
+            u -= 1;
+        }
+        u
+    };
+
+    /// Bytes of the storage not available to frames: the boundary bitmap (one bit per
+    /// [`GRANULARITY`] bytes) and padding. `stats().used` starts at this value.
+    pub const RESERVED: usize = N - Self::UNITS * GRANULARITY;
+
+    /// Largest allocation in bytes: [`MAX_ALLOC_LIMIT`], or the usable size of a smaller
+    /// arena. Always at least [`MIN_USABLE`].
+    pub const MAX_ALLOC: usize = if Self::UNITS * GRANULARITY < MAX_ALLOC_LIMIT {
+        Self::UNITS * GRANULARITY
+    } else {
+        MAX_ALLOC_LIMIT
+    };
+
+    /// Compile-time check of `N`, forced by [`new`](Self::new).
+    const VALID: () = {
+        assert!(
+            Self::UNITS * GRANULARITY >= MIN_USABLE,
+            "FrameArena: N is too small (the usable part must be at least MIN_USABLE bytes)"
+        );
+        assert!(
+            Self::UNITS <= MAX_UNITS,
+            "FrameArena: N is too large (at most 65534 units of GRANULARITY bytes)"
+        );
+    };
+
+    /// A snapshot of the fill level and counters.
+    ///
+    /// # Time Complexity
+    ///
+    /// Constant; takes the lock briefly.
+    pub fn stats(&self) -> ArenaStats {
+        self.with_heap(|st, _| ArenaStats {
+            capacity: N,
+            used: st.used,
+            live: st.live,
+            high_water: st.high_water,
+            free_blocks: st.free_blocks,
+            allocs: st.allocs,
+            frees: st.frees,
+            failures: st.failures,
+        })
+    }
+
+    /// Restart the high-water mark from the current fill level.
+    pub fn reset_high_water(&self) {
+        self.with_heap(|st, _| st.high_water = st.used);
+    }
+
+    /// Run `f` on the metadata with the lock held, setting the arena up on first use.
+    fn with_heap<R>(&self, f: impl FnOnce(&mut State, Mem) -> R) -> R {
+        let mem = Mem {
+            base: self.storage.get().cast::<u8>(),
+            units: Self::UNITS,
+        };
+        self.state.lock(|state| {
+            // Never already borrowed: nothing below calls back into the arena.
+            let mut st = state.borrow_mut();
+            if !st.ready {
+                st.ready = true;
+                st.used = Self::RESERVED;
+                st.high_water = Self::RESERVED;
+                st.insert(mem, 0, Self::UNITS);
+            }
+            f(&mut st, mem)
+        })
+    }
+}
+
+impl<M: RawMutex + Sync, const N: usize> FrameArena<M, N> {
+    /// An empty arena. A `const fn`, so the arena can be a `static`; it is all zeros, so
+    /// it lives in `.bss`.
+    ///
+    /// Only arenas whose mutex is `Sync` can be created: frames are `Send`, so they may
+    /// release their memory from another thread (see [`FrameBuf`]). With one executor,
+    /// use `ThreadModeRawMutex` rather than `NoopRawMutex`.
+    ///
+    /// # Panics
+    ///
+    /// Never at run time; an invalid `N` is a compile-time error.
+    pub const fn new() -> Self {
+        let () = Self::VALID;
+        Self {
+            state: Mutex::new(RefCell::new(State::EMPTY)),
+            storage: UnsafeCell::new([0; N]),
+        }
+    }
+}
+
+impl<M: RawMutex, const N: usize> FrameArena<M, N> {
+    /// Allocate a frame of `len` bytes (`0..=MAX_ALLOC`). Its bytes are initialised but
+    /// unspecified (an older frame's data); [`FrameBuf::truncate`] it to the length
+    /// actually encoded. Dropping it releases the memory.
+    ///
+    /// The block is `len` rounded up to [`GRANULARITY`] (at least one unit). For
+    /// `len <= 256` this fails with [`AllocError::Full`] only if no free block is large
+    /// enough; above, only if none is large enough by a margin of at most `len / 16`,
+    /// unless the first block of the request's own size class fits.
+    ///
+    /// # Errors
+    ///
+    /// [`AllocError::TooLarge`] if `len > MAX_ALLOC`, [`AllocError::Full`] if no free
+    /// block fits. Both count as failures in [`stats`](Self::stats).
+    ///
+    /// # Time Complexity
+    ///
+    /// Constant, whatever the fill level; takes the lock briefly.
+    pub fn alloc(&self, len: usize) -> Result<FrameBuf<'_>, AllocError> {
+        let block = self.with_heap(|st, mem| {
+            let result = if len > Self::MAX_ALLOC {
+                Err(AllocError::TooLarge {
+                    len,
+                    max: Self::MAX_ALLOC,
+                })
+            } else {
+                let units = len.div_ceil(GRANULARITY).max(1);
+                st.alloc(mem, units)
+                    .map(|start| (start, units))
+                    .ok_or(AllocError::Full { len })
+            };
+            match result {
+                Ok((_, units)) => {
+                    st.allocs = st.allocs.wrapping_add(1);
+                    st.live += 1;
+                    st.used += units * GRANULARITY;
+                    st.high_water = st.high_water.max(st.used);
+                }
+                Err(_) => st.failures = st.failures.wrapping_add(1),
+            }
+            result
+        })?;
+        // The casts are lossless: `start + units <= UNITS <= MAX_UNITS` and
+        // `len <= MAX_ALLOC_LIMIT`.
+        Ok(FrameBuf {
+            arena: self,
+            start: block.0 as u16,
+            units: block.1 as u16,
+            len: len as u16,
+        })
+    }
+}
+
+impl<M: RawMutex + Sync, const N: usize> Default for FrameArena<M, N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<M: RawMutex, const N: usize> fmt::Debug for FrameArena<M, N> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("FrameArena")
+            .field("stats", &self.stats())
+            .finish_non_exhaustive()
+    }
+}
+
+/// What a [`FrameBuf`] needs of its arena, with `M` and `N` erased.
+trait Grants {
+    /// Start of the storage.
+    fn base(&self) -> *mut u8;
+
+    /// Return the block `start..start + units` to the free lists.
+    ///
+    /// # Safety
+    ///
+    /// * `start..start + units` is a block allocated by this arena and not yet released.
+    /// * No reference into its bytes is used afterwards.
+    unsafe fn release(&self, start: usize, units: usize);
+}
+
+impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
+    fn base(&self) -> *mut u8 {
+        self.storage.get().cast::<u8>()
+    }
+
+    unsafe fn release(&self, start: usize, units: usize) {
+        self.with_heap(|st, mem| {
+            st.free(mem, start, units);
+            st.frees = st.frees.wrapping_add(1);
+            st.live -= 1;
+            st.used -= units * GRANULARITY;
+        });
+    }
+}
+
+/// An exclusively owned, contiguous region of a [`FrameArena`]: a pending frame.
+///
+/// Created by [`FrameArena::alloc`].
+///
+/// Dereferences to its first [`len`](Self::len) bytes. Dropping it releases the memory
+/// (in constant time, taking the arena's lock briefly). It is `Send` and `Sync`, so it can
+/// be queued, handed to a writer task on another executor and held across an `.await`
+/// while other tasks allocate and release frames.
+pub struct FrameBuf<'a> {
+    /// The arena, which outlives the frame.
+    arena: &'a dyn Grants,
+    /// First unit of the block; owned by this `FrameBuf` alone (invariant 1).
+    start: u16,
+    /// Size of the block in units; `start + units <= UNITS`.
+    units: u16,
+    /// Logical length in bytes; `len <= units * GRANULARITY`.
+    len: u16,
+}
+
+// Safety: a `FrameBuf` holds a shared reference to its arena and the exclusive right to
+// its block. Its arena is `Sync`: the only constructors of `FrameArena`, `new` and
+// `default`, require `M: Sync`, which makes `FrameArena<M, N>: Sync`. So the reference
+// may be used from another thread (to release the block, under the lock), and the block's
+// bytes are reached only through this `FrameBuf` (invariant 1), with `&`/`&mut` rules
+// enforced by `Deref`/`DerefMut`.
+unsafe impl Send for FrameBuf<'_> {}
+
+// Safety: as for `Send`; through `&FrameBuf` another thread can only read the block's
+// bytes and the `FrameBuf`'s own fields, never write or release them.
+unsafe impl Sync for FrameBuf<'_> {}
+
+impl FrameBuf<'_> {
+    /// Logical length in bytes (the requested length, or less after [`truncate`]).
+    ///
+    /// [`truncate`]: Self::truncate
+    pub fn len(&self) -> usize {
+        usize::from(self.len)
+    }
+
+    /// Whether the logical length is zero.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Bytes of arena the frame occupies until it is dropped: its requested length rounded
+    /// up to [`GRANULARITY`] (at least one unit).
+    pub fn capacity(&self) -> usize {
+        usize::from(self.units) * GRANULARITY
+    }
+
+    /// Shorten the logical length to `len`, typically to what an encoder wrote. Does
+    /// nothing if `len >= self.len()`. The memory stays allocated until the drop.
+    pub fn truncate(&mut self, len: usize) {
+        if len < self.len() {
+            // Lossless: `len < self.len <= u16::MAX`.
+            self.len = len as u16;
+        }
+    }
+
+    /// Pointer to the first byte of the block.
+    fn ptr(&self) -> *mut u8 {
+        // `wrapping_add` cannot leave the storage: `start * GRANULARITY < UNITS *
+        // GRANULARITY <= N`, so this is an in-bounds pointer of the storage allocation.
+        self.arena
+            .base()
+            .wrapping_add(usize::from(self.start) * GRANULARITY)
+    }
+}
+
+impl Deref for FrameBuf<'_> {
+    type Target = [u8];
+
+    fn deref(&self) -> &[u8] {
+        // Safety: the block `start..start + units` lies inside the storage, which lives for
+        // `'a`, and `len <= units * GRANULARITY`. It is owned by this `FrameBuf` alone
+        // (invariant 1): the allocator does not touch it (invariant 4) and no other
+        // `FrameBuf` covers it, so the only references to these bytes come from this
+        // `FrameBuf`, and `&self` keeps `deref_mut` out. The bytes are initialised
+        // (invariant 6).
+        unsafe { core::slice::from_raw_parts(self.ptr(), self.len()) }
+    }
+}
+
+impl DerefMut for FrameBuf<'_> {
+    fn deref_mut(&mut self) -> &mut [u8] {
+        // Safety: as in `deref`; `&mut self` makes this the only live reference to the
+        // block's bytes.
+        unsafe { core::slice::from_raw_parts_mut(self.ptr(), self.len()) }
+    }
+}
+
+impl Drop for FrameBuf<'_> {
+    fn drop(&mut self) {
+        // Safety: the block was allocated by `self.arena` and is released exactly once,
+        // here; references into it borrowed `self`, so none outlives this call.
+        unsafe {
+            self.arena
+                .release(usize::from(self.start), usize::from(self.units));
+        }
+    }
+}
+
+impl fmt::Debug for FrameBuf<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("FrameBuf")
+            .field("offset", &(usize::from(self.start) * GRANULARITY))
+            .field("len", &self.len())
+            .field("capacity", &self.capacity())
+            .finish()
+    }
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for FrameBuf<'_> {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(
+            f,
+            "FrameBuf {{ offset: {}, len: {}, capacity: {} }}",
+            usize::from(self.start) * GRANULARITY,
+            self.len(),
+            self.capacity()
+        );
+    }
+}
+
+/// Raw access to the storage for the allocator, valid while the lock is held.
+#[derive(Clone, Copy)]
+struct Mem {
+    /// Start of the storage (`N` bytes).
+    base: *mut u8,
+    /// Number of frame units; the boundary bitmap follows them.
+    units: usize,
+}
+
+impl Mem {
+    /// Byte offset of `field` in unit `unit`.
+    fn offset(self, unit: usize, field: usize) -> usize {
+        assert!(unit < self.units, "arena: unit out of range");
+        unit * GRANULARITY + field
+    }
+
+    /// Read the `u16` field at `field` of unit `unit` of a free block.
+    fn get(self, unit: usize, field: usize) -> usize {
+        let at = self.offset(unit, field);
+        // Safety: `at + 2 <= units * GRANULARITY <= N`, in bounds of the storage. The unit
+        // is the first or last unit of a free block (callers follow free-list links,
+        // boundary bits and footers, invariants 1-4), which no `FrameBuf` covers, and the
+        // lock is held, so nothing writes it concurrently. `[u8; 2]` has alignment 1.
+        let bytes = unsafe { self.base.add(at).cast::<[u8; 2]>().read() };
+        usize::from(u16::from_le_bytes(bytes))
+    }
+
+    /// Write the `u16` field at `field` of unit `unit` of a free block.
+    fn set(self, unit: usize, field: usize, value: usize) {
+        let at = self.offset(unit, field);
+        // Values are unit counts or links, at most `MAX_UNITS + 1`.
+        let bytes = (value as u16).to_le_bytes();
+        // Safety: as in `get`; the unit belongs to a free block or to a block being freed
+        // or split off, which no `FrameBuf` covers.
+        unsafe { self.base.add(at).cast::<[u8; 2]>().write(bytes) };
+    }
+
+    /// Byte offset and mask of the boundary bit of `unit`.
+    fn bit(self, unit: usize) -> (usize, u8) {
+        assert!(unit < self.units, "arena: unit out of range");
+        (self.units * GRANULARITY + unit / 8, 1 << (unit % 8))
+    }
+
+    /// The boundary bit of `unit` (invariant 3).
+    fn boundary(self, unit: usize) -> bool {
+        let (at, mask) = self.bit(unit);
+        // Safety: `at < units * GRANULARITY + ceil(units / 8) <= N`; the bitmap is only
+        // accessed by the allocator, with the lock held.
+        unsafe { self.base.add(at).read() & mask != 0 }
+    }
+
+    /// Set or clear the boundary bit of `unit`.
+    fn set_boundary(self, unit: usize, on: bool) {
+        let (at, mask) = self.bit(unit);
+        // Safety: as in `boundary`.
+        unsafe {
+            let byte = self.base.add(at);
+            byte.write(if on {
+                byte.read() | mask
+            } else {
+                byte.read() & !mask
+            });
+        }
+    }
+}
+
+/// Free-list link of a block: unit + 1, 0 = none.
+fn link(unit: Option<usize>) -> usize {
+    unit.map_or(0, |u| u + 1)
+}
+
+/// The block a link points to.
+fn unlink(link: usize) -> Option<usize> {
+    link.checked_sub(1)
+}
+
+/// Size class `(fl, sl)` of a size in units (`1..=MAX_UNITS`).
+fn class(size: usize) -> (usize, usize) {
+    if size < SL {
+        (0, size)
+    } else {
+        let f = size.ilog2();
+        ((f - SLI + 1) as usize, (size >> (f - SLI)) - SL)
+    }
+}
+
+/// `size` rounded up to the smallest size of its class or the next one, so that every
+/// block of that class or above is at least `size`.
+fn round_up(size: usize) -> usize {
+    if size < SL {
+        size
+    } else {
+        let step = 1 << (size.ilog2() - SLI);
+        (size + step - 1) & !(step - 1)
+    }
+}
+
+/// Allocator metadata and counters. All zeros is a valid "not yet set up" state.
+struct State {
+    /// Whether the initial free block has been inserted.
+    ready: bool,
+    /// Bit `fl` set iff `sl_bitmap[fl] != 0` (invariant 5).
+    fl_bitmap: u16,
+    /// Bit `sl` of `sl_bitmap[fl]` set iff `heads[fl][sl]` is not none (invariant 5).
+    sl_bitmap: [u16; FL],
+    /// First block of each free list, as a link.
+    heads: [[u16; SL]; FL],
+    /// See [`ArenaStats`].
+    used: usize,
+    high_water: usize,
+    live: usize,
+    free_blocks: usize,
+    allocs: u32,
+    frees: u32,
+    failures: u32,
+}
+
+impl State {
+    /// The state of a new arena.
+    const EMPTY: Self = Self {
+        ready: false,
+        fl_bitmap: 0,
+        sl_bitmap: [0; FL],
+        heads: [[0; SL]; FL],
+        used: 0,
+        high_water: 0,
+        live: 0,
+        free_blocks: 0,
+        allocs: 0,
+        frees: 0,
+        failures: 0,
+    };
+
+    /// Make `block..block + size` a free block: header, footer, boundary bits, and the
+    /// head of its free list. It must not be adjacent to another free block.
+    fn insert(&mut self, mem: Mem, block: usize, size: usize) {
+        let (fl, sl) = class(size);
+        let next = usize::from(self.heads[fl][sl]);
+        mem.set(block, field::SIZE, size);
+        mem.set(block, field::NEXT, next);
+        mem.set(block, field::PREV, link(None));
+        mem.set(block + size - 1, field::FOOT, size);
+        if let Some(next) = unlink(next) {
+            mem.set(next, field::PREV, link(Some(block)));
+        }
+        mem.set_boundary(block, true);
+        mem.set_boundary(block + size - 1, true);
+        self.heads[fl][sl] = link(Some(block)) as u16;
+        self.sl_bitmap[fl] |= 1 << sl;
+        self.fl_bitmap |= 1 << fl;
+        self.free_blocks += 1;
+    }
+
+    /// Take the free block `block` of `size` units out of its list.
+    fn remove(&mut self, mem: Mem, block: usize, size: usize) {
+        let (fl, sl) = class(size);
+        let next = mem.get(block, field::NEXT);
+        let prev = mem.get(block, field::PREV);
+        match unlink(prev) {
+            Some(prev) => mem.set(prev, field::NEXT, next),
+            None => {
+                self.heads[fl][sl] = next as u16;
+                if next == 0 {
+                    self.sl_bitmap[fl] &= !(1 << sl);
+                    if self.sl_bitmap[fl] == 0 {
+                        self.fl_bitmap &= !(1 << fl);
+                    }
+                }
+            }
+        }
+        if let Some(next) = unlink(next) {
+            mem.set(next, field::PREV, prev);
+        }
+        mem.set_boundary(block, false);
+        mem.set_boundary(block + size - 1, false);
+        self.free_blocks -= 1;
+    }
+
+    /// First block of the smallest non-empty list of class `(fl, sl)` or above.
+    fn find(&self, (fl, sl): (usize, usize)) -> Option<usize> {
+        let here = self.sl_bitmap.get(fl)? & (u16::MAX << sl);
+        let (fl, sl) = if here != 0 {
+            (fl, here.trailing_zeros() as usize)
+        } else {
+            let above = self.fl_bitmap & u16::MAX.checked_shl(fl as u32 + 1)?;
+            if above == 0 {
+                return None;
+            }
+            let fl = above.trailing_zeros() as usize;
+            (fl, self.sl_bitmap[fl].trailing_zeros() as usize)
+        };
+        unlink(usize::from(self.heads[fl][sl]))
+    }
+
+    /// Allocate `units` (`1..=MAX_UNITS`) and return the first unit.
+    fn alloc(&mut self, mem: Mem, units: usize) -> Option<usize> {
+        // Good fit: any block of the rounded-up class or above fits. Failing that, the
+        // first block of the request's own class may (only for sizes of 32 units and more,
+        // whose classes span several sizes).
+        let block = self.find(class(round_up(units))).or_else(|| {
+            let (fl, sl) = class(units);
+            unlink(usize::from(self.heads[fl][sl])).filter(|&b| mem.get(b, field::SIZE) >= units)
+        })?;
+        let size = mem.get(block, field::SIZE);
+        self.remove(mem, block, size);
+        if size > units {
+            // The rest was inside a free block, so its neighbours are this block (now
+            // allocated) and a used block: it is not adjacent to a free block.
+            self.insert(mem, block + units, size - units);
+        }
+        Some(block)
+    }
+
+    /// Release the allocated block `block..block + units`, merging it with free neighbours.
+    fn free(&mut self, mem: Mem, block: usize, units: usize) {
+        let (mut start, mut size) = (block, units);
+        let after = block + units;
+        if after < mem.units && mem.boundary(after) {
+            // `after` starts the next block; its bit is set iff that block is free.
+            let next_size = mem.get(after, field::SIZE);
+            self.remove(mem, after, next_size);
+            size += next_size;
+        }
+        if block > 0 && mem.boundary(block - 1) {
+            // `block - 1` ends the previous block; its bit is set iff that block is free.
+            let prev_size = mem.get(block - 1, field::FOOT);
+            start = block - prev_size;
+            self.remove(mem, start, prev_size);
+            size += prev_size;
+        }
+        self.insert(mem, start, size);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! White-box tests: size classes, and the invariants checked after every step of
+    //! random workloads against a shadow model.
+
+    use super::*;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    type Arena<const N: usize> = FrameArena<CriticalSectionRawMutex, N>;
+
+    #[test]
+    fn classes_are_exact_up_to_32_units_and_monotonic() {
+        let mut last = (0, 0);
+        for size in 1..=MAX_UNITS {
+            let c = class(size);
+            assert!(c >= last, "classes must grow with the size");
+            assert!(c.0 < FL && c.1 < SL);
+            let r = round_up(size);
+            assert!(
+                r >= size && (r - size) * 16 <= size,
+                "round_up({size}) = {r}"
+            );
+            if size <= 32 {
+                assert_eq!(r, size, "frame sizes have exact classes");
+            }
+            // `r` is the smallest size of its class, and that class is not below the
+            // class of `size`: every block of class `class(r)` or above holds `size`.
+            assert!(class(r) >= c);
+            assert!(r == 1 || class(r - 1) < class(r), "round_up({size}) = {r}");
+            last = c;
+        }
+        assert_eq!(class(MAX_UNITS).0, FL - 1);
+    }
+
+    /// `UNITS` is the largest unit count whose units and boundary bits fit in `N`.
+    fn check_units<const N: usize>() {
+        let u = Arena::<N>::UNITS;
+        assert!(u * GRANULARITY + u.div_ceil(8) <= N, "N = {N}");
+        assert!((u + 1) * GRANULARITY + (u + 1).div_ceil(8) > N, "N = {N}");
+        assert_eq!(Arena::<N>::RESERVED, N - u * GRANULARITY);
+    }
+
+    #[test]
+    fn units_and_reserve() {
+        check_units::<528>();
+        check_units::<1024>();
+        check_units::<4095>();
+        check_units::<16384>();
+        check_units::<100_003>();
+        check_units::<532_471>();
+        assert_eq!(Arena::<16384>::UNITS, 2016);
+        assert_eq!(Arena::<16384>::MAX_ALLOC, MAX_ALLOC_LIMIT);
+        assert_eq!(Arena::<600>::MAX_ALLOC, Arena::<600>::UNITS * GRANULARITY);
+        assert_eq!(Arena::<532_471>::UNITS, MAX_UNITS);
+        assert_eq!(Arena::<532_472>::UNITS, MAX_UNITS + 1);
+    }
+
+    impl<M: RawMutex, const N: usize> FrameArena<M, N> {
+        /// Check invariants 1-5 given the live blocks `(start, units)`; return the size of
+        /// the largest free block.
+        fn check(&self, live: &[(usize, usize)]) -> usize {
+            #[derive(Clone, Copy, PartialEq, Debug)]
+            enum Owner {
+                Frame(usize),
+                Free(usize),
+            }
+            self.with_heap(|st, mem| {
+                let mut owner = std::vec![None::<Owner>; mem.units];
+                let mut mark = |start: usize, size: usize, tag: Owner| {
+                    for slot in &mut owner[start..start + size] {
+                        assert_eq!(*slot, None, "blocks overlap at unit {start}");
+                        *slot = Some(tag);
+                    }
+                };
+                for (i, &(start, units)) in live.iter().enumerate() {
+                    mark(start, units, Owner::Frame(i));
+                }
+                let (mut free_blocks, mut free_units, mut largest) = (0, 0, 0);
+                let mut ends = Vec::new();
+                for fl in 0..FL {
+                    assert_eq!(st.fl_bitmap & (1 << fl) != 0, st.sl_bitmap[fl] != 0);
+                    for sl in 0..SL {
+                        let head = unlink(usize::from(st.heads[fl][sl]));
+                        assert_eq!(st.sl_bitmap[fl] & (1 << sl) != 0, head.is_some());
+                        let (mut prev, mut cur) = (None, head);
+                        while let Some(b) = cur {
+                            let size = mem.get(b, field::SIZE);
+                            assert_eq!(class(size), (fl, sl), "block in the wrong list");
+                            assert_eq!(mem.get(b + size - 1, field::FOOT), size);
+                            assert_eq!(unlink(mem.get(b, field::PREV)), prev);
+                            mark(b, size, Owner::Free(b));
+                            ends.extend([b, b + size - 1]);
+                            free_blocks += 1;
+                            free_units += size;
+                            largest = largest.max(size);
+                            (prev, cur) = (Some(b), unlink(mem.get(b, field::NEXT)));
+                        }
+                    }
+                }
+                let owner: Vec<Owner> = owner
+                    .into_iter()
+                    .map(|o| o.expect("a unit in no block: a leak"))
+                    .collect();
+                for pair in owner.windows(2) {
+                    if let [Owner::Free(a), Owner::Free(b)] = pair {
+                        assert_eq!(a, b, "adjacent free blocks");
+                    }
+                }
+                for u in 0..mem.units {
+                    assert_eq!(mem.boundary(u), ends.contains(&u), "boundary bit {u}");
+                }
+                assert_eq!(st.free_blocks, free_blocks);
+                assert_eq!(st.live, live.len());
+                assert_eq!(
+                    st.used,
+                    Self::RESERVED + (mem.units - free_units) * GRANULARITY
+                );
+                largest
+            })
+        }
+    }
+
+    #[derive(Clone, Debug)]
+    enum Op {
+        Alloc(usize),
+        Free(usize),
+        Truncate(usize, usize),
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        prop_oneof![
+            4 => (0usize..=280).prop_map(Op::Alloc),
+            1 => (0usize..=1100).prop_map(Op::Alloc),
+            4 => any::<usize>().prop_map(Op::Free),
+            1 => (any::<usize>(), 0usize..300).prop_map(|(i, n)| Op::Truncate(i, n)),
+        ]
+    }
+
+    fn config() -> ProptestConfig {
+        ProptestConfig {
+            cases: if cfg!(miri) { 3 } else { 256 },
+            failure_persistence: None,
+            ..ProptestConfig::default()
+        }
+    }
+
+    proptest! {
+        #![proptest_config(config())]
+
+        /// After every step: invariants 1-5 hold, and an allocation failed only if no
+        /// free block was large enough (exactly as documented on `alloc`).
+        #[test]
+        fn invariants_hold_and_failures_are_genuine(
+            ops in proptest::collection::vec(op(), 1..if cfg!(miri) { 40 } else { 300 })
+        ) {
+            let arena = Arena::<2048>::new();
+            let mut frames: Vec<FrameBuf<'_>> = Vec::new();
+            let blocks = |frames: &[FrameBuf<'_>]| -> Vec<(usize, usize)> {
+                frames
+                    .iter()
+                    .map(|f| (usize::from(f.start), usize::from(f.units)))
+                    .collect()
+            };
+            let mut largest = arena.check(&[]);
+            for op in ops {
+                match op {
+                    Op::Alloc(len) => {
+                        let units = len.div_ceil(GRANULARITY).max(1);
+                        let own_head_fits = arena.with_heap(|st, mem| {
+                            let (fl, sl) = class(units);
+                            unlink(usize::from(st.heads[fl][sl]))
+                                .is_some_and(|b| mem.get(b, field::SIZE) >= units)
+                        });
+                        match arena.alloc(len) {
+                            Ok(frame) => {
+                                prop_assert!(len <= Arena::<2048>::MAX_ALLOC);
+                                prop_assert_eq!(frame.len(), len);
+                                prop_assert_eq!(frame.capacity(), units * GRANULARITY);
+                                frames.push(frame);
+                            }
+                            Err(AllocError::TooLarge { max, .. }) => {
+                                prop_assert!(len > max);
+                            }
+                            Err(AllocError::Full { .. }) => {
+                                prop_assert!(largest < round_up(units) && !own_head_fits);
+                                if units <= 32 {
+                                    prop_assert!(largest < units);
+                                }
+                            }
+                        }
+                    }
+                    Op::Free(i) => {
+                        if !frames.is_empty() {
+                            let n = frames.len();
+                            drop(frames.swap_remove(i % n));
+                        }
+                    }
+                    Op::Truncate(i, len) => {
+                        if !frames.is_empty() {
+                            let n = frames.len();
+                            let frame = &mut frames[i % n];
+                            let before = frame.len();
+                            frame.truncate(len);
+                            prop_assert_eq!(frame.len(), len.min(before));
+                        }
+                    }
+                }
+                largest = arena.check(&blocks(&frames));
+            }
+            drop(frames);
+            prop_assert_eq!(arena.check(&[]), Arena::<2048>::UNITS);
+            prop_assert_eq!(arena.stats().used, Arena::<2048>::RESERVED);
+        }
+    }
+}

@@ -1,0 +1,313 @@
+//! The transmit queue of one device: frames ordered by priority, FIFO among equal
+//! priorities, with eviction of less important frames when full.
+//!
+//! ```text
+//!   least important                                     most important
+//!   index 0 ........................................... index len-1
+//!   [ p=0 newest .. p=0 oldest | p=1 newest .. p=1 oldest | ... ]
+//!     ^ evicted first: oldest of the lowest priority         ^ sent next
+//! ```
+//!
+//! # Why not `embassy_sync::PriorityChannel`
+//! It is a binary heap: equal priorities come out in no particular order unless the key
+//! carries a sequence number, it cannot evict, and its 0.8.0 `poll_ready_to_send` is
+//! buggy. This queue is built on embassy-sync's blocking [`Mutex`] (a critical section
+//! on boards, so interrupt-free contexts on any executor may send) and a
+//! [`WakerRegistration`] for its one consumer, the device's writer task. Entries are
+//! kept sorted, so sending takes the last one, FIFO order needs no sequence number, and
+//! the eviction candidate is found by binary search.
+//!
+//! # Time Complexity
+//! `push` and `evict` are O(Q) (a binary search and a shift of at most `Q` small
+//! entries), `receive` is O(1); `Q` is the queue capacity, typically 8..64.
+
+use core::cell::RefCell;
+use core::future::poll_fn;
+use core::task::Poll;
+
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
+use embassy_sync::waitqueue::WakerRegistration;
+
+use crate::arena::FrameBuf;
+use crate::stats::{DeviceStats, DropReason};
+
+/// A queued frame: its priority, its global sequence number (age) and its bytes.
+struct Entry<'a> {
+    priority: u8,
+    seq: u32,
+    frame: FrameBuf<'a>,
+}
+
+/// What a push did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Pushed {
+    /// Queued; nothing was evicted.
+    Queued,
+    /// Queued after evicting a less important frame.
+    QueuedEvicting,
+    /// Not queued: the queue is full of frames at least as important (counted as a
+    /// [`DropReason::QueueFull`] drop; the frame's memory is released).
+    Dropped,
+}
+
+/// The eviction candidate of a queue: its least important, oldest frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Candidate {
+    /// Priority of the candidate.
+    pub priority: u8,
+    /// Global sequence number of the candidate (smaller is older, modulo wrapping).
+    pub seq: u32,
+}
+
+impl Candidate {
+    /// Whether `self` should be evicted before `other`: lower priority first, then older.
+    pub fn weaker_than(&self, other: &Candidate) -> bool {
+        self.priority < other.priority
+            || (self.priority == other.priority && older(self.seq, other.seq))
+    }
+}
+
+/// `a` was issued before `b` (sequence numbers wrap; live frames are far less than 2^31
+/// apart).
+fn older(a: u32, b: u32) -> bool {
+    (a.wrapping_sub(b) as i32) < 0
+}
+
+struct State<'a, const Q: usize> {
+    /// Invariant: sorted by priority ascending, and within a priority by age descending
+    /// (newest first), so the last entry is the most important and oldest.
+    entries: heapless::Vec<Entry<'a>, Q>,
+    /// Runtime depth limit, `1..=Q`.
+    depth: usize,
+    /// Whether the writer holds a frame taken from this queue.
+    in_flight: bool,
+    waker: WakerRegistration,
+    stats: DeviceStats,
+}
+
+impl<'a, const Q: usize> State<'a, Q> {
+    /// Index of the eviction candidate: the oldest entry of the lowest priority.
+    fn candidate(&self) -> Option<usize> {
+        let lowest = self.entries.first()?.priority;
+        let end = self.entries.partition_point(|e| e.priority <= lowest);
+        end.checked_sub(1)
+    }
+
+    fn update_queued(&mut self) {
+        let n = self.entries.len() + usize::from(self.in_flight);
+        self.stats.queued = u16::try_from(n).unwrap_or(u16::MAX);
+        let waiting = u16::try_from(self.entries.len()).unwrap_or(u16::MAX);
+        self.stats.queue_high_water = self.stats.queue_high_water.max(waiting);
+    }
+}
+
+/// The priority queue of one device.
+///
+/// `'a` is the lifetime of the frame arena; `Q` the capacity (the depth can be lowered
+/// at run time with [`set_depth`](Self::set_depth)).
+pub struct FrameQueue<'a, M: RawMutex, const Q: usize> {
+    state: Mutex<M, RefCell<State<'a, Q>>>,
+}
+
+impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
+    const VALID: () = assert!(
+        Q > 0 && Q <= u16::MAX as usize,
+        "queue capacity must be 1..=65535"
+    );
+
+    /// An empty queue of depth `Q`.
+    pub const fn new() -> Self {
+        let () = Self::VALID;
+        Self {
+            state: Mutex::new(RefCell::new(State {
+                entries: heapless::Vec::new(),
+                depth: Q,
+                in_flight: false,
+                waker: WakerRegistration::new(),
+                stats: DeviceStats {
+                    submitted: 0,
+                    sent: 0,
+                    bytes_sent: 0,
+                    dropped: crate::stats::DropCounts {
+                        too_large: 0,
+                        encode: 0,
+                        queue_full: 0,
+                        arena_full: 0,
+                        write_error: 0,
+                    },
+                    evicted: crate::stats::EvictCounts {
+                        queue_full: 0,
+                        arena_full: 0,
+                    },
+                    queued: 0,
+                    queue_high_water: 0,
+                },
+            })),
+        }
+    }
+
+    fn with<R>(&self, f: impl FnOnce(&mut State<'a, Q>) -> R) -> R {
+        self.state.lock(|s| f(&mut s.borrow_mut()))
+    }
+
+    /// Limits the queue to `depth` frames (clamped to `1..=Q`). Frames beyond a lowered
+    /// depth stay queued; new ones then evict or are dropped.
+    pub fn set_depth(&self, depth: usize) {
+        self.with(|s| s.depth = depth.clamp(1, Q));
+    }
+
+    /// The depth limit.
+    pub fn depth(&self) -> usize {
+        self.with(|s| s.depth)
+    }
+
+    /// Frames waiting (not counting the one being written).
+    pub fn len(&self) -> usize {
+        self.with(|s| s.entries.len())
+    }
+
+    /// Whether no frame is waiting.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// A snapshot of the statistics.
+    pub fn stats(&self) -> DeviceStats {
+        self.with(|s| s.stats)
+    }
+
+    /// Counts a message submitted for this device that was dropped before reaching the
+    /// queue.
+    pub fn count_dropped(&self, reason: DropReason) {
+        self.with(|s| {
+            s.stats.submitted = s.stats.submitted.wrapping_add(1);
+            s.stats.dropped.count(reason);
+        });
+    }
+
+    /// Queues a frame. When the queue is full, the oldest of its least important frames
+    /// is evicted if it is strictly less important than `priority`; otherwise the new
+    /// frame is dropped. Either way it is counted. Never blocks.
+    pub fn push(&self, priority: u8, seq: u32, frame: FrameBuf<'a>) -> Pushed {
+        // Evicted or rejected frames are released after the lock is let go.
+        let mut released = None;
+        let result = self.with(|s| {
+            s.stats.submitted = s.stats.submitted.wrapping_add(1);
+            let mut result = Pushed::Queued;
+            if s.entries.len() >= s.depth {
+                match s.candidate() {
+                    Some(i) if s.entries[i].priority < priority => {
+                        released = Some(s.entries.remove(i));
+                        s.stats.evicted.queue_full = s.stats.evicted.queue_full.wrapping_add(1);
+                        result = Pushed::QueuedEvicting;
+                    }
+                    _ => {
+                        s.stats.dropped.count(DropReason::QueueFull);
+                        s.update_queued();
+                        return (Pushed::Dropped, Some(frame));
+                    }
+                }
+            }
+            // Newest first within a priority: before every entry of the same priority.
+            let at = s.entries.partition_point(|e| e.priority < priority);
+            let entry = Entry {
+                priority,
+                seq,
+                frame,
+            };
+            if let Err(entry) = s.entries.insert(at, entry) {
+                // Unreachable while depth <= Q; counted rather than lost if it ever is.
+                s.stats.dropped.count(DropReason::QueueFull);
+                s.update_queued();
+                return (Pushed::Dropped, Some(entry.frame));
+            }
+            s.update_queued();
+            s.waker.wake();
+            (result, None)
+        });
+        drop(released);
+        drop(result.1);
+        result.0
+    }
+
+    /// The eviction candidate, if any.
+    pub fn candidate(&self) -> Option<Candidate> {
+        self.with(|s| {
+            let i = s.candidate()?;
+            let e = s.entries.get(i)?;
+            Some(Candidate {
+                priority: e.priority,
+                seq: e.seq,
+            })
+        })
+    }
+
+    /// Evicts the current candidate because the arena is full, if it is still `expected`
+    /// (another task may have changed the queue since [`candidate`](Self::candidate)).
+    /// Returns whether a frame was evicted; its memory is released before returning.
+    pub fn evict_for_arena(&self, expected: Candidate) -> bool {
+        let evicted = self.with(|s| {
+            let i = s.candidate()?;
+            let e = s.entries.get(i)?;
+            if e.priority != expected.priority || e.seq != expected.seq {
+                return None;
+            }
+            let entry = s.entries.remove(i);
+            s.stats.evicted.arena_full = s.stats.evicted.arena_full.wrapping_add(1);
+            s.update_queued();
+            Some(entry)
+        });
+        evicted.is_some()
+    }
+
+    /// Takes the most important frame, if any, and marks it in flight.
+    pub fn try_receive(&self) -> Option<FrameBuf<'a>> {
+        self.with(|s| {
+            let entry = s.entries.pop()?;
+            s.in_flight = true;
+            s.update_queued();
+            Some(entry.frame)
+        })
+    }
+
+    /// Waits for the most important frame and marks it in flight. For the device's one
+    /// writer task; report the outcome with [`complete`](Self::complete).
+    pub async fn receive(&self) -> FrameBuf<'a> {
+        poll_fn(|cx| {
+            self.with(|s| match s.entries.pop() {
+                Some(entry) => {
+                    s.in_flight = true;
+                    s.update_queued();
+                    Poll::Ready(entry.frame)
+                }
+                None => {
+                    s.waker.register(cx.waker());
+                    Poll::Pending
+                }
+            })
+        })
+        .await
+    }
+
+    /// Reports the outcome of writing the in-flight frame of `len` bytes.
+    pub fn complete(&self, len: usize, written: bool) {
+        self.with(|s| {
+            if written {
+                s.stats.sent = s.stats.sent.wrapping_add(1);
+                s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
+            } else {
+                s.stats.dropped.count(DropReason::WriteError);
+            }
+            s.in_flight = false;
+            s.update_queued();
+        });
+    }
+}
+
+impl<M: RawMutex, const Q: usize> Default for FrameQueue<'_, M, Q> {
+    fn default() -> Self {
+        Self::new()
+    }
+}

@@ -1,0 +1,192 @@
+//! Downlink statistics per device: what was submitted, sent, dropped (by reason) and
+//! evicted, queue high-water mark, and what the ground's DATALINK_REPORT needs.
+//!
+//! Accounting invariant, at every snapshot:
+//!
+//! ```text
+//! submitted = sent + dropped.total() + evicted.total() + queued
+//! ```
+//!
+//! where `queued` counts the frames waiting in the device's queue plus the one its writer
+//! is writing. Every message accepted for sending is therefore either sent or counted as
+//! dropped or evicted, by reason.
+
+use core::fmt;
+
+/// Why a message did not reach a device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum DropReason {
+    /// The frame is larger than the device's transport carries, or than the arena
+    /// allocates.
+    TooLarge,
+    /// The message could not be encoded (a variable array of more than 255 elements).
+    Encode,
+    /// The device's queue was full of messages at least as important.
+    QueueFull,
+    /// The frame arena was full of messages at least as important.
+    ArenaFull,
+    /// The device reported an error while writing the frame.
+    WriteError,
+}
+
+impl fmt::Display for DropReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::TooLarge => "frame too large for the transport or the arena",
+            Self::Encode => "message could not be encoded",
+            Self::QueueFull => "device queue full of more important messages",
+            Self::ArenaFull => "frame arena full of more important messages",
+            Self::WriteError => "device write error",
+        })
+    }
+}
+
+/// Messages dropped before reaching the wire, by reason.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DropCounts {
+    /// [`DropReason::TooLarge`]
+    pub too_large: u32,
+    /// [`DropReason::Encode`]
+    pub encode: u32,
+    /// [`DropReason::QueueFull`]: the new message was less important than everything queued.
+    pub queue_full: u32,
+    /// [`DropReason::ArenaFull`]: the new message was less important than everything queued.
+    pub arena_full: u32,
+    /// [`DropReason::WriteError`]
+    pub write_error: u32,
+}
+
+impl DropCounts {
+    /// Sum of all reasons.
+    pub fn total(&self) -> u32 {
+        self.too_large
+            .wrapping_add(self.encode)
+            .wrapping_add(self.queue_full)
+            .wrapping_add(self.arena_full)
+            .wrapping_add(self.write_error)
+    }
+
+    pub(crate) fn count(&mut self, reason: DropReason) {
+        let c = match reason {
+            DropReason::TooLarge => &mut self.too_large,
+            DropReason::Encode => &mut self.encode,
+            DropReason::QueueFull => &mut self.queue_full,
+            DropReason::ArenaFull => &mut self.arena_full,
+            DropReason::WriteError => &mut self.write_error,
+        };
+        *c = c.wrapping_add(1);
+    }
+}
+
+/// Queued messages removed to make room for a more important one, by what was full.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EvictCounts {
+    /// Evicted because the device's queue was full.
+    pub queue_full: u32,
+    /// Evicted because the shared frame arena was full.
+    pub arena_full: u32,
+}
+
+impl EvictCounts {
+    /// Sum of both causes.
+    pub fn total(&self) -> u32 {
+        self.queue_full.wrapping_add(self.arena_full)
+    }
+}
+
+/// Statistics of one device of the downlink (a snapshot).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DeviceStats {
+    /// Messages accepted for sending to this device.
+    pub submitted: u32,
+    /// Frames written completely.
+    pub sent: u32,
+    /// Bytes of the frames written completely.
+    pub bytes_sent: u32,
+    /// Messages dropped, by reason.
+    pub dropped: DropCounts,
+    /// Queued messages evicted by more important ones.
+    pub evicted: EvictCounts,
+    /// Frames waiting in the queue or being written now.
+    pub queued: u16,
+    /// Largest number of frames ever waiting in the queue.
+    pub queue_high_water: u16,
+}
+
+impl DeviceStats {
+    /// Whether `submitted = sent + dropped + evicted + queued` (it always should).
+    pub fn is_balanced(&self) -> bool {
+        self.submitted
+            == self
+                .sent
+                .wrapping_add(self.dropped.total())
+                .wrapping_add(self.evicted.total())
+                .wrapping_add(u32::from(self.queued))
+    }
+
+    /// Messages that will never reach the wire (dropped and evicted).
+    pub fn lost(&self) -> u32 {
+        self.dropped.total().wrapping_add(self.evicted.total())
+    }
+
+    /// `downlink_nb_msgs` of DATALINK_REPORT: messages sent, modulo 2^16 as the ground
+    /// expects.
+    pub fn downlink_nb_msgs(&self) -> u16 {
+        self.sent as u16
+    }
+
+    /// `downlink_ovrn` of DATALINK_REPORT: messages lost for lack of room (dropped or
+    /// evicted because the queue or the arena was full), saturating at 255 rather than
+    /// wrapping like the reference firmware's counter.
+    pub fn downlink_ovrn(&self) -> u8 {
+        let overruns = self
+            .dropped
+            .queue_full
+            .wrapping_add(self.dropped.arena_full)
+            .wrapping_add(self.evicted.total());
+        u8::try_from(overruns).unwrap_or(u8::MAX)
+    }
+
+    /// `downlink_rate` of DATALINK_REPORT in bytes/s, from an earlier snapshot taken
+    /// `elapsed_ms` milliseconds before this one (saturating at `u16::MAX`).
+    pub fn downlink_rate(&self, earlier: &DeviceStats, elapsed_ms: u32) -> u16 {
+        if elapsed_ms == 0 {
+            return 0;
+        }
+        let bytes = u64::from(self.bytes_sent.wrapping_sub(earlier.bytes_sent));
+        u16::try_from(bytes * 1000 / u64::from(elapsed_ms)).unwrap_or(u16::MAX)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_report_fields() {
+        let mut s = DeviceStats {
+            submitted: 70_010,
+            sent: 70_000,
+            bytes_sent: 5_000,
+            ..Default::default()
+        };
+        s.dropped.count(DropReason::QueueFull);
+        s.evicted.arena_full = 300;
+        s.queued = 9;
+        s.submitted = s.sent + s.lost() + u32::from(s.queued);
+        assert!(s.is_balanced());
+        assert_eq!(s.downlink_nb_msgs(), (70_000u32 % 65_536) as u16);
+        assert_eq!(s.downlink_ovrn(), 255);
+        let earlier = DeviceStats {
+            bytes_sent: 1_000,
+            ..Default::default()
+        };
+        assert_eq!(s.downlink_rate(&earlier, 2_000), 2_000);
+        assert_eq!(s.downlink_rate(&earlier, 0), 0);
+    }
+}

@@ -1,0 +1,286 @@
+//! The downlink without time: priority order (the thesis' Figure 27 trace), FIFO among
+//! equal priorities, the overflow policy for queue and arena, per-device accounting under
+//! random load, and no leaked arena memory.
+
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
+use pprz_messages::{Decode, VarArray};
+use pprz_telemetry::messages::telemetry::{DlValue, Payload};
+use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, PprzLog, PprzV1, PprzV2, XBee24};
+use pprz_telemetry::{DeviceConfig, DeviceStats, Downlink, DropReason, FrameArena, Targets};
+use proptest::prelude::*;
+
+type Arena = FrameArena<CriticalSectionRawMutex, 8192>;
+
+fn v2() -> DeviceConfig {
+    DeviceConfig::new(PprzV2::new().into())
+}
+
+/// Takes every queued frame of `device` in send order and returns the DL_VALUE indices.
+fn drain_indices<const D: usize, const Q: usize>(
+    downlink: &Downlink<'_, NoopRawMutex, D, Q>,
+    device: usize,
+) -> Vec<u8> {
+    let queue = downlink.queue(device).unwrap();
+    let mut order = Vec::new();
+    while let Some(frame) = queue.try_receive() {
+        let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+        let mut input = &frame[..];
+        let f = decoder.feed(&mut input).expect("a complete PPRZ v2 frame");
+        order.push(DlValue::decode(f.payload()).unwrap().index);
+        let len = frame.len();
+        drop(frame);
+        queue.complete(len, true);
+    }
+    order
+}
+
+#[test]
+fn thesis_figure_27_trace() {
+    // Priorities 0, 1, 0, 1 arrive while the device is busy: sent 2nd, 4th, 1st, 3rd.
+    let arena = Arena::new();
+    let downlink: Downlink<'_, NoopRawMutex, 1, 8> = Downlink::new(&arena, 7, [v2()]);
+    for (index, priority) in [(1, 0), (2, 1), (3, 0), (4, 1)] {
+        downlink
+            .send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+            .unwrap();
+    }
+    assert_eq!(drain_indices(&downlink, 0), [2, 4, 1, 3]);
+}
+
+#[test]
+fn many_levels_strictly_higher_first_fifo_among_equals() {
+    let arena = Arena::new();
+    let downlink: Downlink<'_, NoopRawMutex, 1, 64> = Downlink::new(&arena, 7, [v2()]);
+    let prios = [5u8, 255, 0, 5, 128, 255, 0, 128, 5, 1];
+    for (i, p) in prios.iter().enumerate() {
+        downlink
+            .send_to(
+                &DlValue {
+                    index: i as u8,
+                    value: 0.0,
+                },
+                Targets::ALL,
+                *p,
+            )
+            .unwrap();
+    }
+    let mut expected: Vec<(u8, u8)> = prios
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (*p, i as u8))
+        .collect();
+    expected.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    let expected: Vec<u8> = expected.into_iter().map(|(_, i)| i).collect();
+    assert_eq!(drain_indices(&downlink, 0), expected);
+}
+
+#[test]
+fn full_queue_evicts_oldest_of_least_important_never_equal() {
+    let arena = Arena::new();
+    let downlink: Downlink<'_, NoopRawMutex, 1, 8> = Downlink::new(&arena, 7, [v2().depth(3)]);
+    let send = |index: u8, priority: u8| {
+        downlink.send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+    };
+    send(1, 10).unwrap();
+    send(2, 5).unwrap();
+    send(3, 5).unwrap();
+    // Full. Equal priority is never evicted: dropped.
+    assert_eq!(
+        send(4, 5),
+        Err(pprz_telemetry::SendError {
+            device: 0,
+            reason: DropReason::QueueFull
+        })
+    );
+    // Higher priority evicts the oldest of the lowest priority (2, not 3).
+    send(5, 6).unwrap();
+    let stats = downlink.stats(0).unwrap();
+    assert_eq!(stats.dropped.queue_full, 1);
+    assert_eq!(stats.evicted.queue_full, 1);
+    assert_eq!(stats.queue_high_water, 3);
+    assert!(stats.is_balanced(), "{stats:?}");
+    assert_eq!(drain_indices(&downlink, 0), [1, 5, 3]);
+    let stats = downlink.stats(0).unwrap();
+    assert_eq!((stats.submitted, stats.sent, stats.queued), (5, 3, 0));
+    assert!(stats.is_balanced());
+}
+
+#[test]
+fn full_arena_evicts_across_devices_least_important_first() {
+    // A small arena shared by two devices.
+    let arena: FrameArena<CriticalSectionRawMutex, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, NoopRawMutex, 2, 64> = Downlink::new(&arena, 7, [v2(), v2()]);
+    let bytes = [0xA5u8; 100];
+    let payload = Payload {
+        values: VarArray::new(&bytes),
+    };
+    // Fill the arena with low-priority frames alternating between the devices.
+    let mut queued = 0;
+    for i in 0..64 {
+        if downlink.send_to(&payload, Targets::only(i % 2), 1).is_err() {
+            break;
+        }
+        queued += 1;
+    }
+    assert!(queued >= 4, "the arena held {queued} frames");
+    // Equal priority cannot get in.
+    assert_eq!(
+        downlink
+            .send_to(&payload, Targets::only(0), 1)
+            .unwrap_err()
+            .reason,
+        DropReason::ArenaFull
+    );
+    // A more important frame evicts the oldest low-priority frame (device 0's first).
+    downlink
+        .send_to(
+            &DlValue {
+                index: 9,
+                value: 1.0,
+            },
+            Targets::only(1),
+            200,
+        )
+        .unwrap();
+    let (s0, s1) = (downlink.stats(0).unwrap(), downlink.stats(1).unwrap());
+    assert_eq!(s0.evicted.arena_full + s1.evicted.arena_full, 1);
+    assert_eq!(s0.evicted.arena_full, 1, "the oldest frame was device 0's");
+    assert_eq!(s0.dropped.arena_full, 1);
+    assert!(s0.is_balanced() && s1.is_balanced());
+    // The high-priority frame is next on device 1.
+    assert_eq!(drain_indices_first(&downlink, 1), 31);
+}
+
+/// Message id of the next frame of `device`.
+fn drain_indices_first<const D: usize, const Q: usize>(
+    downlink: &Downlink<'_, NoopRawMutex, D, Q>,
+    device: usize,
+) -> u8 {
+    let frame = downlink.queue(device).unwrap().try_receive().unwrap();
+    frame[5]
+}
+
+#[test]
+fn too_large_and_encode_errors_are_counted_per_device() {
+    let arena = Arena::new();
+    let downlink: Downlink<'_, NoopRawMutex, 2, 8> = Downlink::new(
+        &arena,
+        7,
+        [v2(), DeviceConfig::new(XBee24::default().into())],
+    );
+    let bytes = [1u8; 150];
+    let big = Payload {
+        values: VarArray::new(&bytes),
+    };
+    // 151 field bytes: fine for PPRZ v2, too large for XBee 802.15.4 (96).
+    let err = downlink.send(&big).unwrap_err();
+    assert_eq!((err.device, err.reason), (1, DropReason::TooLarge));
+    assert_eq!(downlink.stats(0).unwrap().queued, 1);
+    assert_eq!(downlink.stats(1).unwrap().dropped.too_large, 1);
+    let too_many = [0u8; 256];
+    let bad = Payload {
+        values: VarArray::new(&too_many),
+    };
+    let err = downlink.send_to(&bad, Targets::only(0), 1).unwrap_err();
+    assert_eq!(err.reason, DropReason::TooLarge);
+    for d in 0..2 {
+        assert!(downlink.stats(d).unwrap().is_balanced());
+    }
+}
+
+#[test]
+fn each_transport_frames_the_message_and_same_transports_share_the_encoding() {
+    let arena = Arena::new();
+    let transports: [AnyTransport; 4] = [
+        PprzV2::new().into(),
+        PprzV1::new(1).into(),
+        PprzLog::TELEMETRY.into(),
+        PprzV2::new().into(),
+    ];
+    let downlink: Downlink<'_, NoopRawMutex, 4, 8> =
+        Downlink::new(&arena, 7, transports.map(DeviceConfig::new));
+    downlink
+        .send(&DlValue {
+            index: 3,
+            value: 0.5,
+        })
+        .unwrap();
+    let frame = |d: usize| downlink.queue(d).unwrap().try_receive().unwrap();
+    let (f0, f1, f2, f3) = (frame(0), frame(1), frame(2), frame(3));
+    assert_eq!(&f0[..], &f3[..]);
+    assert_eq!(&f0[..6], &[0x99, 13, 7, 0, 1, 31]);
+    assert_eq!(&f1[..4], &[0x99, 11, 7, 31]);
+    assert_eq!(f2[0], 0x99);
+    assert_eq!(
+        f2[1],
+        4 + 5,
+        "PPRZLOG LEN counts the v2 header and the fields"
+    );
+}
+
+#[derive(Debug, Clone)]
+enum Op {
+    Send { size: u8, priority: u8, targets: u8 },
+    Write { device: u8, ok: bool },
+}
+
+fn op() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        3 => (any::<u8>(), 0u8..4, 1u8..8).prop_map(|(size, priority, targets)| Op::Send {
+            size,
+            priority: priority * 60,
+            targets
+        }),
+        1 => (0u8..3, prop::bool::weighted(0.9)).prop_map(|(device, ok)| Op::Write { device, ok }),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn accounting_balances_under_random_load(ops in prop::collection::vec(op(), 1..400)) {
+        let arena: FrameArena<CriticalSectionRawMutex, 2048> = FrameArena::new();
+        let downlink: Downlink<'_, NoopRawMutex, 3, 16> = Downlink::new(
+            &arena,
+            7,
+            [v2(), DeviceConfig::new(XBee24::default().into()).depth(4), DeviceConfig::new(PprzLog::TELEMETRY.into())],
+        );
+        let bytes = [0x5Au8; 255];
+        for op in ops {
+            match op {
+                Op::Send { size, priority, targets } => {
+                    let msg = Payload { values: VarArray::new(&bytes[..usize::from(size)]) };
+                    let _ = downlink.send_to(&msg, Targets::from_bits(u32::from(targets)), priority);
+                }
+                Op::Write { device, ok } => {
+                    let q = downlink.queue(usize::from(device)).unwrap();
+                    if let Some(frame) = q.try_receive() {
+                        let len = frame.len();
+                        drop(frame);
+                        q.complete(len, ok);
+                    }
+                }
+            }
+            let stats: Vec<DeviceStats> = (0..3).map(|d| downlink.stats(d).unwrap()).collect();
+            for s in &stats {
+                prop_assert!(s.is_balanced(), "{:?}", s);
+            }
+            let queued: u32 = stats.iter().map(|s| u32::from(s.queued)).sum();
+            prop_assert_eq!(downlink.arena_stats().live as u32, queued, "arena frames = queued frames");
+        }
+        // Drain: everything ends sent or counted, and the arena is empty again.
+        for d in 0..3 {
+            let q = downlink.queue(d).unwrap();
+            while let Some(frame) = q.try_receive() {
+                let len = frame.len();
+                drop(frame);
+                q.complete(len, true);
+            }
+            let s = downlink.stats(d).unwrap();
+            prop_assert!(s.is_balanced());
+            prop_assert_eq!(s.queued, 0);
+        }
+        prop_assert_eq!(downlink.arena_stats().live, 0);
+    }
+}

@@ -1,0 +1,144 @@
+//! The downlink as a firmware wires it (statics, `StaticCell`, one writer task per
+//! device), running on the Embassy std executor with embassy-time's mock driver: a busy
+//! radio and an SD log, the thesis trace on the radio, and the log flushed per frame.
+//!
+//! The mock clock is advanced by a task of its own, so the run is deterministic. The test
+//! thread only waits for the result (with a generous guard against a hang, not a timing
+//! assertion).
+
+use std::convert::Infallible;
+use std::sync::Mutex as StdMutex;
+use std::sync::mpsc;
+
+use embassy_executor::{Executor, Spawner};
+use embassy_futures::yield_now;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+use embassy_time::{Duration, MockDriver, Timer};
+use pprz_messages::Decode;
+use pprz_telemetry::messages::telemetry::DlValue;
+use pprz_telemetry::pprz_transports::{Decoder, PprzLog, PprzLogDecoder, PprzV2};
+use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Targets, run_writer};
+use static_cell::StaticCell;
+
+type Dl = Downlink<'static, M, 2, 16>;
+
+static ARENA: FrameArena<M, 2048> = FrameArena::new();
+static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+/// What reached the devices: frames of the radio, frames of the log, flushes.
+struct Wire(Vec<Vec<u8>>, Vec<Vec<u8>>, u32);
+
+static WIRE: StdMutex<Wire> = StdMutex::new(Wire(Vec::new(), Vec::new(), 0));
+
+/// A device that takes `byte_us` microseconds per byte.
+struct SlowDevice {
+    index: usize,
+    byte_us: u64,
+}
+
+impl embedded_io_async::ErrorType for SlowDevice {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Write for SlowDevice {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        Timer::after(Duration::from_micros(self.byte_us * buf.len() as u64)).await;
+        let mut wire = WIRE.lock().unwrap();
+        let frames = if self.index == 0 {
+            &mut wire.0
+        } else {
+            &mut wire.1
+        };
+        frames.push(buf.to_vec());
+        Ok(buf.len())
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        WIRE.lock().unwrap().2 += 1;
+        Ok(())
+    }
+}
+
+#[embassy_executor::task(pool_size = 2)]
+async fn writer(downlink: &'static Dl, index: usize, byte_us: u64) {
+    let mut device = SlowDevice { index, byte_us };
+    let _ = run_writer(downlink, index, &mut device).await;
+}
+
+#[embassy_executor::task]
+async fn clock() {
+    loop {
+        MockDriver::get().advance(Duration::from_micros(50));
+        yield_now().await;
+    }
+}
+
+#[embassy_executor::task]
+async fn app(spawner: Spawner, downlink: &'static Dl, done: mpsc::Sender<()>) {
+    // The radio is busy with a first frame while four more arrive: priorities 0, 1, 0, 1.
+    for (index, priority) in [(0u8, 9u8), (1, 0), (2, 1), (3, 0), (4, 1)] {
+        downlink
+            .send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+            .unwrap();
+        if index == 0 {
+            spawner.spawn(writer(downlink, 0, 173).unwrap());
+            spawner.spawn(writer(downlink, 1, 10).unwrap());
+            yield_now().await; // let the writers take the first frame
+        }
+    }
+    while downlink.stats(0).unwrap().sent < 5 || downlink.stats(1).unwrap().sent < 5 {
+        Timer::after(Duration::from_millis(1)).await;
+    }
+    let _ = done.send(());
+}
+
+#[test]
+fn firmware_style_wiring_on_the_std_executor() {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let downlink: &'static Dl = DOWNLINK.init(Downlink::new(
+            &ARENA,
+            7,
+            [
+                DeviceConfig::new(PprzV2::new().into()),
+                DeviceConfig::new(PprzLog::TELEMETRY.into()).flush(true),
+            ],
+        ));
+        let executor = EXECUTOR.init(Executor::new());
+        executor.run(|spawner| {
+            spawner.spawn(clock().unwrap());
+            spawner.spawn(app(spawner, downlink, tx).unwrap());
+        })
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(60))
+        .expect("the firmware finished sending");
+
+    let wire = WIRE.lock().unwrap();
+    let radio: Vec<u8> = wire
+        .0
+        .iter()
+        .map(|bytes| {
+            let mut d: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+            let mut input = &bytes[..];
+            DlValue::decode(d.feed(&mut input).unwrap().payload())
+                .unwrap()
+                .index
+        })
+        .collect();
+    // Frame 0 was on the wire; then the thesis order: 2nd, 4th, 1st, 3rd.
+    assert_eq!(radio, [0, 2, 4, 1, 3]);
+    let log: Vec<u8> = wire
+        .1
+        .iter()
+        .map(|bytes| {
+            let mut d = PprzLogDecoder::new(PprzLog::TELEMETRY);
+            let mut input = &bytes[..];
+            DlValue::decode(d.feed(&mut input).unwrap().payload())
+                .unwrap()
+                .index
+        })
+        .collect();
+    assert_eq!(log.len(), 5);
+    assert_eq!(wire.2, 5, "the log is flushed after every frame");
+    assert_eq!(ARENA.stats().live, 0, "every frame's memory came back");
+}
