@@ -49,6 +49,9 @@ impl embedded_io_async::Write for SimUart<'_> {
     }
 }
 
+/// The mock clock is global: tests that use it run one at a time.
+static MOCK_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Polls `fut` to completion, advancing mock time by `step` whenever it is pending.
 fn run_with_mock_time<F: Future>(fut: F, step: Duration, max_steps: u64) -> F::Output {
     let mut fut = pin!(fut);
@@ -65,6 +68,7 @@ fn run_with_mock_time<F: Future>(fut: F, step: Duration, max_steps: u64) -> F::O
 #[test]
 fn acknowledgements_survive_a_10x_overloaded_link() {
     const SECONDS: u64 = 6;
+    let _serial = MOCK_TIME.lock().unwrap_or_else(|e| e.into_inner());
     MockDriver::get().reset();
     let arena: FrameArena<CriticalSectionRawMutex, 4096> = FrameArena::new();
     let downlink: Downlink<'_, NoopRawMutex, 1, 32> =
@@ -179,5 +183,111 @@ fn acknowledgements_survive_a_10x_overloaded_link() {
         payloads,
         stats.lost(),
         busy_us as f64 * 100.0 / span_us as f64
+    );
+}
+
+/// A device that never completes a write.
+struct Stalled;
+
+impl embedded_io_async::ErrorType for Stalled {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Write for Stalled {
+    async fn write(&mut self, _buf: &[u8]) -> Result<usize, Infallible> {
+        core::future::pending().await
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        core::future::pending().await
+    }
+}
+
+/// A device whose every other write fails.
+struct Flaky {
+    writes: u32,
+}
+
+impl embedded_io_async::ErrorType for Flaky {
+    type Error = embedded_io_async::ErrorKind;
+}
+
+impl embedded_io_async::Write for Flaky {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        Timer::after(Duration::from_micros(BYTE_TIME_US * buf.len() as u64)).await;
+        self.writes += 1;
+        if self.writes.is_multiple_of(2) {
+            Err(embedded_io_async::ErrorKind::Other)
+        } else {
+            Ok(buf.len())
+        }
+    }
+
+    async fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+#[test]
+fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
+    let _serial = MOCK_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    MockDriver::get().reset();
+    let arena: FrameArena<CriticalSectionRawMutex, 8192> = FrameArena::new();
+    let downlink: Downlink<'_, NoopRawMutex, 3, 8> = Downlink::new(
+        &arena,
+        7,
+        [
+            DeviceConfig::new(PprzV2::new().into()),
+            DeviceConfig::new(PprzV2::new().into()),
+            DeviceConfig::new(PprzV2::new().into()),
+        ],
+    );
+    let log = RefCell::new(Vec::new());
+    let producer = async {
+        for index in 0..50u8 {
+            let _ = downlink.send(&DlValue { index, value: 0.0 });
+            Timer::after(Duration::from_millis(10)).await;
+        }
+        Timer::after(Duration::from_millis(50)).await;
+    };
+    let writers = async {
+        let mut good = SimUart { log: &log };
+        let mut flaky = Flaky { writes: 0 };
+        let _ = embassy_futures::join::join3(
+            run_writer(&downlink, 0, &mut good),
+            run_writer(&downlink, 1, &mut Stalled),
+            run_writer(&downlink, 2, &mut flaky),
+        )
+        .await;
+    };
+    run_with_mock_time(
+        select(producer, writers),
+        Duration::from_micros(100),
+        100_000,
+    );
+
+    let good = downlink.stats(0).unwrap();
+    assert_eq!(good.sent, 50, "the healthy device got everything: {good:?}");
+    assert_eq!(log.borrow().len(), 50);
+    let stalled = downlink.stats(1).unwrap();
+    assert_eq!(stalled.sent, 0);
+    // A full queue of 8; the frame stuck in the writer was reported as a failed write
+    // when the writer was dropped at the end of the run.
+    assert_eq!(stalled.queued, 8);
+    assert_eq!(stalled.dropped.write_error, 1);
+    assert_eq!(
+        stalled.dropped.queue_full,
+        50 - 9,
+        "equal priority: new ones dropped"
+    );
+    let flaky = downlink.stats(2).unwrap();
+    assert_eq!((flaky.sent, flaky.dropped.write_error), (25, 25));
+    for s in [good, stalled, flaky] {
+        assert!(s.is_balanced(), "{s:?}");
+    }
+    assert_eq!(
+        arena.stats().live,
+        8,
+        "only the stalled device's queue holds frames"
     );
 }
