@@ -9,67 +9,26 @@
 
 use std::cell::RefCell;
 use std::convert::Infallible;
-use std::future::Future;
-use std::pin::pin;
-use std::task::{Context, Poll, Waker};
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
-use embassy_time::{Duration, Instant, MockDriver, Ticker, Timer};
+use embassy_time::{Duration, Instant, Ticker, Timer};
 use pprz_messages::{Message, VarArray, priority};
 use pprz_telemetry::messages::telemetry::{Attitude, DlValue, Payload};
 use pprz_telemetry::pprz_transports::{Decoder, PprzV2};
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 
+mod common;
+
+use common::sim::{SimUart, byte_time_us, mock_time, run_with_mock_time};
+
 /// 57600 baud, 8N1: 10 bits per byte.
-const BAUD: u64 = 57_600;
-const BYTE_TIME_US: u64 = 10 * 1_000_000 / BAUD; // 173 µs
-
-/// A UART that takes one byte time per byte, recording every frame it writes.
-struct SimUart<'a> {
-    log: &'a RefCell<Vec<(Instant, Instant, Vec<u8>)>>,
-}
-
-impl embedded_io_async::ErrorType for SimUart<'_> {
-    type Error = Infallible;
-}
-
-impl embedded_io_async::Write for SimUart<'_> {
-    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        let start = Instant::now();
-        Timer::after(Duration::from_micros(BYTE_TIME_US * buf.len() as u64)).await;
-        self.log
-            .borrow_mut()
-            .push((start, Instant::now(), buf.to_vec()));
-        Ok(buf.len())
-    }
-
-    async fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-
-/// The mock clock is global: tests that use it run one at a time.
-static MOCK_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-/// Polls `fut` to completion, advancing mock time by `step` whenever it is pending.
-fn run_with_mock_time<F: Future>(fut: F, step: Duration, max_steps: u64) -> F::Output {
-    let mut fut = pin!(fut);
-    let mut cx = Context::from_waker(Waker::noop());
-    for _ in 0..max_steps {
-        if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
-            return v;
-        }
-        MockDriver::get().advance(step);
-    }
-    panic!("simulation did not finish in {max_steps} steps");
-}
+const BYTE_TIME_US: u64 = byte_time_us(57_600); // 173 µs
 
 #[test]
 fn acknowledgements_survive_a_10x_overloaded_link() {
     const SECONDS: u64 = 6;
-    let _serial = MOCK_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    MockDriver::get().reset();
+    let _serial = mock_time();
     let arena: FrameArena<CriticalSectionRawMutex, 4096> = FrameArena::new();
     let downlink: Downlink<'_, NoopRawMutex, 1, 32> =
         Downlink::new(&arena, 7, [DeviceConfig::new(PprzV2::new().into())]);
@@ -108,7 +67,10 @@ fn acknowledgements_survive_a_10x_overloaded_link() {
         Timer::after(Duration::from_millis(100)).await;
     };
     let writer = async {
-        let mut uart = SimUart { log: &log };
+        let mut uart = SimUart {
+            byte_us: BYTE_TIME_US,
+            log: &log,
+        };
         run_writer(&downlink, 0, &mut uart).await
     };
     let done = run_with_mock_time(
@@ -230,8 +192,7 @@ impl embedded_io_async::Write for Flaky {
 
 #[test]
 fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
-    let _serial = MOCK_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    MockDriver::get().reset();
+    let _serial = mock_time();
     let arena: FrameArena<CriticalSectionRawMutex, 8192> = FrameArena::new();
     let downlink: Downlink<'_, NoopRawMutex, 3, 8> = Downlink::new(
         &arena,
@@ -251,7 +212,10 @@ fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
         Timer::after(Duration::from_millis(50)).await;
     };
     let writers = async {
-        let mut good = SimUart { log: &log };
+        let mut good = SimUart {
+            byte_us: BYTE_TIME_US,
+            log: &log,
+        };
         let mut flaky = Flaky { writes: 0 };
         let _ = embassy_futures::join::join3(
             run_writer(&downlink, 0, &mut good),

@@ -1,2 +1,5 @@
-//! Test helpers shared by several test files.
+//! Test helpers shared by several test files (each file uses some of them).
+#![allow(dead_code)]
+
 pub mod roundtrip;
+pub mod sim;
