@@ -6,6 +6,10 @@
 pub mod arena;
 pub mod downlink;
 pub mod queue;
+pub mod reader;
+pub mod registry;
+pub mod scheduler;
+pub mod services;
 pub mod stats;
 pub mod writer;
 

@@ -1,0 +1,1 @@
+//! Periodic telemetry scheduler (work in progress).
