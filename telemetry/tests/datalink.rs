@@ -287,3 +287,40 @@ fn datalink_report_from_uplink_and_downlink_counters() {
     assert_eq!(report.downlink_rate, 500, "2500 bytes in 5 s");
     assert_eq!(report.downlink_ovrn, 0);
 }
+
+#[test]
+fn an_idle_line_flushes_frames_held_behind_a_false_start() {
+    let _clock = mock_time();
+    static PINGS: AtomicU32 = AtomicU32::new(0);
+    let on_ping = |_: &Received<'_>| {
+        PINGS.fetch_add(1, Ordering::Relaxed);
+    };
+    let mut registry: Registry<'_, 1> = Registry::new();
+    registry
+        .subscribe(Filter::message::<Ping>(), &on_ping)
+        .unwrap();
+    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID, registry);
+    // A false start announcing a 240-byte frame, then a PING, then silence.
+    let mut bytes = vec![0x99, 0xF0];
+    bytes.extend(uplink_frame(&Ping, AC_ID));
+    for idle in [None, Some(Duration::from_millis(20))] {
+        PINGS.store(0, Ordering::Relaxed);
+        let chunks = VecDeque::from([(Duration::from_millis(1), bytes.clone())]);
+        let mut reader =
+            Reader::<_, _>::new(ScriptedRx { chunks }, PprzV2::new(), 0).idle_flush(idle);
+        run_with_mock_time(
+            select(
+                reader.run(&datalink),
+                Timer::after(Duration::from_millis(100)),
+            ),
+            Duration::from_micros(100),
+            10_000,
+        );
+        let expected = u32::from(idle.is_some());
+        assert_eq!(
+            PINGS.load(Ordering::Relaxed),
+            expected,
+            "idle flush {idle:?}"
+        );
+    }
+}
