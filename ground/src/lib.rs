@@ -1,0 +1,1 @@
+//! Ground tools (work in progress).
