@@ -1,1 +1,31 @@
-//! Ground tools (work in progress).
+//! Ground tools of the Paparazzi telemetry stack: decode any `messages.xml` at run time
+//! and watch an aircraft live.
+//!
+//! * [`set`]: a message set loaded from a `messages.xml` at run time (the full PPRZLINK
+//!   reference included), as descriptors for generic decoding.
+//! * [`format`]: text forms of decoded messages (values with units and labels).
+//! * [`monitor`]: the state of the `pprz-monitor` tool: per-message rates and latest
+//!   values, link statistics, PING round trips and SETTING acknowledgements.
+//! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
+//!
+//! ```
+//! use pprz_ground::{monitor::Monitor, set::RuntimeSet};
+//! use pprz_transports::PprzV2;
+//!
+//! let set = RuntimeSet::parse("m.xml", r#"<protocol><msg_class name="telemetry" id="1">
+//!     <message name="ALIVE" id="2"><field name="md5sum" type="uint8[]"/></message>
+//!     </msg_class></protocol>"#).unwrap();
+//! let mut monitor = Monitor::new(set, PprzV2::new().into());
+//! let mut lines = Vec::new();
+//! monitor.feed(0.0, &[0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4],
+//!     |line, _raw| lines.push(line.to_owned()));
+//! assert_eq!(lines, ["7 telemetry ALIVE md5sum=0,1,2"]);
+//! ```
+
+#![warn(missing_docs)]
+#![deny(unsafe_code)]
+
+pub mod format;
+pub mod monitor;
+pub mod set;
+pub mod uplink;
