@@ -1,4 +1,5 @@
-//! Generates Rust message types from a Paparazzi `messages.xml`.
+//! Generates Rust message types from a Paparazzi `messages.xml`, and periodic telemetry
+//! schedule tables from a `telemetry.xml`.
 //!
 //! Pipeline: XML parser -> typed, validated [`Protocol`] model -> emitter -> one Rust
 //! source file that a crate `include!`s. The generated code is `no_std`, allocation-free
@@ -55,6 +56,60 @@
 //! assert!(err.to_string().starts_with("error: bad.xml:2:30: message BAD, field x: unknown type `uint9`"));
 //! ```
 //!
+//! # Periodic telemetry (`telemetry.xml`)
+//!
+//! The same generator reads a Paparazzi telemetry configuration (processes, modes, message
+//! periods and phases), resolves its message names against the message set above (class
+//! `telemetry` by default) and emits static schedule tables for the runtime scheduler
+//! (`pprz_telemetry::scheduler`), into a second file. See [`telemetry`] for the tick
+//! rounding and the automatic phase staggering.
+//!
+//! ```no_run
+//! // build.rs (body of `fn main`), after generating the messages:
+//! match pprz_codegen::Generator::new("messages.xml")
+//!     .telemetry("telemetry.xml")
+//!     .tick_frequency(60)                  // Hz, the default
+//!     .skip_unknown_telemetry(false)       // true: leave unknown messages out, warn
+//!     .write_telemetry_to_out_dir("periodic.rs")
+//! {
+//!     Ok(_warnings) => {} // already printed as `cargo:warning=`
+//!     Err(e) => {
+//!         eprintln!("{e}");
+//!         std::process::exit(1);
+//!     }
+//! }
+//! ```
+//!
+//! ```ignore
+//! pub mod periodic {
+//!     include!(concat!(env!("OUT_DIR"), "/periodic.rs"));
+//! }
+//! // periodic::SCHEDULE, periodic::FREQUENCY_HZ, periodic::PROCESSES,
+//! // periodic::main::PROCESS, periodic::main::MODE_DEFAULT, ...
+//! ```
+//!
+//! A message the configuration names but the message set lacks is an error naming it with
+//! file and line, unless [`skip_unknown_telemetry`](Generator::skip_unknown_telemetry)
+//! is set:
+//!
+//! ```
+//! let messages = r#"<protocol><msg_class name="telemetry" id="1">
+//!   <message name="ALIVE" id="2"/></msg_class></protocol>"#;
+//! let telemetry = r#"<telemetry><process name="Main"><mode name="default">
+//!   <message name="ALIVE" period="2.1"/>
+//!   <message name="ROTORCRAFT_FOO" period="1"/>
+//! </mode></process></telemetry>"#;
+//! let g = pprz_codegen::Generator::from_str("messages.xml", messages)
+//!     .telemetry_from_str("telemetry.xml", telemetry);
+//! let err = g.generate_telemetry().unwrap_err();
+//! assert!(err.to_string().starts_with(
+//!     "error: telemetry.xml:3:3: message ROTORCRAFT_FOO: not in class `telemetry` of `messages.xml` (mode `default`, process `Main`)"
+//! ));
+//! let out = g.skip_unknown_telemetry(true).generate_telemetry().unwrap();
+//! assert_eq!(out.warnings.len(), 1);
+//! assert!(out.code.contains("name: \"ALIVE\", class_id: 1, msg_id: 2, period_ticks: 126"));
+//! ```
+//!
 //! A command-line front end, `pprz-codegen`, is built with the `cli` feature (default).
 
 #![warn(missing_docs)]
@@ -65,11 +120,13 @@ mod error;
 pub mod model;
 mod names;
 pub mod reference;
+pub mod telemetry;
 
 use std::path::{Path, PathBuf};
 
 pub use error::{Diagnostic, Error, ErrorKind};
 pub use model::{Class, FieldDef, MessageDef, Protocol, Units};
+pub use telemetry::{Schedule, ScheduleOptions, TelemetryConfig};
 
 /// Where the messages come from.
 #[derive(Debug, Clone)]
@@ -87,6 +144,18 @@ pub struct Generator {
     messages: Vec<String>,
     runtime: String,
     default_priority: u8,
+    telemetry: Option<Source>,
+    schedule: ScheduleOptions,
+    scheduler: String,
+}
+
+/// Generated schedule tables (see [`Generator::generate_telemetry`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneratedTelemetry {
+    /// The Rust source.
+    pub code: String,
+    /// What was accepted with a warning (see [`Schedule::warnings`]).
+    pub warnings: Vec<Diagnostic>,
 }
 
 impl Generator {
@@ -111,6 +180,9 @@ impl Generator {
             messages: Vec::new(),
             runtime: "::pprz_messages".to_owned(),
             default_priority: pprz_messages::priority::DEFAULT,
+            telemetry: None,
+            schedule: ScheduleOptions::default(),
+            scheduler: "::pprz_telemetry::scheduler".to_owned(),
         }
     }
 
@@ -213,5 +285,136 @@ impl Generator {
         let path = PathBuf::from(out_dir).join(file_name);
         self.write_to(&path)?;
         Ok(path)
+    }
+
+    /// A Paparazzi telemetry configuration (`telemetry.xml`) to generate schedule tables
+    /// from, with [`generate_telemetry`](Self::generate_telemetry) and friends.
+    pub fn telemetry(mut self, telemetry_xml: impl Into<PathBuf>) -> Self {
+        self.telemetry = Some(Source::File(telemetry_xml.into()));
+        self
+    }
+
+    /// A telemetry configuration as text; `name` names it in diagnostics.
+    pub fn telemetry_from_str(mut self, name: &str, xml: &str) -> Self {
+        self.telemetry = Some(Source::Text {
+            name: name.to_owned(),
+            xml: xml.to_owned(),
+        });
+        self
+    }
+
+    /// Class whose messages the telemetry configuration names (default `telemetry`).
+    pub fn telemetry_class(mut self, class: impl Into<String>) -> Self {
+        self.schedule.class = class.into();
+        self
+    }
+
+    /// Tick frequency of the scheduler, in Hz (default 60, as the reference firmware):
+    /// periods and phases become whole numbers of ticks (see [`telemetry`]).
+    pub fn tick_frequency(mut self, hz: u32) -> Self {
+        self.schedule.frequency_hz = hz;
+        self
+    }
+
+    /// Interval between the automatic phases of consecutive messages of a mode, in
+    /// seconds (default 0.1).
+    pub fn stagger_interval(mut self, seconds: f64) -> Self {
+        self.schedule.stagger_s = seconds;
+        self
+    }
+
+    /// Leave messages of the telemetry configuration that the message set lacks out of
+    /// the schedule, with a warning, instead of failing (default `false`).
+    pub fn skip_unknown_telemetry(mut self, skip: bool) -> Self {
+        self.schedule.skip_unknown = skip;
+        self
+    }
+
+    /// Path of the runtime's scheduler module as seen from the generated tables
+    /// (default `::pprz_telemetry::scheduler`; `crate::scheduler` inside that crate).
+    pub fn scheduler_crate(mut self, path: impl Into<String>) -> Self {
+        self.scheduler = path.into();
+        self
+    }
+
+    /// Reads and validates the telemetry configuration and resolves it against the
+    /// selected message set, without generating code.
+    ///
+    /// # Errors
+    /// No configuration was given, any problem of the message set (as
+    /// [`protocol`](Self::protocol)) or of the configuration (see
+    /// [`TelemetryConfig::parse`] and [`TelemetryConfig::resolve`]), each with file and
+    /// line.
+    pub fn schedule(&self) -> Result<Schedule, Error> {
+        let config = match &self.telemetry {
+            Some(Source::File(path)) => TelemetryConfig::from_file(path)?,
+            Some(Source::Text { name, xml }) => TelemetryConfig::parse(name, xml)?,
+            None => {
+                return Err(Error::single(
+                    "telemetry.xml",
+                    ErrorKind::Telemetry(
+                        "no telemetry configuration given (see `Generator::telemetry`)".into(),
+                    ),
+                ));
+            }
+        };
+        let protocol = self.protocol()?;
+        config.resolve(&protocol, &self.schedule)
+    }
+
+    /// Generates the Rust source of the schedule tables.
+    ///
+    /// # Errors
+    /// As [`schedule`](Self::schedule).
+    pub fn generate_telemetry(&self) -> Result<GeneratedTelemetry, Error> {
+        let schedule = self.schedule()?;
+        Ok(GeneratedTelemetry {
+            code: telemetry::emit(&schedule, &self.scheduler),
+            warnings: schedule.warnings,
+        })
+    }
+
+    /// Generates the schedule tables into `path`, returning the warnings.
+    ///
+    /// # Errors
+    /// As [`schedule`](Self::schedule), or the file cannot be written.
+    pub fn write_telemetry_to(&self, path: impl AsRef<Path>) -> Result<Vec<Diagnostic>, Error> {
+        let path = path.as_ref();
+        let generated = self.generate_telemetry()?;
+        std::fs::write(path, generated.code).map_err(|e| {
+            Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string()))
+        })?;
+        Ok(generated.warnings)
+    }
+
+    /// For a `build.rs`: generates the schedule tables into `$OUT_DIR/<file_name>`, tells
+    /// Cargo to rerun when an input changes, prints each warning as `cargo:warning=`, and
+    /// returns the warnings.
+    ///
+    /// # Errors
+    /// As [`write_telemetry_to`](Self::write_telemetry_to), or `OUT_DIR` is not set.
+    pub fn write_telemetry_to_out_dir(&self, file_name: &str) -> Result<Vec<Diagnostic>, Error> {
+        for source in [Some(&self.source), self.telemetry.as_ref()]
+            .into_iter()
+            .flatten()
+        {
+            if let Source::File(path) = source {
+                println!("cargo:rerun-if-changed={}", path.display());
+            }
+        }
+        if let Some(units) = &self.units {
+            println!("cargo:rerun-if-changed={}", units.display());
+        }
+        let out_dir = std::env::var_os("OUT_DIR").ok_or_else(|| {
+            Error::single(
+                file_name,
+                ErrorKind::Io("OUT_DIR is not set: call this from a build script".into()),
+            )
+        })?;
+        let warnings = self.write_telemetry_to(PathBuf::from(out_dir).join(file_name))?;
+        for w in &warnings {
+            println!("cargo:warning={w}");
+        }
+        Ok(warnings)
     }
 }

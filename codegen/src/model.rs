@@ -689,7 +689,7 @@ impl<'input> Parser<'_, 'input> {
 }
 
 /// Reads a file, returning its name for diagnostics and its text.
-fn read_file(path: &Path) -> Result<(String, String), Error> {
+pub(crate) fn read_file(path: &Path) -> Result<(String, String), Error> {
     let name = path.display().to_string();
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
@@ -698,7 +698,7 @@ fn read_file(path: &Path) -> Result<(String, String), Error> {
 
 /// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry; a syntax error
 /// is reported at its position in `file`.
-fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
+pub(crate) fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
     Document::parse_with_options(
         text,
         ParsingOptions {

@@ -30,3 +30,14 @@ pub use writer::run_writer;
 pub mod messages {
     include!(concat!(env!("OUT_DIR"), "/messages.rs"));
 }
+
+/// The project's periodic telemetry schedule, generated at build time from `telemetry.xml`
+/// at the root of the repository, resolved against [`messages`]: [`SCHEDULE`](periodic::SCHEDULE)
+/// for a [`Scheduler`](scheduler::Scheduler), and per process a module with its index and
+/// mode indices (`periodic::main::PROCESS`, `periodic::main::MODE_DEFAULT`, ...).
+///
+/// A firmware with its own `telemetry.xml` generates its own schedule the same way; see
+/// `pprz-codegen`.
+pub mod periodic {
+    include!(concat!(env!("OUT_DIR"), "/periodic.rs"));
+}

@@ -1,13 +1,15 @@
 //! `pprz-codegen`: generate Rust message types from a Paparazzi `messages.xml`, or check
-//! and list one.
+//! and list one; with `--telemetry`, the same for the periodic telemetry schedule of a
+//! `telemetry.xml` resolved against it.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use pprz_codegen::Generator;
+use pprz_codegen::{Generator, Schedule};
 
-/// Generate Rust message types from a Paparazzi messages.xml.
+/// Generate Rust message types from a Paparazzi messages.xml (or, with --telemetry, the
+/// periodic telemetry schedule tables of a telemetry.xml).
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Args {
@@ -34,22 +36,114 @@ struct Args {
     /// Only validate; print a summary.
     #[arg(long, conflicts_with = "list")]
     check: bool,
-    /// Only validate; list every selected message (class, id, name, priority, size).
+    /// Only validate; list every selected message (class, id, name, priority, size), or
+    /// with --telemetry every scheduled message (process, mode, period, phase).
     #[arg(long)]
     list: bool,
+    /// A telemetry.xml: generate (or check, list) its schedule tables instead of the
+    /// message types; its message names are resolved against the selected messages.
+    #[arg(long, value_name = "TELEMETRY_XML")]
+    telemetry: Option<PathBuf>,
+    /// Leave the messages of the telemetry.xml that are not in the messages.xml out of
+    /// the schedule, with a warning, instead of failing.
+    #[arg(long, requires = "telemetry")]
+    skip_unknown_telemetry: bool,
+    /// Class of the periodic messages.
+    #[arg(long, default_value = "telemetry", requires = "telemetry")]
+    telemetry_class: String,
+    /// Tick frequency of the scheduler, in Hz.
+    #[arg(long, default_value_t = 60, requires = "telemetry", value_parser = clap::value_parser!(u32).range(1..))]
+    tick_frequency: u32,
+    /// Interval between automatic phases, in seconds.
+    #[arg(long, default_value_t = 0.1, requires = "telemetry")]
+    stagger: f64,
+    /// Path of the runtime's scheduler module in the generated tables.
+    #[arg(
+        long,
+        default_value = "::pprz_telemetry::scheduler",
+        requires = "telemetry"
+    )]
+    scheduler_crate: String,
+}
+
+fn list_schedule(s: &Schedule) {
+    println!(
+        "{:<10} {:<16} {:<28} {:>4} {:>4} {:>8} {:>7}  phase",
+        "process", "mode", "message", "class", "id", "period s", "ticks"
+    );
+    for p in &s.processes {
+        for m in &p.modes {
+            for msg in &m.messages {
+                let phase = match msg.phase_s {
+                    Some(ph) => format!("{} ({ph} s)", msg.phase_ticks),
+                    None => format!("{} (auto)", msg.phase_ticks),
+                };
+                println!(
+                    "{:<10} {:<16} {:<28} {:>4} {:>4} {:>8} {:>7}  {phase}",
+                    p.name,
+                    m.name,
+                    msg.name,
+                    msg.class_id,
+                    msg.msg_id,
+                    msg.period_s,
+                    msg.period_ticks
+                );
+            }
+        }
+    }
+}
+
+fn telemetry(args: &Args, generator: Generator) -> Result<(), pprz_codegen::Error> {
+    let Some(file) = &args.telemetry else {
+        return Ok(());
+    };
+    let generator = generator
+        .telemetry(file)
+        .skip_unknown_telemetry(args.skip_unknown_telemetry)
+        .telemetry_class(args.telemetry_class.clone())
+        .tick_frequency(args.tick_frequency)
+        .stagger_interval(args.stagger)
+        .scheduler_crate(args.scheduler_crate.clone());
+    let warnings = if args.check || args.list {
+        let s = generator.schedule()?;
+        if args.list {
+            list_schedule(&s);
+        }
+        println!(
+            "{}: {} processes, {} modes, {} periodic messages at {} Hz: ok",
+            file.display(),
+            s.processes.len(),
+            s.mode_count(),
+            s.entry_count(),
+            s.frequency_hz
+        );
+        s.warnings
+    } else if let Some(out) = &args.output {
+        generator.write_telemetry_to(out)?
+    } else {
+        let g = generator.generate_telemetry()?;
+        print!("{}", g.code);
+        g.warnings
+    };
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
 }
 
 fn main() -> ExitCode {
     let args = Args::parse();
     let mut generator = Generator::new(&args.messages)
-        .classes(args.classes)
-        .messages(args.messages_sel)
-        .runtime_crate(args.runtime_crate)
+        .classes(args.classes.clone())
+        .messages(args.messages_sel.clone())
+        .runtime_crate(args.runtime_crate.clone())
         .default_priority(args.default_priority);
-    if let Some(units) = args.units {
+    if let Some(units) = &args.units {
         generator = generator.units(units);
     }
-    let result = if args.check || args.list {
+    let result = if args.telemetry.is_some() {
+        telemetry(&args, generator)
+    } else if args.check || args.list {
         generator.protocol().map(|p| {
             if args.list {
                 println!(

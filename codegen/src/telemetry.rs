@@ -1,0 +1,904 @@
+//! Periodic telemetry configurations (Paparazzi `telemetry.xml`): parser, resolution
+//! against a message set into tick-based schedule tables, and the emitter of those tables.
+//!
+//! ```text
+//! <telemetry>
+//!   <process name="Main">
+//!     <mode name="default" key_press="d">
+//!       <message name="GPS_INT" period="0.25" phase="0.1"/>
+//! ```
+//!
+//! Pipeline: [`TelemetryConfig::parse`] (syntax and per-file checks) ->
+//! [`TelemetryConfig::resolve`] (message names to class and id, seconds to ticks, automatic
+//! phases) -> [`Schedule`] -> Rust source with a static table for the runtime scheduler
+//! (`pprz_telemetry::scheduler`).
+//!
+//! # Ticks
+//! The scheduler ticks at a fixed frequency `f` (default 60 Hz, as the reference
+//! firmware). A duration of `s` seconds becomes `round(s * f)` ticks, to the nearest tick
+//! with halves rounded up (after removing floating-point noise below 1e-6 tick, so
+//! `4.1 s * 60 Hz` is 246 ticks, not 245). A period is at least one tick: a shorter period
+//! is sent on every tick, with a warning. An explicit phase is taken modulo the period
+//! after rounding. A message is due on tick `t` (counted from 0 since the scheduler
+//! started) when `t % period_ticks == phase_ticks`.
+//!
+//! # Automatic phases (staggering)
+//! Within one mode, messages with a `phase` keep it. The others get one in file order:
+//! the `i`-th message without a phase (counting from 0) starts from the candidate phase
+//! `i * stagger mod period`, where `stagger = round(0.1 s * f)` ticks (at least 1; the
+//! interval is [`ScheduleOptions::stagger_s`]), so consecutive messages are about 100 ms
+//! apart as in the reference firmware. If another message of the same mode with the same
+//! period already uses that phase, the next free phase (`+1`, `+2`, ... modulo the
+//! period) is taken; only when all `period` phases are used is the least used one taken.
+//!
+//! Hence, in one mode, messages with automatic phases never share a tick with another
+//! message of the same period as long as there are no more of them than the period has
+//! ticks; beyond that, at most `ceil(n / period)` of `n` such messages share a tick.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use roxmltree::{Document, Node};
+
+use crate::model::parse_xml;
+
+use crate::error::{Diagnostic, Error, ErrorKind};
+use crate::model::Protocol;
+use crate::names;
+
+/// A parsed and validated telemetry configuration (before message names are resolved).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TelemetryConfig {
+    /// Name of the file it was read from (for diagnostics).
+    pub file: String,
+    /// Processes in file order.
+    pub processes: Vec<ProcessDef>,
+}
+
+/// A `<process>`: a set of modes, one of which is active at a time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessDef {
+    /// Process name (`Main`).
+    pub name: String,
+    /// Line of the element.
+    pub line: u32,
+    /// Modes in file order; the first is active at start-up.
+    pub modes: Vec<ModeDef>,
+}
+
+/// A `<mode>`: the periodic messages sent while it is the active mode of its process.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModeDef {
+    /// Mode name (`default`).
+    pub name: String,
+    /// Line of the element.
+    pub line: u32,
+    /// The `key_press` attribute (a ground-station shortcut), if given.
+    pub key_press: Option<String>,
+    /// Messages in file order.
+    pub messages: Vec<PeriodicDef>,
+}
+
+/// A `<message>` of a mode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeriodicDef {
+    /// Message name (`GPS_INT`).
+    pub name: String,
+    /// Line of the element.
+    pub line: u32,
+    /// Column of the element.
+    pub column: u32,
+    /// Period in seconds (finite, > 0).
+    pub period: f64,
+    /// Phase in seconds (finite, >= 0, less than the period), if given.
+    pub phase: Option<f64>,
+}
+
+/// How a configuration is turned into a [`Schedule`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScheduleOptions {
+    /// Class whose messages the configuration names (default `telemetry`).
+    pub class: String,
+    /// Tick frequency of the scheduler in Hz (default 60, at least 1).
+    pub frequency_hz: u32,
+    /// Interval between the automatic phases of consecutive messages of a mode, in
+    /// seconds (default 0.1; 0 keeps only the separation of equal periods).
+    pub stagger_s: f64,
+    /// Leave messages absent from the message set out with a warning instead of failing.
+    pub skip_unknown: bool,
+}
+
+impl Default for ScheduleOptions {
+    fn default() -> Self {
+        Self {
+            class: "telemetry".to_owned(),
+            frequency_hz: 60,
+            stagger_s: 0.1,
+            skip_unknown: false,
+        }
+    }
+}
+
+/// A configuration resolved against a message set: the tables the scheduler runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Schedule {
+    /// The telemetry configuration file.
+    pub file: String,
+    /// The messages file the names were resolved against.
+    pub messages_file: String,
+    /// Class of the messages.
+    pub class: String,
+    /// Tick frequency in Hz.
+    pub frequency_hz: u32,
+    /// Interval between automatic phases, in ticks.
+    pub stagger_ticks: u32,
+    /// Processes in file order.
+    pub processes: Vec<ScheduledProcess>,
+    /// What was accepted with a warning: messages left out (with
+    /// [`ScheduleOptions::skip_unknown`]) and periods shorter than a tick. Each is a
+    /// [`Diagnostic`] with file and line; print them as `warning: {diagnostic}`.
+    pub warnings: Vec<Diagnostic>,
+}
+
+/// A process of a [`Schedule`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScheduledProcess {
+    /// Process name.
+    pub name: String,
+    /// Modes in file order.
+    pub modes: Vec<ScheduledMode>,
+}
+
+/// A mode of a [`ScheduledProcess`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScheduledMode {
+    /// Mode name.
+    pub name: String,
+    /// The `key_press` attribute, if given.
+    pub key_press: Option<String>,
+    /// Messages in file order (without those left out).
+    pub messages: Vec<ScheduledMessage>,
+}
+
+/// A message of a [`ScheduledMode`], with its timing in ticks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScheduledMessage {
+    /// Message name.
+    pub name: String,
+    /// Line in the configuration.
+    pub line: u32,
+    /// Class id.
+    pub class_id: u8,
+    /// Message id within the class.
+    pub msg_id: u8,
+    /// Period in seconds, as configured.
+    pub period_s: f64,
+    /// Phase in seconds, if configured.
+    pub phase_s: Option<f64>,
+    /// Period in ticks (>= 1).
+    pub period_ticks: u32,
+    /// Phase in ticks (< `period_ticks`), configured or automatic.
+    pub phase_ticks: u32,
+}
+
+impl Schedule {
+    /// Number of modes of all processes.
+    pub fn mode_count(&self) -> usize {
+        self.processes.iter().map(|p| p.modes.len()).sum()
+    }
+
+    /// Number of periodic message entries of all modes.
+    pub fn entry_count(&self) -> usize {
+        self.processes
+            .iter()
+            .flat_map(|p| &p.modes)
+            .map(|m| m.messages.len())
+            .sum()
+    }
+}
+
+impl TelemetryConfig {
+    /// Reads and validates a telemetry configuration file.
+    ///
+    /// # Errors
+    /// Every problem found, each with file and line.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
+        let (name, text) = crate::model::read_file(path.as_ref())?;
+        Self::parse(&name, &text)
+    }
+
+    /// Parses and validates telemetry configuration text; `file` names it in diagnostics.
+    ///
+    /// Checks: the element structure, required attributes (`name` of processes, modes and
+    /// messages, `period` of messages), names usable as identifiers, periods finite and
+    /// above 0, phases finite, at least 0 and less than the period, no duplicate process names,
+    /// mode names within a process or message names within a mode, and at least one mode
+    /// per process.
+    ///
+    /// # Errors
+    /// Every problem found, each with file and line.
+    pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
+        let doc = parse_xml(file, text)?;
+        let mut p = Parser {
+            file,
+            doc: &doc,
+            diagnostics: Vec::new(),
+        };
+        let config = p.config();
+        if p.diagnostics.is_empty() {
+            Ok(config)
+        } else {
+            Err(Error::new(p.diagnostics))
+        }
+    }
+
+    /// Resolves the message names against class `options.class` of `protocol` and
+    /// computes periods and phases in ticks (see the [module docs](self)).
+    ///
+    /// # Errors
+    /// A message absent from the class (each one listed with file and line; unless
+    /// `options.skip_unknown`, which turns them into [`Schedule::warnings`]), an absent
+    /// class, a tick frequency of 0, a negative or non-finite stagger interval, or a
+    /// period longer than `u32::MAX` ticks.
+    pub fn resolve(
+        &self,
+        protocol: &Protocol,
+        options: &ScheduleOptions,
+    ) -> Result<Schedule, Error> {
+        let file = &self.file;
+        if options.frequency_hz == 0 {
+            return Err(Error::single(
+                file,
+                ErrorKind::Telemetry("the tick frequency must be at least 1 Hz".into()),
+            ));
+        }
+        let freq = f64::from(options.frequency_hz);
+        if !(options.stagger_s.is_finite() && options.stagger_s >= 0.0) {
+            return Err(Error::single(
+                file,
+                ErrorKind::Telemetry(format!(
+                    "the stagger interval must be a finite number of seconds >= 0, not {}",
+                    options.stagger_s
+                )),
+            ));
+        }
+        let Some(class) = protocol.class(&options.class) else {
+            return Err(Error::single(
+                file,
+                ErrorKind::Telemetry(format!(
+                    "class `{}` (where periodic messages are looked up) is not in `{}`",
+                    options.class, protocol.file
+                )),
+            ));
+        };
+        let stagger = match ticks(options.stagger_s, freq) {
+            0 if options.stagger_s > 0.0 => 1,
+            t => u32::try_from(t).unwrap_or(u32::MAX),
+        };
+        let mut errors = Vec::new();
+        let mut warnings = Vec::new();
+        let mut processes = Vec::new();
+        for process in &self.processes {
+            let mut modes = Vec::new();
+            for mode in &process.modes {
+                let mut messages = Vec::new();
+                for m in &mode.messages {
+                    let diag = |kind| Diagnostic {
+                        file: file.clone(),
+                        line: m.line,
+                        column: m.column,
+                        message: Some(m.name.clone()),
+                        field: None,
+                        kind,
+                    };
+                    let Some(def) = class.messages.iter().find(|d| d.name == m.name) else {
+                        let missing = format!(
+                            "not in class `{}` of `{}` (mode `{}`, process `{}`)",
+                            class.name, protocol.file, mode.name, process.name
+                        );
+                        if options.skip_unknown {
+                            warnings.push(diag(ErrorKind::Telemetry(format!(
+                                "{missing}; left out of the schedule"
+                            ))));
+                        } else {
+                            errors.push(diag(ErrorKind::Telemetry(format!(
+                                "{missing}; `skip_unknown_telemetry(true)` (CLI: `--skip-unknown-telemetry`) leaves such messages out with a warning"
+                            ))));
+                        }
+                        continue;
+                    };
+                    let raw = ticks(m.period, freq);
+                    let Ok(period_ticks) = u32::try_from(raw.max(1)) else {
+                        errors.push(diag(ErrorKind::Telemetry(format!(
+                            "period {} s is {raw} ticks at {} Hz, more than the {} a schedule holds",
+                            m.period,
+                            options.frequency_hz,
+                            u32::MAX
+                        ))));
+                        continue;
+                    };
+                    if raw == 0 {
+                        warnings.push(diag(ErrorKind::Telemetry(format!(
+                            "period {} s is shorter than one tick at {} Hz ({:.3} ms): sent on every tick",
+                            m.period,
+                            options.frequency_hz,
+                            1000.0 / freq
+                        ))));
+                    }
+                    let phase_ticks = m.phase.map(|ph| {
+                        // < period_ticks after the modulo, so it fits a u32.
+                        u32::try_from(ticks(ph, freq) % u64::from(period_ticks)).unwrap_or(0)
+                    });
+                    messages.push((
+                        ScheduledMessage {
+                            name: m.name.clone(),
+                            line: m.line,
+                            class_id: class.id,
+                            msg_id: def.id,
+                            period_s: m.period,
+                            phase_s: m.phase,
+                            period_ticks,
+                            phase_ticks: phase_ticks.unwrap_or(0),
+                        },
+                        phase_ticks.is_some(),
+                    ));
+                }
+                stagger_phases(&mut messages, stagger);
+                modes.push(ScheduledMode {
+                    name: mode.name.clone(),
+                    key_press: mode.key_press.clone(),
+                    messages: messages.into_iter().map(|(m, _)| m).collect(),
+                });
+            }
+            processes.push(ScheduledProcess {
+                name: process.name.clone(),
+                modes,
+            });
+        }
+        if !errors.is_empty() {
+            return Err(Error::new(errors));
+        }
+        Ok(Schedule {
+            file: file.clone(),
+            messages_file: protocol.file.clone(),
+            class: class.name.clone(),
+            frequency_hz: options.frequency_hz,
+            stagger_ticks: stagger,
+            processes,
+            warnings,
+        })
+    }
+}
+
+/// `seconds * freq` to the nearest tick, halves up, ignoring floating-point noise below
+/// 1e-6 tick; saturates at `u64::MAX`.
+fn ticks(seconds: f64, freq: f64) -> u64 {
+    let x = seconds * freq;
+    let snapped = (x * 1e6).round() / 1e6;
+    // `as` saturates; the value is finite and >= 0 (validated).
+    snapped.round() as u64
+}
+
+/// Gives the messages of one mode without an explicit phase (`false` in the pair) their
+/// automatic phase; see the module docs for the rule.
+fn stagger_phases(messages: &mut [(ScheduledMessage, bool)], stagger: u32) {
+    // Messages placed so far per (period, phase), and per period.
+    let mut load: HashMap<(u32, u32), usize> = HashMap::new();
+    let mut placed: HashMap<u32, usize> = HashMap::new();
+    for (m, _) in messages.iter().filter(|(_, explicit)| *explicit) {
+        *load.entry((m.period_ticks, m.phase_ticks)).or_default() += 1;
+        *placed.entry(m.period_ticks).or_default() += 1;
+    }
+    let automatic = messages.iter_mut().filter(|(_, explicit)| !*explicit);
+    for (i, (m, _)) in (0u64..).zip(automatic) {
+        let p = m.period_ticks;
+        let candidate = (i * u64::from(stagger) % u64::from(p)) as u32;
+        let used = |phase: u32| load.get(&(p, phase)).copied().unwrap_or(0);
+        let n = placed.get(&p).copied().unwrap_or(0);
+        let phase = if (n as u64) < u64::from(p) {
+            // A free phase exists; at most `n + 1` candidates are tried.
+            let mut phase = candidate;
+            while used(phase) > 0 {
+                phase = if phase + 1 == p { 0 } else { phase + 1 };
+            }
+            phase
+        } else {
+            // Every phase is used (so `p <= n` is small): the least used one, first
+            // from the candidate on.
+            (0..p)
+                .map(|k| ((u64::from(candidate) + u64::from(k)) % u64::from(p)) as u32)
+                .min_by_key(|&phase| used(phase))
+                .unwrap_or(candidate)
+        };
+        m.phase_ticks = phase;
+        *load.entry((p, phase)).or_default() += 1;
+        *placed.entry(p).or_default() += 1;
+    }
+}
+
+/// Appends formatted text; writing to a `String` cannot fail.
+macro_rules! out {
+    ($dst:expr, $($arg:tt)*) => {
+        let _ = writeln!($dst, $($arg)*);
+    };
+}
+
+/// Seconds for display: `2.1`, `0.25`, `1.0`.
+fn secs(s: f64) -> String {
+    format!("{s:?}")
+}
+
+/// The constant naming a mode's index: `raw_sensors` -> `MODE_RAW_SENSORS`.
+pub(crate) fn mode_const(name: &str) -> String {
+    format!(
+        "MODE_{}",
+        names::snake_case(name)
+            .trim_end_matches('_')
+            .to_ascii_uppercase()
+    )
+}
+
+/// Rust source for a resolved schedule; `scheduler` is the path of the runtime's
+/// scheduler module (`::pprz_telemetry::scheduler`).
+pub(crate) fn emit(s: &Schedule, scheduler: &str) -> String {
+    let mut out = String::new();
+    let rt = scheduler;
+    out!(
+        out,
+        "// Generated by pprz-codegen {} from `{}` (messages of class `{}` from `{}`). Do not edit.\n",
+        env!("CARGO_PKG_VERSION"),
+        s.file,
+        s.class,
+        s.messages_file
+    );
+    out!(out, "/// Tick frequency of [`SCHEDULE`], in Hz.");
+    out!(out, "pub const FREQUENCY_HZ: u32 = {};\n", s.frequency_hz);
+    out!(
+        out,
+        "/// Number of processes of [`SCHEDULE`] (the `P` parameter of a scheduler that runs it)."
+    );
+    out!(out, "pub const PROCESSES: usize = {};\n", s.processes.len());
+    let summary = s
+        .processes
+        .iter()
+        .map(|p| {
+            format!(
+                "`{}` ({} {})",
+                p.name,
+                if p.modes.len() == 1 { "mode" } else { "modes" },
+                p.modes
+                    .iter()
+                    .map(|m| format!("`{}`", m.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ");
+    out!(
+        out,
+        "/// The periodic telemetry schedule, ticking at {} Hz: {}.",
+        s.frequency_hz,
+        match s.processes.len() {
+            0 => "no processes".to_owned(),
+            1 => format!("process {summary}"),
+            _ => format!("processes {summary}"),
+        }
+    );
+    out!(out, "///");
+    out!(
+        out,
+        "/// Periods and phases are in ticks of 1/{} s; phases not given in the configuration",
+        s.frequency_hz
+    );
+    out!(
+        out,
+        "/// are staggered ({} ticks apart, never equal for equal periods while possible).",
+        s.stagger_ticks
+    );
+    out!(
+        out,
+        "pub static SCHEDULE: {rt}::Schedule<'static> = {rt}::Schedule {{"
+    );
+    out!(out, "    frequency_hz: {},", s.frequency_hz);
+    out!(out, "    processes: &[");
+    for p in &s.processes {
+        out!(out, "        {rt}::Process {{");
+        out!(out, "            name: {:?},", p.name);
+        out!(out, "            modes: &[");
+        for m in &p.modes {
+            out!(out, "                {rt}::Mode {{");
+            out!(out, "                    name: {:?},", m.name);
+            match &m.key_press {
+                Some(k) => {
+                    out!(out, "                    key_press: Some({k:?}),");
+                }
+                None => {
+                    out!(out, "                    key_press: None,");
+                }
+            }
+            out!(out, "                    messages: &[");
+            for msg in &m.messages {
+                let phase = match msg.phase_s {
+                    Some(ph) => format!("phase {} s", secs(ph)),
+                    None => "automatic phase".to_owned(),
+                };
+                out!(
+                    out,
+                    "                        // {}: every {} s, {phase}",
+                    msg.name,
+                    secs(msg.period_s)
+                );
+                out!(
+                    out,
+                    "                        {rt}::Periodic {{ name: {:?}, class_id: {}, msg_id: {}, period_ticks: {}, phase_ticks: {}, period_s: {:?} }},",
+                    msg.name,
+                    msg.class_id,
+                    msg.msg_id,
+                    msg.period_ticks,
+                    msg.phase_ticks,
+                    msg.period_s as f32
+                );
+            }
+            out!(out, "                    ],");
+            out!(out, "                }},");
+        }
+        out!(out, "            ],");
+        out!(out, "        }},");
+    }
+    out!(out, "    ],");
+    out!(out, "}};");
+    for (index, p) in s.processes.iter().enumerate() {
+        out!(out, "");
+        out!(
+            out,
+            "/// Process `{}` of [`SCHEDULE`]: its index and the indices of its modes (values of its mode setting).",
+            p.name
+        );
+        out!(out, "pub mod {} {{", names::module_name(&p.name));
+        out!(
+            out,
+            "    /// Index of process `{}` in [`SCHEDULE`](super::SCHEDULE).",
+            p.name
+        );
+        out!(out, "    pub const PROCESS: usize = {index};");
+        for (i, m) in p.modes.iter().enumerate() {
+            let key = m
+                .key_press
+                .as_ref()
+                .map(|k| format!(" (key `{k}`)"))
+                .unwrap_or_default();
+            let list = if m.messages.is_empty() {
+                "no messages".to_owned()
+            } else {
+                m.messages
+                    .iter()
+                    .map(|msg| format!("{} every {} s", msg.name, secs(msg.period_s)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let text = if i == 0 {
+                format!("Mode `{}`{key}, active at start-up: {list}.", m.name)
+            } else {
+                format!("Mode `{}`{key}: {list}.", m.name)
+            };
+            out!(out, "    #[doc = {:?}]", format!(" {text}"));
+            out!(out, "    pub const {}: usize = {i};", mode_const(&m.name));
+        }
+        out!(out, "}}");
+    }
+    out
+}
+
+struct Parser<'a, 'input> {
+    file: &'a str,
+    doc: &'a Document<'input>,
+    diagnostics: Vec<Diagnostic>,
+}
+
+/// First occurrences of names, to report duplicates.
+#[derive(Default)]
+struct Seen {
+    first: HashMap<(&'static str, String), u32>,
+}
+
+impl Seen {
+    /// Records `value`; reports it and returns `false` if already seen.
+    fn check(
+        &mut self,
+        p: &mut Parser<'_, '_>,
+        node: Node<'_, '_>,
+        message: Option<&str>,
+        what: &'static str,
+        value: String,
+    ) -> bool {
+        let (line, _) = p.line_col(node);
+        match self.first.get(&(what, value.clone())) {
+            Some(&first_line) => {
+                p.report(
+                    node,
+                    message,
+                    ErrorKind::Duplicate {
+                        what,
+                        value,
+                        first_line,
+                    },
+                );
+                false
+            }
+            None => {
+                self.first.insert((what, value), line);
+                true
+            }
+        }
+    }
+}
+
+impl<'input> Parser<'_, 'input> {
+    fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
+        let pos = self.doc.text_pos_at(node.range().start);
+        (pos.row, pos.col)
+    }
+
+    fn report(&mut self, node: Node<'_, '_>, message: Option<&str>, kind: ErrorKind) {
+        let (line, column) = self.line_col(node);
+        self.diagnostics.push(Diagnostic {
+            file: self.file.to_owned(),
+            line,
+            column,
+            message: message.map(str::to_owned),
+            field: None,
+            kind,
+        });
+    }
+
+    fn unexpected(&mut self, node: Node<'_, '_>, expected: &'static str) {
+        self.report(
+            node,
+            None,
+            ErrorKind::UnexpectedElement {
+                found: node.tag_name().name().to_owned(),
+                expected,
+            },
+        );
+    }
+
+    fn required<'n>(
+        &mut self,
+        node: Node<'n, 'input>,
+        element: &'static str,
+        attribute: &'static str,
+        message: Option<&str>,
+    ) -> Option<&'n str> {
+        let value = node.attribute(attribute).map(str::trim);
+        if value.is_none() {
+            self.report(
+                node,
+                message,
+                ErrorKind::MissingAttribute { element, attribute },
+            );
+        }
+        value
+    }
+
+    fn name(&mut self, node: Node<'_, 'input>, element: &'static str) -> Option<String> {
+        let name = self.required(node, element, "name", None)?;
+        if names::is_identifier(name) {
+            Some(name.to_owned())
+        } else {
+            self.report(node, None, ErrorKind::InvalidName(name.to_owned()));
+            None
+        }
+    }
+
+    fn seconds(
+        &mut self,
+        node: Node<'_, '_>,
+        message: &str,
+        attribute: &'static str,
+        value: &str,
+        ok: impl Fn(f64) -> bool,
+        expected: &'static str,
+    ) -> Option<f64> {
+        match value.parse::<f64>() {
+            Ok(x) if x.is_finite() && ok(x) => Some(x),
+            _ => {
+                self.report(
+                    node,
+                    Some(message),
+                    ErrorKind::InvalidNumber {
+                        attribute,
+                        value: value.to_owned(),
+                        expected,
+                    },
+                );
+                None
+            }
+        }
+    }
+
+    fn config(&mut self) -> TelemetryConfig {
+        let root = self.doc.root_element();
+        let mut processes = Vec::new();
+        if !root.has_tag_name("telemetry") {
+            self.report(
+                root,
+                None,
+                ErrorKind::UnexpectedElement {
+                    found: root.tag_name().name().to_owned(),
+                    expected: "<telemetry> as the root element",
+                },
+            );
+        } else {
+            let mut seen = Seen::default();
+            for node in root.children().filter(Node::is_element) {
+                if !node.has_tag_name("process") {
+                    self.unexpected(node, "<process>");
+                    continue;
+                }
+                if let Some(process) = self.process(node) {
+                    if seen.check(self, node, None, "process name", process.name.clone()) {
+                        seen.check(
+                            self,
+                            node,
+                            None,
+                            "module name of process",
+                            names::module_name(&process.name),
+                        );
+                    }
+                    processes.push(process);
+                }
+            }
+        }
+        TelemetryConfig {
+            file: self.file.to_owned(),
+            processes,
+        }
+    }
+
+    fn process(&mut self, node: Node<'_, 'input>) -> Option<ProcessDef> {
+        let name = self.name(node, "process");
+        let mut modes = Vec::new();
+        let mut mode_elements = 0;
+        let mut seen = Seen::default();
+        for child in node.children().filter(Node::is_element) {
+            if !child.has_tag_name("mode") {
+                self.unexpected(child, "<mode>");
+                continue;
+            }
+            mode_elements += 1;
+            if let Some(mode) = self.mode(child) {
+                if seen.check(self, child, None, "mode name", mode.name.clone()) {
+                    seen.check(
+                        self,
+                        child,
+                        None,
+                        "constant name of mode",
+                        mode_const(&mode.name),
+                    );
+                }
+                modes.push(mode);
+            }
+        }
+        let name = name?;
+        if mode_elements == 0 {
+            self.report(
+                node,
+                None,
+                ErrorKind::Telemetry(format!("process `{name}` has no <mode>")),
+            );
+        }
+        let (line, _) = self.line_col(node);
+        Some(ProcessDef { name, line, modes })
+    }
+
+    fn mode(&mut self, node: Node<'_, 'input>) -> Option<ModeDef> {
+        let name = self.name(node, "mode");
+        let mut messages = Vec::new();
+        let mut seen = Seen::default();
+        for child in node.children().filter(Node::is_element) {
+            if !child.has_tag_name("message") {
+                self.unexpected(child, "<message>");
+                continue;
+            }
+            if let Some(m) = self.message(child) {
+                seen.check(self, child, Some(&m.name), "message name", m.name.clone());
+                messages.push(m);
+            }
+        }
+        let (line, _) = self.line_col(node);
+        Some(ModeDef {
+            name: name?,
+            line,
+            key_press: node.attribute("key_press").map(|k| k.trim().to_owned()),
+            messages,
+        })
+    }
+
+    fn message(&mut self, node: Node<'_, 'input>) -> Option<PeriodicDef> {
+        let name = self.name(node, "message")?;
+        let period = self
+            .required(node, "message", "period", Some(&name))
+            .and_then(|v| {
+                self.seconds(
+                    node,
+                    &name,
+                    "period",
+                    v,
+                    |x| x > 0.0,
+                    "a finite number of seconds > 0",
+                )
+            });
+        let phase = match node.attribute("phase").map(str::trim) {
+            None => None,
+            Some(v) => Some(self.seconds(
+                node,
+                &name,
+                "phase",
+                v,
+                |x| x >= 0.0 && period.is_none_or(|p| x < p),
+                "a finite number of seconds >= 0 and less than the period",
+            )?),
+        };
+        let (line, column) = self.line_col(node);
+        Some(PeriodicDef {
+            name,
+            line,
+            column,
+            period: period?,
+            phase,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msg(period_ticks: u32, phase: Option<u32>) -> (ScheduledMessage, bool) {
+        (
+            ScheduledMessage {
+                name: String::new(),
+                line: 0,
+                class_id: 1,
+                msg_id: 1,
+                period_s: 0.0,
+                phase_s: None,
+                period_ticks,
+                phase_ticks: phase.unwrap_or(0),
+            },
+            phase.is_some(),
+        )
+    }
+
+    fn phases(ms: &[(ScheduledMessage, bool)]) -> Vec<u32> {
+        ms.iter().map(|(m, _)| m.phase_ticks).collect()
+    }
+
+    #[test]
+    fn rounds_to_nearest_tick() {
+        assert_eq!(ticks(4.1, 60.0), 246);
+        assert_eq!(ticks(0.075, 60.0), 5);
+        assert_eq!(ticks(0.03, 60.0), 2);
+        assert_eq!(ticks(0.02, 60.0), 1);
+        assert_eq!(ticks(0.005, 60.0), 0);
+        assert_eq!(ticks(1e300, 60.0), u64::MAX);
+    }
+
+    #[test]
+    fn staggers_by_interval_and_separates_equal_periods() {
+        // 6 messages of 30 ticks: 0, 6, 12, 18, 24, then 30 % 30 = 0 is taken -> 1.
+        let mut ms: Vec<_> = (0..6).map(|_| msg(30, None)).collect();
+        stagger_phases(&mut ms, 6);
+        assert_eq!(phases(&ms), [0, 6, 12, 18, 24, 1]);
+        // Explicit phases are kept and avoided.
+        let mut ms = vec![msg(15, Some(0)), msg(15, None), msg(15, None), msg(7, None)];
+        stagger_phases(&mut ms, 6);
+        assert_eq!(phases(&ms), [0, 1, 6, 5]);
+        // More messages than phases: balanced.
+        let mut ms: Vec<_> = (0..5).map(|_| msg(2, None)).collect();
+        stagger_phases(&mut ms, 6);
+        assert_eq!(phases(&ms), [0, 1, 0, 1, 0]);
+    }
+}
