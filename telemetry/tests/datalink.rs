@@ -324,3 +324,69 @@ fn an_idle_line_flushes_frames_held_behind_a_false_start() {
         );
     }
 }
+
+#[test]
+fn a_setting_switches_the_telemetry_mode() {
+    use pprz_telemetry::periodic::{SCHEDULE, main};
+    use pprz_telemetry::scheduler::Scheduler;
+    let _clock = mock_time();
+    static ARENA: FrameArena<M, 2048> = FrameArena::new();
+    let downlink: Downlink<'_, M, 1, 16> =
+        Downlink::new(&ARENA, AC_ID, [DeviceConfig::new(PprzV2::new().into())]);
+    let scheduler: Scheduler<'_, M, 1, 8> = Scheduler::new(&SCHEDULE);
+    let mode = scheduler.mode_setting(0).unwrap();
+    let get_mode = || mode.get();
+    let set_mode = |v: f32| {
+        // An invalid mode is refused; the acknowledgement then reports the mode in force.
+        let _ = mode.set(v);
+    };
+    let mut settings: Settings<'_, 4> = Settings::new();
+    let index = settings
+        .add("telemetry mode", &get_mode, &set_mode)
+        .unwrap();
+    let services: Services<'_, '_, M, 1, 16, 4> = Services::new(&downlink, settings);
+    let mut registry: Registry<'_, 4> = Registry::new();
+    services.subscribe(&mut registry).unwrap();
+    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID, registry);
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), 0);
+
+    assert_eq!(scheduler.mode(0), Some(main::MODE_DEFAULT));
+    let debug = main::MODE_DEBUG as f32;
+    reader.feed(
+        &uplink_frame(
+            &Setting {
+                index,
+                ac_id: AC_ID,
+                value: debug,
+            },
+            AC_ID,
+        ),
+        &datalink,
+    );
+    assert_eq!(scheduler.mode(0), Some(main::MODE_DEBUG));
+    reader.feed(
+        &uplink_frame(
+            &Setting {
+                index,
+                ac_id: AC_ID,
+                value: 99.0,
+            },
+            AC_ID,
+        ),
+        &datalink,
+    );
+    assert_eq!(
+        scheduler.mode(0),
+        Some(main::MODE_DEBUG),
+        "no such mode: unchanged"
+    );
+    // Both SETTINGs were acknowledged with the mode in force.
+    let q = downlink.queue(0).unwrap();
+    for _ in 0..2 {
+        let frame = q.try_receive().unwrap();
+        assert_eq!(frame[5], DlValue::ID);
+        let mut expected = vec![index];
+        expected.extend_from_slice(&debug.to_le_bytes());
+        assert_eq!(&frame[6..11], &expected[..]);
+    }
+}
