@@ -3,7 +3,7 @@
 //!
 //! * [`set`]: a message set loaded from a `messages.xml` at run time (the full PPRZLINK
 //!   reference included), as descriptors for generic decoding.
-//! * [`format`]: text forms of decoded messages (values with units and labels).
+//! * [`format`](mod@format): text forms of decoded messages (values with units and labels).
 //! * [`monitor`]: the state of the `pprz-monitor` tool: per-message rates and latest
 //!   values, link statistics, PING round trips and SETTING acknowledgements.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.

@@ -53,7 +53,7 @@ pub trait Decode<'a>: Message + Sized {
 ///
 /// Priorities are a byte: 0 is the least important, 255 the most. The `priority`
 /// attribute of a `<message>` in `messages.xml` sets a message's priority; a message
-/// without it gets the generator's default, [`DEFAULT`] unless configured otherwise.
+/// without it gets the generator's default, [`DEFAULT`](self::priority::DEFAULT) unless configured otherwise.
 pub mod priority {
     /// Payload and debug data: shed first when the link is saturated.
     pub const LOW: u8 = 64;

@@ -1,5 +1,5 @@
 //! The downlink: send a message to one or more devices, each with its own transport and
-//! priority queue, all frames in one shared [`FrameArena`](crate::FrameArena). Sending
+//! priority queue, all frames in one shared [`FrameArena`]. Sending
 //! never blocks: a message is encoded straight into arena memory and queued, or dropped
 //! and counted with a reason.
 //!
