@@ -193,9 +193,9 @@ impl<'s, 'a, M: RawMutex, const D: usize, const Q: usize, const S: usize>
     ///
     /// # Errors
     /// The registry has no room for the three subscriptions.
-    pub fn subscribe<const N: usize>(
-        &'s self,
-        registry: &mut Registry<'s, N>,
+    pub fn subscribe<'r, const N: usize>(
+        &'r self,
+        registry: &mut Registry<'r, N>,
     ) -> Result<(), RegistryFull>
     where
         Self: Subscriber,
