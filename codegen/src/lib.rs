@@ -121,6 +121,7 @@ pub mod model;
 mod names;
 pub mod reference;
 pub mod telemetry;
+mod xml;
 
 use std::path::{Path, PathBuf};
 

@@ -7,14 +7,18 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use pprz_messages::{BaseType, FieldDescriptor, FieldType, MessageDescriptor};
-use roxmltree::{Document, Node, ParsingOptions};
+use roxmltree::Node;
 
 use crate::error::{Diagnostic, Error, ErrorKind};
 use crate::names;
+use crate::xml::{self, Ctx, Seen};
 
 /// Largest number of field bytes a PPRZ v2 frame carries (255 - STX, LEN, 2 checksum
 /// bytes and the 4-byte v2 header).
 pub const MAX_PAYLOAD: usize = 247;
+
+/// What a coefficient must be (in diagnostics).
+const FINITE: &str = "a finite number";
 
 /// A parsed and validated message set.
 #[derive(Debug, Clone, PartialEq)]
@@ -144,8 +148,7 @@ impl Protocol {
     /// # Errors
     /// Every problem found, each with file, line, message and field.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
-        let (name, text) = read_file(path.as_ref())?;
-        Self::parse(&name, &text)
+        xml::parse_file(path.as_ref(), Self::parse)
     }
 
     /// Parses and validates `messages.xml` text; `file` names it in diagnostics.
@@ -153,18 +156,7 @@ impl Protocol {
     /// # Errors
     /// Every problem found, each with file, line, message and field.
     pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
-        let doc = parse_xml(file, text)?;
-        let mut p = Parser {
-            file,
-            doc: &doc,
-            diagnostics: Vec::new(),
-        };
-        let protocol = p.protocol();
-        if p.diagnostics.is_empty() {
-            Ok(protocol)
-        } else {
-            Err(Error::new(p.diagnostics))
-        }
+        xml::parse(file, text, parse_protocol)
     }
 
     /// Finds a class by name.
@@ -282,8 +274,7 @@ impl Units {
     /// # Errors
     /// Unreadable file, malformed XML, or a `<unit>` without a numeric `coef`.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
-        let (name, text) = read_file(path.as_ref())?;
-        Self::parse(&name, &text)
+        xml::parse_file(path.as_ref(), Self::parse)
     }
 
     /// Parses `units.xml` text.
@@ -291,33 +282,22 @@ impl Units {
     /// # Errors
     /// Malformed XML, or a `<unit>` without `from`, `to` or a numeric `coef`.
     pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
-        let doc = parse_xml(file, text)?;
-        let mut p = Parser {
-            file,
-            doc: &doc,
-            diagnostics: Vec::new(),
-        };
-        let mut units = Units::default();
-        for node in doc
-            .root_element()
-            .children()
-            .filter(|n| n.has_tag_name("unit"))
-        {
-            let ctx = Ctx::default();
-            let from = p.required(node, "unit", "from", &ctx);
-            let to = p.required(node, "unit", "to", &ctx);
-            let coef = p
-                .required(node, "unit", "coef", &ctx)
-                .and_then(|v| p.parse_f64(node, "coef", v, &ctx));
-            if let (Some(from), Some(to), Some(coef)) = (from, to, coef) {
-                units.coefs.insert((from.to_owned(), to.to_owned()), coef);
+        xml::parse(file, text, |p| {
+            let mut units = Units::default();
+            let root = p.document().root_element();
+            for node in root.children().filter(|n| n.has_tag_name("unit")) {
+                let ctx = Ctx::default();
+                let from = p.required(node, "unit", "from", &ctx);
+                let to = p.required(node, "unit", "to", &ctx);
+                let coef = p
+                    .required(node, "unit", "coef", &ctx)
+                    .and_then(|v| p.number(node, &ctx, "coef", v, |_| true, FINITE));
+                if let (Some(from), Some(to), Some(coef)) = (from, to, coef) {
+                    units.coefs.insert((from.to_owned(), to.to_owned()), coef);
+                }
             }
-        }
-        if p.diagnostics.is_empty() {
-            Ok(units)
-        } else {
-            Err(Error::new(p.diagnostics))
-        }
+            units
+        })
     }
 
     /// Conversions between the units Paparazzi messages use, built in so generated
@@ -358,364 +338,204 @@ impl Units {
     }
 }
 
-/// The message and field a diagnostic is about.
-#[derive(Default)]
-struct Ctx {
-    message: Option<String>,
-    field: Option<String>,
-}
-
-struct Parser<'a, 'input> {
-    file: &'a str,
-    doc: &'a Document<'input>,
-    diagnostics: Vec<Diagnostic>,
-}
-
-impl<'input> Parser<'_, 'input> {
-    fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
-        let pos = self.doc.text_pos_at(node.range().start);
-        (pos.row, pos.col)
-    }
-
-    fn report(&mut self, node: Node<'_, '_>, ctx: &Ctx, kind: ErrorKind) {
-        let (line, column) = self.line_col(node);
-        self.diagnostics.push(Diagnostic {
-            file: self.file.to_owned(),
-            line,
-            column,
-            message: ctx.message.clone(),
-            field: ctx.field.clone(),
-            kind,
-        });
-    }
-
-    fn required<'n>(
-        &mut self,
-        node: Node<'n, 'input>,
-        element: &'static str,
-        attribute: &'static str,
-        ctx: &Ctx,
-    ) -> Option<&'n str> {
-        let value = node.attribute(attribute).map(str::trim);
-        if value.is_none() {
-            self.report(
+/// An `id` attribute value: a class or message id.
+fn parse_id(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>, v: &str, ctx: &Ctx) -> Option<u8> {
+    match v.parse::<u8>() {
+        Ok(id) => Some(id),
+        Err(_) => {
+            p.report(
                 node,
                 ctx,
-                ErrorKind::MissingAttribute { element, attribute },
+                ErrorKind::InvalidNumber {
+                    attribute: "id",
+                    value: v.to_owned(),
+                    expected: "an integer in 0..=255",
+                },
             );
-        }
-        value
-    }
-
-    fn parse_f64(
-        &mut self,
-        node: Node<'_, '_>,
-        attribute: &'static str,
-        v: &str,
-        ctx: &Ctx,
-    ) -> Option<f64> {
-        match v.parse::<f64>() {
-            Ok(x) if x.is_finite() => Some(x),
-            _ => {
-                self.report(
-                    node,
-                    ctx,
-                    ErrorKind::InvalidNumber {
-                        attribute,
-                        value: v.to_owned(),
-                        expected: "a finite number",
-                    },
-                );
-                None
-            }
-        }
-    }
-
-    fn parse_id(&mut self, node: Node<'_, '_>, v: &str, ctx: &Ctx) -> Option<u8> {
-        match v.parse::<u8>() {
-            Ok(id) => Some(id),
-            Err(_) => {
-                self.report(
-                    node,
-                    ctx,
-                    ErrorKind::InvalidNumber {
-                        attribute: "id",
-                        value: v.to_owned(),
-                        expected: "an integer in 0..=255",
-                    },
-                );
-                None
-            }
-        }
-    }
-
-    fn name(&mut self, node: Node<'_, 'input>, element: &'static str, ctx: &Ctx) -> Option<String> {
-        let name = self.required(node, element, "name", ctx)?;
-        if names::is_identifier(name) {
-            Some(name.to_owned())
-        } else {
-            self.report(node, ctx, ErrorKind::InvalidName(name.to_owned()));
             None
         }
     }
+}
 
-    fn protocol(&mut self) -> Protocol {
-        let root = self.doc.root_element();
-        let ctx = Ctx::default();
-        let mut classes = Vec::new();
-        if !root.has_tag_name("protocol") {
-            self.report(
-                root,
-                &ctx,
-                ErrorKind::UnexpectedElement {
-                    found: root.tag_name().name().to_owned(),
-                    expected: "<protocol> as the root element",
-                },
-            );
-            return Protocol {
-                file: self.file.to_owned(),
-                classes,
-            };
-        }
-        let mut seen = Seen::default();
-        for node in root.children().filter(Node::is_element) {
-            if !node.has_tag_name("msg_class") {
-                self.unexpected(node, &ctx, "<msg_class>");
-                continue;
+/// The `<protocol>` root of a `messages.xml`: its classes.
+fn parse_protocol(p: &mut xml::Parser<'_, '_>) -> Protocol {
+    let ctx = Ctx::default();
+    let mut seen = Seen::default();
+    let classes = match p.root("protocol", "<protocol> as the root element") {
+        None => Vec::new(),
+        Some(root) => p.children(root, "msg_class", &ctx, "<msg_class>", |p, node| {
+            let class = parse_class(p, node)?;
+            let line = class.line;
+            seen.check(p, node, &ctx, "class name", class.name.clone(), line);
+            seen.check(p, node, &ctx, "class id", class.id.to_string(), line);
+            let module = names::module_name(&class.name);
+            seen.check(p, node, &ctx, "module name of class", module, line);
+            Some(class)
+        }),
+    };
+    Protocol {
+        file: p.file().to_owned(),
+        classes,
+    }
+}
+
+/// A `<msg_class>` and its messages; `None` if its name or id is unusable.
+fn parse_class(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Class> {
+    let ctx = Ctx::default();
+    let name = p.name(node, "msg_class", &ctx);
+    let id = p
+        .required(node, "msg_class", "id", &ctx)
+        .and_then(|v| parse_id(p, node, v, &ctx));
+    let mut seen = Seen::default();
+    let messages = p.children(node, "message", &ctx, "<message>", |p, child| {
+        let m = parse_message(p, child)?;
+        let (ctx, line) = (Ctx::message(&m.name), m.line);
+        seen.check(p, child, &ctx, "message name", m.name.clone(), line);
+        seen.check(p, child, &ctx, "message id", m.id.to_string(), line);
+        let type_name = names::camel_case(&m.name);
+        seen.check(p, child, &ctx, "Rust type name of message", type_name, line);
+        for f in &m.fields {
+            if let Some(e) = crate::emit::values_enum(&m, f) {
+                let fctx = Ctx {
+                    message: Some(m.name.clone()),
+                    field: Some(f.name.clone()),
+                };
+                seen.check(p, child, &fctx, "enum name of `values`", e, f.line);
             }
-            if let Some(class) = self.class(node) {
-                let (line, _) = self.line_col(node);
-                seen.check(self, node, &ctx, "class name", class.name.clone(), line);
-                seen.check(self, node, &ctx, "class id", class.id.to_string(), line);
-                seen.check(
-                    self,
-                    node,
-                    &ctx,
-                    "module name of class",
-                    names::module_name(&class.name),
-                    line,
-                );
-                classes.push(class);
-            }
         }
-        Protocol {
-            file: self.file.to_owned(),
-            classes,
+        Some(m)
+    });
+    let (line, _) = p.line_col(node);
+    Some(Class {
+        name: name?,
+        id: id?,
+        line,
+        messages,
+    })
+}
+
+/// A `<message>` of a class and its fields; `None` if its name or id is unusable.
+fn parse_message(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<MessageDef> {
+    let mut ctx = Ctx::default();
+    let name = p.name(node, "message", &ctx);
+    ctx.message = name.clone();
+    let id = p
+        .required(node, "message", "id", &ctx)
+        .and_then(|v| parse_id(p, node, v, &ctx));
+    let priority = match node.attribute("priority").map(str::trim) {
+        None => None,
+        Some(v) => match v.parse::<u8>() {
+            Ok(priority) => Some(priority),
+            Err(_) => {
+                p.report(node, &ctx, ErrorKind::PriorityOutOfRange(v.to_owned()));
+                None
+            }
+        },
+    };
+    let mut description = None;
+    let mut fields = Vec::new();
+    let mut seen = Seen::default();
+    for child in node.children().filter(Node::is_element) {
+        match child.tag_name().name() {
+            "description" => description = text(child),
+            "field" => {
+                if let Some(f) = parse_field(p, child, &ctx) {
+                    let fctx = Ctx {
+                        message: ctx.message.clone(),
+                        field: Some(f.name.clone()),
+                    };
+                    seen.check(p, child, &fctx, "field name", f.name.clone(), f.line);
+                    seen.check(
+                        p,
+                        child,
+                        &fctx,
+                        "Rust name of field",
+                        names::snake_case(&f.name),
+                        f.line,
+                    );
+                    fields.push(f);
+                }
+            }
+            _ => p.unexpected(child, &ctx, "<description> or <field>"),
         }
     }
-
-    fn unexpected(&mut self, node: Node<'_, '_>, ctx: &Ctx, expected: &'static str) {
-        self.report(
+    let (line, _) = p.line_col(node);
+    let message = MessageDef {
+        name: name?,
+        id: id?,
+        line,
+        priority,
+        link: node.attribute("link").map(str::to_owned),
+        description,
+        fields,
+    };
+    let min_len = message.min_len();
+    if min_len > MAX_PAYLOAD {
+        p.report(
             node,
-            ctx,
-            ErrorKind::UnexpectedElement {
-                found: node.tag_name().name().to_owned(),
-                expected,
+            &ctx,
+            ErrorKind::PayloadTooLarge {
+                min_len,
+                max: MAX_PAYLOAD,
             },
         );
     }
+    Some(message)
+}
 
-    fn class(&mut self, node: Node<'_, 'input>) -> Option<Class> {
-        let ctx = Ctx::default();
-        let name = self.name(node, "msg_class", &ctx);
-        let id = self
-            .required(node, "msg_class", "id", &ctx)
-            .and_then(|v| self.parse_id(node, v, &ctx));
-        let mut messages = Vec::new();
-        let mut seen = Seen::default();
-        for child in node.children().filter(Node::is_element) {
-            if !child.has_tag_name("message") {
-                self.unexpected(child, &ctx, "<message>");
-                continue;
-            }
-            if let Some(m) = self.message(child) {
-                let ctx = Ctx {
-                    message: Some(m.name.clone()),
-                    field: None,
-                };
-                seen.check(self, child, &ctx, "message name", m.name.clone(), m.line);
-                seen.check(self, child, &ctx, "message id", m.id.to_string(), m.line);
-                seen.check(
-                    self,
-                    child,
-                    &ctx,
-                    "Rust type name of message",
-                    names::camel_case(&m.name),
-                    m.line,
-                );
-                for f in &m.fields {
-                    if let Some(e) = crate::emit::values_enum(&m, f) {
-                        let fctx = Ctx {
-                            message: Some(m.name.clone()),
-                            field: Some(f.name.clone()),
-                        };
-                        seen.check(self, child, &fctx, "enum name of `values`", e, f.line);
-                    }
-                }
-                messages.push(m);
-            }
+/// A `<field>` of the message `message`; `None` if its name or type is unusable.
+fn parse_field(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>, message: &Ctx) -> Option<FieldDef> {
+    let mut ctx = Ctx {
+        message: message.message.clone(),
+        field: None,
+    };
+    let name = p.name(node, "field", &ctx);
+    ctx.field = name.clone();
+    let xml_type = p.required(node, "field", "type", &ctx);
+    let ty = xml_type.and_then(|t| match parse_type(t) {
+        Ok(ty) => Some(ty),
+        Err(kind) => {
+            p.report(node, &ctx, kind);
+            None
         }
-        let (line, _) = self.line_col(node);
-        Some(Class {
-            name: name?,
-            id: id?,
-            line,
-            messages,
-        })
-    }
-
-    fn message(&mut self, node: Node<'_, 'input>) -> Option<MessageDef> {
-        let mut ctx = Ctx::default();
-        let name = self.name(node, "message", &ctx);
-        ctx.message = name.clone();
-        let id = self
-            .required(node, "message", "id", &ctx)
-            .and_then(|v| self.parse_id(node, v, &ctx));
-        let priority = match node.attribute("priority").map(str::trim) {
-            None => None,
-            Some(v) => match v.parse::<u8>() {
-                Ok(p) => Some(p),
-                Err(_) => {
-                    self.report(node, &ctx, ErrorKind::PriorityOutOfRange(v.to_owned()));
-                    None
-                }
-            },
-        };
-        let mut description = None;
-        let mut fields = Vec::new();
-        let mut seen = Seen::default();
-        for child in node.children().filter(Node::is_element) {
-            match child.tag_name().name() {
-                "description" => description = text(child),
-                "field" => {
-                    if let Some(f) = self.field(child, &ctx) {
-                        let fctx = Ctx {
-                            message: ctx.message.clone(),
-                            field: Some(f.name.clone()),
-                        };
-                        seen.check(self, child, &fctx, "field name", f.name.clone(), f.line);
-                        seen.check(
-                            self,
-                            child,
-                            &fctx,
-                            "Rust name of field",
-                            names::snake_case(&f.name),
-                            f.line,
-                        );
-                        fields.push(f);
-                    }
-                }
-                _ => self.unexpected(child, &ctx, "<description> or <field>"),
-            }
-        }
-        let (line, _) = self.line_col(node);
-        let message = MessageDef {
-            name: name?,
-            id: id?,
-            line,
-            priority,
-            link: node.attribute("link").map(str::to_owned),
-            description,
-            fields,
-        };
-        let min_len = message.min_len();
-        if min_len > MAX_PAYLOAD {
-            self.report(
+    });
+    let alt_unit_coef = node
+        .attribute("alt_unit_coef")
+        .and_then(|v| p.number(node, &ctx, "alt_unit_coef", v.trim(), |_| true, FINITE));
+    let values: Vec<String> = node
+        .attribute("values")
+        .map(|v| v.split('|').map(|s| s.trim().to_owned()).collect())
+        .unwrap_or_default();
+    if let Some(ty) = ty
+        && !values.is_empty()
+        && let FieldType::Scalar(base) = ty
+        && base.is_integer()
+    {
+        let capacity = 1u128 << (8 * base.size() - usize::from(is_signed(base)));
+        if values.len() as u128 > capacity {
+            p.report(
                 node,
                 &ctx,
-                ErrorKind::PayloadTooLarge {
-                    min_len,
-                    max: MAX_PAYLOAD,
+                ErrorKind::TooManyValues {
+                    count: values.len(),
+                    ty: base.xml_name().to_owned(),
                 },
             );
         }
-        Some(message)
     }
-
-    fn field(&mut self, node: Node<'_, 'input>, message: &Ctx) -> Option<FieldDef> {
-        let mut ctx = Ctx {
-            message: message.message.clone(),
-            field: None,
-        };
-        let name = self.name(node, "field", &ctx);
-        ctx.field = name.clone();
-        let xml_type = self.required(node, "field", "type", &ctx);
-        let ty = xml_type.and_then(|t| match parse_type(t) {
-            Ok(ty) => Some(ty),
-            Err(kind) => {
-                self.report(node, &ctx, kind);
-                None
-            }
-        });
-        let alt_unit_coef = node
-            .attribute("alt_unit_coef")
-            .and_then(|v| self.parse_f64(node, "alt_unit_coef", v.trim(), &ctx));
-        let values: Vec<String> = node
-            .attribute("values")
-            .map(|v| v.split('|').map(|s| s.trim().to_owned()).collect())
-            .unwrap_or_default();
-        if let Some(ty) = ty
-            && !values.is_empty()
-            && let FieldType::Scalar(base) = ty
-            && base.is_integer()
-        {
-            let capacity = 1u128 << (8 * base.size() - usize::from(is_signed(base)));
-            if values.len() as u128 > capacity {
-                self.report(
-                    node,
-                    &ctx,
-                    ErrorKind::TooManyValues {
-                        count: values.len(),
-                        ty: base.xml_name().to_owned(),
-                    },
-                );
-            }
-        }
-        let attr = |a: &str| node.attribute(a).map(|v| v.trim().to_owned());
-        let (line, _) = self.line_col(node);
-        Some(FieldDef {
-            name: name?,
-            line,
-            xml_type: xml_type?.to_owned(),
-            ty: ty?,
-            unit: attr("unit"),
-            alt_unit: attr("alt_unit"),
-            alt_unit_coef,
-            format: attr("format"),
-            values,
-            description: text(node),
-        })
-    }
-}
-
-/// Reads a file, returning its name for diagnostics and its text.
-pub(crate) fn read_file(path: &Path) -> Result<(String, String), Error> {
-    let name = path.display().to_string();
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
-    Ok((name, text))
-}
-
-/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry; a syntax error
-/// is reported at its position in `file`.
-pub(crate) fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
-    Document::parse_with_options(
-        text,
-        ParsingOptions {
-            allow_dtd: true,
-            ..ParsingOptions::default()
-        },
-    )
-    .map_err(|e| {
-        let pos = e.pos();
-        Error::new(vec![Diagnostic {
-            file: file.to_owned(),
-            line: pos.row,
-            column: pos.col,
-            message: None,
-            field: None,
-            kind: ErrorKind::Xml(e.to_string()),
-        }])
+    let attr = |a: &str| node.attribute(a).map(|v| v.trim().to_owned());
+    let (line, _) = p.line_col(node);
+    Some(FieldDef {
+        name: name?,
+        line,
+        xml_type: xml_type?.to_owned(),
+        ty: ty?,
+        unit: attr("unit"),
+        alt_unit: attr("alt_unit"),
+        alt_unit_coef,
+        format: attr("format"),
+        values,
+        description: text(node),
     })
 }
 
@@ -769,39 +589,6 @@ pub fn parse_type(t: &str) -> Result<FieldType, ErrorKind> {
             Ok(n) if n > 0 => Ok(FieldType::Array(base, usize::from(n))),
             _ => Err(ErrorKind::MalformedArray(t.to_owned())),
         },
-    }
-}
-
-/// First occurrences of names and ids, to report duplicates.
-#[derive(Default)]
-struct Seen {
-    first: HashMap<(&'static str, String), u32>,
-}
-
-impl Seen {
-    fn check(
-        &mut self,
-        p: &mut Parser<'_, '_>,
-        node: Node<'_, '_>,
-        ctx: &Ctx,
-        what: &'static str,
-        value: String,
-        line: u32,
-    ) {
-        match self.first.get(&(what, value.clone())) {
-            Some(&first_line) => p.report(
-                node,
-                ctx,
-                ErrorKind::Duplicate {
-                    what,
-                    value,
-                    first_line,
-                },
-            ),
-            None => {
-                self.first.insert((what, value), line);
-            }
-        }
     }
 }
 

@@ -39,13 +39,12 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use roxmltree::{Document, Node};
-
-use crate::model::parse_xml;
+use roxmltree::Node;
 
 use crate::error::{Diagnostic, Error, ErrorKind};
 use crate::model::Protocol;
 use crate::names;
+use crate::xml::{self, Ctx, Seen};
 
 /// A parsed and validated telemetry configuration (before message names are resolved).
 #[derive(Debug, Clone, PartialEq)]
@@ -204,8 +203,7 @@ impl TelemetryConfig {
     /// # Errors
     /// Every problem found, each with file and line.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Self, Error> {
-        let (name, text) = crate::model::read_file(path.as_ref())?;
-        Self::parse(&name, &text)
+        xml::parse_file(path.as_ref(), Self::parse)
     }
 
     /// Parses and validates telemetry configuration text; `file` names it in diagnostics.
@@ -219,18 +217,7 @@ impl TelemetryConfig {
     /// # Errors
     /// Every problem found, each with file and line.
     pub fn parse(file: &str, text: &str) -> Result<Self, Error> {
-        let doc = parse_xml(file, text)?;
-        let mut p = Parser {
-            file,
-            doc: &doc,
-            diagnostics: Vec::new(),
-        };
-        let config = p.config();
-        if p.diagnostics.is_empty() {
-            Ok(config)
-        } else {
-            Err(Error::new(p.diagnostics))
-        }
+        xml::parse(file, text, parse_config)
     }
 
     /// Resolves the message names against class `options.class` of `protocol` and
@@ -591,265 +578,109 @@ pub(crate) fn emit(s: &Schedule, scheduler: &str) -> String {
     out
 }
 
-struct Parser<'a, 'input> {
-    file: &'a str,
-    doc: &'a Document<'input>,
-    diagnostics: Vec<Diagnostic>,
+/// The `<telemetry>` root of a telemetry configuration: its processes.
+fn parse_config(p: &mut xml::Parser<'_, '_>) -> TelemetryConfig {
+    let ctx = Ctx::default();
+    let mut seen = Seen::default();
+    let processes = match p.root("telemetry", "<telemetry> as the root element") {
+        None => Vec::new(),
+        Some(root) => p.children(root, "process", &ctx, "<process>", |p, node| {
+            let process = parse_process(p, node)?;
+            let (name, line) = (&process.name, process.line);
+            if seen.check(p, node, &ctx, "process name", name.clone(), line) {
+                let module = names::module_name(name);
+                seen.check(p, node, &ctx, "module name of process", module, line);
+            }
+            Some(process)
+        }),
+    };
+    TelemetryConfig {
+        file: p.file().to_owned(),
+        processes,
+    }
 }
 
-/// First occurrences of names, to report duplicates.
-#[derive(Default)]
-struct Seen {
-    first: HashMap<(&'static str, String), u32>,
-}
-
-impl Seen {
-    /// Records `value`; reports it and returns `false` if already seen.
-    fn check(
-        &mut self,
-        p: &mut Parser<'_, '_>,
-        node: Node<'_, '_>,
-        message: Option<&str>,
-        what: &'static str,
-        value: String,
-    ) -> bool {
-        let (line, _) = p.line_col(node);
-        match self.first.get(&(what, value.clone())) {
-            Some(&first_line) => {
-                p.report(
-                    node,
-                    message,
-                    ErrorKind::Duplicate {
-                        what,
-                        value,
-                        first_line,
-                    },
-                );
-                false
-            }
-            None => {
-                self.first.insert((what, value), line);
-                true
-            }
+/// A `<process>` and its modes; `None` if its name is unusable.
+fn parse_process(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<ProcessDef> {
+    let ctx = Ctx::default();
+    let name = p.name(node, "process", &ctx);
+    let mut mode_elements = 0;
+    let mut seen = Seen::default();
+    let modes = p.children(node, "mode", &ctx, "<mode>", |p, child| {
+        mode_elements += 1;
+        let mode = parse_mode(p, child)?;
+        let (name, line) = (&mode.name, mode.line);
+        if seen.check(p, child, &ctx, "mode name", name.clone(), line) {
+            let constant = mode_const(name);
+            seen.check(p, child, &ctx, "constant name of mode", constant, line);
         }
-    }
-}
-
-impl<'input> Parser<'_, 'input> {
-    fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
-        let pos = self.doc.text_pos_at(node.range().start);
-        (pos.row, pos.col)
-    }
-
-    fn report(&mut self, node: Node<'_, '_>, message: Option<&str>, kind: ErrorKind) {
-        let (line, column) = self.line_col(node);
-        self.diagnostics.push(Diagnostic {
-            file: self.file.to_owned(),
-            line,
-            column,
-            message: message.map(str::to_owned),
-            field: None,
-            kind,
-        });
-    }
-
-    fn unexpected(&mut self, node: Node<'_, '_>, expected: &'static str) {
-        self.report(
+        Some(mode)
+    });
+    let name = name?;
+    if mode_elements == 0 {
+        p.report(
             node,
-            None,
-            ErrorKind::UnexpectedElement {
-                found: node.tag_name().name().to_owned(),
-                expected,
-            },
+            &ctx,
+            ErrorKind::Telemetry(format!("process `{name}` has no <mode>")),
         );
     }
+    let (line, _) = p.line_col(node);
+    Some(ProcessDef { name, line, modes })
+}
 
-    fn required<'n>(
-        &mut self,
-        node: Node<'n, 'input>,
-        element: &'static str,
-        attribute: &'static str,
-        message: Option<&str>,
-    ) -> Option<&'n str> {
-        let value = node.attribute(attribute).map(str::trim);
-        if value.is_none() {
-            self.report(
-                node,
-                message,
-                ErrorKind::MissingAttribute { element, attribute },
-            );
-        }
-        value
-    }
+/// A `<mode>` and its messages; `None` if its name is unusable.
+fn parse_mode(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<ModeDef> {
+    let ctx = Ctx::default();
+    let name = p.name(node, "mode", &ctx);
+    let mut seen = Seen::default();
+    let messages = p.children(node, "message", &ctx, "<message>", |p, child| {
+        let m = parse_message(p, child)?;
+        let mctx = Ctx::message(&m.name);
+        seen.check(p, child, &mctx, "message name", m.name.clone(), m.line);
+        Some(m)
+    });
+    let (line, _) = p.line_col(node);
+    Some(ModeDef {
+        name: name?,
+        line,
+        key_press: node.attribute("key_press").map(|k| k.trim().to_owned()),
+        messages,
+    })
+}
 
-    fn name(&mut self, node: Node<'_, 'input>, element: &'static str) -> Option<String> {
-        let name = self.required(node, element, "name", None)?;
-        if names::is_identifier(name) {
-            Some(name.to_owned())
-        } else {
-            self.report(node, None, ErrorKind::InvalidName(name.to_owned()));
-            None
-        }
-    }
-
-    fn seconds(
-        &mut self,
-        node: Node<'_, '_>,
-        message: &str,
-        attribute: &'static str,
-        value: &str,
-        ok: impl Fn(f64) -> bool,
-        expected: &'static str,
-    ) -> Option<f64> {
-        match value.parse::<f64>() {
-            Ok(x) if x.is_finite() && ok(x) => Some(x),
-            _ => {
-                self.report(
-                    node,
-                    Some(message),
-                    ErrorKind::InvalidNumber {
-                        attribute,
-                        value: value.to_owned(),
-                        expected,
-                    },
-                );
-                None
-            }
-        }
-    }
-
-    fn config(&mut self) -> TelemetryConfig {
-        let root = self.doc.root_element();
-        let mut processes = Vec::new();
-        if !root.has_tag_name("telemetry") {
-            self.report(
-                root,
-                None,
-                ErrorKind::UnexpectedElement {
-                    found: root.tag_name().name().to_owned(),
-                    expected: "<telemetry> as the root element",
-                },
-            );
-        } else {
-            let mut seen = Seen::default();
-            for node in root.children().filter(Node::is_element) {
-                if !node.has_tag_name("process") {
-                    self.unexpected(node, "<process>");
-                    continue;
-                }
-                if let Some(process) = self.process(node) {
-                    if seen.check(self, node, None, "process name", process.name.clone()) {
-                        seen.check(
-                            self,
-                            node,
-                            None,
-                            "module name of process",
-                            names::module_name(&process.name),
-                        );
-                    }
-                    processes.push(process);
-                }
-            }
-        }
-        TelemetryConfig {
-            file: self.file.to_owned(),
-            processes,
-        }
-    }
-
-    fn process(&mut self, node: Node<'_, 'input>) -> Option<ProcessDef> {
-        let name = self.name(node, "process");
-        let mut modes = Vec::new();
-        let mut mode_elements = 0;
-        let mut seen = Seen::default();
-        for child in node.children().filter(Node::is_element) {
-            if !child.has_tag_name("mode") {
-                self.unexpected(child, "<mode>");
-                continue;
-            }
-            mode_elements += 1;
-            if let Some(mode) = self.mode(child) {
-                if seen.check(self, child, None, "mode name", mode.name.clone()) {
-                    seen.check(
-                        self,
-                        child,
-                        None,
-                        "constant name of mode",
-                        mode_const(&mode.name),
-                    );
-                }
-                modes.push(mode);
-            }
-        }
-        let name = name?;
-        if mode_elements == 0 {
-            self.report(
-                node,
-                None,
-                ErrorKind::Telemetry(format!("process `{name}` has no <mode>")),
-            );
-        }
-        let (line, _) = self.line_col(node);
-        Some(ProcessDef { name, line, modes })
-    }
-
-    fn mode(&mut self, node: Node<'_, 'input>) -> Option<ModeDef> {
-        let name = self.name(node, "mode");
-        let mut messages = Vec::new();
-        let mut seen = Seen::default();
-        for child in node.children().filter(Node::is_element) {
-            if !child.has_tag_name("message") {
-                self.unexpected(child, "<message>");
-                continue;
-            }
-            if let Some(m) = self.message(child) {
-                seen.check(self, child, Some(&m.name), "message name", m.name.clone());
-                messages.push(m);
-            }
-        }
-        let (line, _) = self.line_col(node);
-        Some(ModeDef {
-            name: name?,
-            line,
-            key_press: node.attribute("key_press").map(|k| k.trim().to_owned()),
-            messages,
-        })
-    }
-
-    fn message(&mut self, node: Node<'_, 'input>) -> Option<PeriodicDef> {
-        let name = self.name(node, "message")?;
-        let period = self
-            .required(node, "message", "period", Some(&name))
-            .and_then(|v| {
-                self.seconds(
-                    node,
-                    &name,
-                    "period",
-                    v,
-                    |x| x > 0.0,
-                    "a finite number of seconds > 0",
-                )
-            });
-        let phase = match node.attribute("phase").map(str::trim) {
-            None => None,
-            Some(v) => Some(self.seconds(
-                node,
-                &name,
-                "phase",
-                v,
-                |x| x >= 0.0 && period.is_none_or(|p| x < p),
-                "a finite number of seconds >= 0 and less than the period",
-            )?),
-        };
-        let (line, column) = self.line_col(node);
-        Some(PeriodicDef {
-            name,
-            line,
-            column,
-            period: period?,
-            phase,
-        })
-    }
+/// A `<message>` of a mode; `None` if its name or period is unusable.
+fn parse_message(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<PeriodicDef> {
+    let name = p.name(node, "message", &Ctx::default())?;
+    let ctx = Ctx::message(&name);
+    let period = p.required(node, "message", "period", &ctx).and_then(|v| {
+        p.number(
+            node,
+            &ctx,
+            "period",
+            v,
+            |x| x > 0.0,
+            "a finite number of seconds > 0",
+        )
+    });
+    let phase = match node.attribute("phase").map(str::trim) {
+        None => None,
+        Some(v) => Some(p.number(
+            node,
+            &ctx,
+            "phase",
+            v,
+            |x| x >= 0.0 && period.is_none_or(|period| x < period),
+            "a finite number of seconds >= 0 and less than the period",
+        )?),
+    };
+    let (line, column) = p.line_col(node);
+    Some(PeriodicDef {
+        name,
+        line,
+        column,
+        period: period?,
+        phase,
+    })
 }
 
 #[cfg(test)]

@@ -1,0 +1,299 @@
+//! The machinery the XML parsers of the crate share (`messages.xml` and `units.xml` in
+//! [`crate::model`], `telemetry.xml` in [`crate::telemetry`]): reading and parsing a file,
+//! and a [`Parser`] that collects diagnostics with their position instead of stopping at
+//! the first problem.
+//!
+//! Each format keeps its own element logic, as functions over a [`Parser`]; [`parse`] runs
+//! the one for the root element and turns what was collected into a `Result`.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use roxmltree::{Document, Node, ParsingOptions};
+
+use crate::error::{Diagnostic, Error, ErrorKind};
+use crate::names;
+
+/// The message and field a diagnostic is about.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Ctx {
+    /// Name of the message, if the diagnostic is about one.
+    pub(crate) message: Option<String>,
+    /// Name of the field, if the diagnostic is about one.
+    pub(crate) field: Option<String>,
+}
+
+impl Ctx {
+    /// About message `name` as a whole (no field).
+    pub(crate) fn message(name: &str) -> Self {
+        Self {
+            message: Some(name.to_owned()),
+            field: None,
+        }
+    }
+}
+
+/// A parsed XML document and the diagnostics collected about it so far.
+pub(crate) struct Parser<'a, 'input> {
+    file: &'a str,
+    doc: &'a Document<'input>,
+    diagnostics: Vec<Diagnostic>,
+}
+
+impl<'a, 'input> Parser<'a, 'input> {
+    /// A parser of `doc`, which `file` names in diagnostics, with no diagnostics yet.
+    pub(crate) fn new(file: &'a str, doc: &'a Document<'input>) -> Self {
+        Self {
+            file,
+            doc,
+            diagnostics: Vec::new(),
+        }
+    }
+
+    /// The name of the file in diagnostics.
+    pub(crate) fn file(&self) -> &'a str {
+        self.file
+    }
+
+    /// The document being parsed.
+    pub(crate) fn document(&self) -> &'a Document<'input> {
+        self.doc
+    }
+
+    /// The root element if its tag is `tag`; otherwise reports it as unexpected where
+    /// `expected` was.
+    pub(crate) fn root(&mut self, tag: &str, expected: &'static str) -> Option<Node<'a, 'input>> {
+        let root = self.doc.root_element();
+        if root.has_tag_name(tag) {
+            Some(root)
+        } else {
+            self.unexpected(root, &Ctx::default(), expected);
+            None
+        }
+    }
+
+    /// Line and column (1-based) where `node` starts.
+    pub(crate) fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
+        let pos = self.doc.text_pos_at(node.range().start);
+        (pos.row, pos.col)
+    }
+
+    /// Records a problem at `node`, about the message and field of `ctx`.
+    pub(crate) fn report(&mut self, node: Node<'_, '_>, ctx: &Ctx, kind: ErrorKind) {
+        let (line, column) = self.line_col(node);
+        self.diagnostics.push(Diagnostic {
+            file: self.file.to_owned(),
+            line,
+            column,
+            message: ctx.message.clone(),
+            field: ctx.field.clone(),
+            kind,
+        });
+    }
+
+    /// The trimmed value of `attribute` of `node` (an `element`); reports it if absent.
+    pub(crate) fn required<'n>(
+        &mut self,
+        node: Node<'n, '_>,
+        element: &'static str,
+        attribute: &'static str,
+        ctx: &Ctx,
+    ) -> Option<&'n str> {
+        let value = node.attribute(attribute).map(str::trim);
+        if value.is_none() {
+            self.report(
+                node,
+                ctx,
+                ErrorKind::MissingAttribute { element, attribute },
+            );
+        }
+        value
+    }
+
+    /// The `name` attribute of `node` (an `element`); reports it if absent or not an
+    /// identifier.
+    pub(crate) fn name(
+        &mut self,
+        node: Node<'_, '_>,
+        element: &'static str,
+        ctx: &Ctx,
+    ) -> Option<String> {
+        let name = self.required(node, element, "name", ctx)?;
+        if names::is_identifier(name) {
+            Some(name.to_owned())
+        } else {
+            self.report(node, ctx, ErrorKind::InvalidName(name.to_owned()));
+            None
+        }
+    }
+
+    /// Reports `node` as an element not allowed where `expected` is.
+    pub(crate) fn unexpected(&mut self, node: Node<'_, '_>, ctx: &Ctx, expected: &'static str) {
+        self.report(
+            node,
+            ctx,
+            ErrorKind::UnexpectedElement {
+                found: node.tag_name().name().to_owned(),
+                expected,
+            },
+        );
+    }
+
+    /// `value` (of `attribute` of `node`) as a finite number for which `ok` holds;
+    /// otherwise reports it as an invalid number where `expected` was.
+    pub(crate) fn number(
+        &mut self,
+        node: Node<'_, '_>,
+        ctx: &Ctx,
+        attribute: &'static str,
+        value: &str,
+        ok: impl Fn(f64) -> bool,
+        expected: &'static str,
+    ) -> Option<f64> {
+        match value.parse::<f64>() {
+            Ok(x) if x.is_finite() && ok(x) => Some(x),
+            _ => {
+                self.report(
+                    node,
+                    ctx,
+                    ErrorKind::InvalidNumber {
+                        attribute,
+                        value: value.to_owned(),
+                        expected,
+                    },
+                );
+                None
+            }
+        }
+    }
+
+    /// Parses the `<tag>` element children of `node` with `parse`, in file order,
+    /// keeping what it returns; reports any other element child as unexpected where
+    /// `expected` was.
+    pub(crate) fn children<'n, 'i, T>(
+        &mut self,
+        node: Node<'n, 'i>,
+        tag: &str,
+        ctx: &Ctx,
+        expected: &'static str,
+        mut parse: impl FnMut(&mut Self, Node<'n, 'i>) -> Option<T>,
+    ) -> Vec<T> {
+        let mut parsed = Vec::new();
+        for child in node.children().filter(Node::is_element) {
+            if !child.has_tag_name(tag) {
+                self.unexpected(child, ctx, expected);
+            } else if let Some(value) = parse(self, child) {
+                parsed.push(value);
+            }
+        }
+        parsed
+    }
+
+    /// `value` if no problem was reported, otherwise every problem reported.
+    pub(crate) fn finish<T>(self, value: T) -> Result<T, Error> {
+        if self.diagnostics.is_empty() {
+            Ok(value)
+        } else {
+            Err(Error::new(self.diagnostics))
+        }
+    }
+}
+
+/// First occurrences of names and ids, to report duplicates.
+#[derive(Default)]
+pub(crate) struct Seen {
+    first: HashMap<(&'static str, String), u32>,
+}
+
+impl Seen {
+    /// Records `value` (a `what`, first seen on `line`); if it was already seen, reports
+    /// it at `node` with the line of its first occurrence and returns `false`.
+    pub(crate) fn check(
+        &mut self,
+        p: &mut Parser<'_, '_>,
+        node: Node<'_, '_>,
+        ctx: &Ctx,
+        what: &'static str,
+        value: String,
+        line: u32,
+    ) -> bool {
+        match self.first.get(&(what, value.clone())) {
+            Some(&first_line) => {
+                p.report(
+                    node,
+                    ctx,
+                    ErrorKind::Duplicate {
+                        what,
+                        value,
+                        first_line,
+                    },
+                );
+                false
+            }
+            None => {
+                self.first.insert((what, value), line);
+                true
+            }
+        }
+    }
+}
+
+/// Parses `text` (named `file` in diagnostics) as XML and runs `run` on a [`Parser`] of
+/// it; the value `run` returns if it reported no problem, otherwise every problem.
+///
+/// # Errors
+/// Malformed XML, or the problems `run` reported.
+pub(crate) fn parse<T>(
+    file: &str,
+    text: &str,
+    run: impl FnOnce(&mut Parser<'_, '_>) -> T,
+) -> Result<T, Error> {
+    let doc = parse_xml(file, text)?;
+    let mut p = Parser::new(file, &doc);
+    let value = run(&mut p);
+    p.finish(value)
+}
+
+/// Reads the file at `path` and parses it with `parse` (given the file's name for
+/// diagnostics and its text).
+///
+/// # Errors
+/// An unreadable file, or what `parse` returns.
+pub(crate) fn parse_file<T>(
+    path: &Path,
+    parse: impl FnOnce(&str, &str) -> Result<T, Error>,
+) -> Result<T, Error> {
+    let (name, text) = read_file(path)?;
+    parse(&name, &text)
+}
+
+/// Reads a file, returning its name for diagnostics and its text.
+fn read_file(path: &Path) -> Result<(String, String), Error> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+    Ok((name, text))
+}
+
+/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry; a syntax error
+/// is reported at its position in `file`.
+fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
+    Document::parse_with_options(
+        text,
+        ParsingOptions {
+            allow_dtd: true,
+            ..ParsingOptions::default()
+        },
+    )
+    .map_err(|e| {
+        let pos = e.pos();
+        Error::new(vec![Diagnostic {
+            file: file.to_owned(),
+            line: pos.row,
+            column: pos.col,
+            message: None,
+            field: None,
+            kind: ErrorKind::Xml(e.to_string()),
+        }])
+    })
+}
