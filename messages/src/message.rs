@@ -63,4 +63,19 @@ pub mod priority {
     pub const HIGH: u8 = 192;
     /// Priority of a message whose definition has no `priority` attribute.
     pub const DEFAULT: u8 = NORMAL;
+
+    /// Names of the three levels, indexed by [`level`].
+    pub const LEVEL_NAMES: [&str; 3] = ["high", "normal", "low"];
+
+    /// The fundamental level of a priority, for statistics: 0 high (`>= HIGH`), 1 normal
+    /// (`>= NORMAL`), 2 low.
+    pub const fn level(priority: u8) -> usize {
+        if priority >= HIGH {
+            0
+        } else if priority >= NORMAL {
+            1
+        } else {
+            2
+        }
+    }
 }

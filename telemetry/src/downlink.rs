@@ -300,7 +300,7 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
                     let _ = frames.push((device, frame));
                 }
                 Err(reason) => {
-                    self.queues[device].count_dropped(reason);
+                    self.queues[device].count_dropped(reason, priority);
                     error = Some(SendError { device, reason });
                 }
             }

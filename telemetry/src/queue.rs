@@ -81,8 +81,9 @@ struct State<'a, const Q: usize> {
     entries: heapless::Vec<Entry<'a>, Q>,
     /// Runtime depth limit, `1..=Q`.
     depth: usize,
-    /// Whether the writer holds a frame taken from this queue.
+    /// Whether the writer holds a frame taken from this queue, and its priority.
     in_flight: bool,
+    in_flight_priority: u8,
     waker: WakerRegistration,
     stats: DeviceStats,
 }
@@ -93,6 +94,21 @@ impl<'a, const Q: usize> State<'a, Q> {
         let lowest = self.entries.first()?.priority;
         let end = self.entries.partition_point(|e| e.priority <= lowest);
         end.checked_sub(1)
+    }
+
+    fn level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
+        &mut self.stats.levels[pprz_messages::priority::level(priority)]
+    }
+
+    fn submitted(&mut self, priority: u8) {
+        self.stats.submitted = self.stats.submitted.wrapping_add(1);
+        let l = self.level(priority);
+        l.submitted = l.submitted.wrapping_add(1);
+    }
+
+    fn lost(&mut self, priority: u8) {
+        let l = self.level(priority);
+        l.lost = l.lost.wrapping_add(1);
     }
 
     fn update_queued(&mut self) {
@@ -125,6 +141,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 entries: heapless::Vec::new(),
                 depth: Q,
                 in_flight: false,
+                in_flight_priority: 0,
                 waker: WakerRegistration::new(),
                 stats: DeviceStats {
                     submitted: 0,
@@ -143,6 +160,11 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                     },
                     queued: 0,
                     queue_high_water: 0,
+                    levels: [crate::stats::LevelStats {
+                        submitted: 0,
+                        sent: 0,
+                        lost: 0,
+                    }; 3],
                 },
             })),
         }
@@ -178,12 +200,13 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         self.with(|s| s.stats)
     }
 
-    /// Counts a message submitted for this device that was dropped before reaching the
-    /// queue.
-    pub fn count_dropped(&self, reason: DropReason) {
+    /// Counts a message of `priority` submitted for this device that was dropped before
+    /// reaching the queue.
+    pub fn count_dropped(&self, reason: DropReason, priority: u8) {
         self.with(|s| {
-            s.stats.submitted = s.stats.submitted.wrapping_add(1);
+            s.submitted(priority);
             s.stats.dropped.count(reason);
+            s.lost(priority);
         });
     }
 
@@ -194,17 +217,20 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         // Evicted or rejected frames are released after the lock is let go.
         let mut released = None;
         let result = self.with(|s| {
-            s.stats.submitted = s.stats.submitted.wrapping_add(1);
+            s.submitted(priority);
             let mut result = Pushed::Queued;
             if s.entries.len() >= s.depth {
                 match s.candidate() {
                     Some(i) if s.entries[i].priority < priority => {
-                        released = Some(s.entries.remove(i));
+                        let victim = s.entries.remove(i);
+                        s.lost(victim.priority);
+                        released = Some(victim);
                         s.stats.evicted.queue_full = s.stats.evicted.queue_full.wrapping_add(1);
                         result = Pushed::QueuedEvicting;
                     }
                     _ => {
                         s.stats.dropped.count(DropReason::QueueFull);
+                        s.lost(priority);
                         s.update_queued();
                         return (Pushed::Dropped, Some(frame));
                     }
@@ -220,6 +246,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             if let Err(entry) = s.entries.insert(at, entry) {
                 // Unreachable while depth <= Q; counted rather than lost if it ever is.
                 s.stats.dropped.count(DropReason::QueueFull);
+                s.lost(priority);
                 s.update_queued();
                 return (Pushed::Dropped, Some(entry.frame));
             }
@@ -255,6 +282,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 return None;
             }
             let entry = s.entries.remove(i);
+            s.lost(entry.priority);
             s.stats.evicted.arena_full = s.stats.evicted.arena_full.wrapping_add(1);
             s.update_queued();
             Some(entry)
@@ -267,6 +295,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         self.with(|s| {
             let entry = s.entries.pop()?;
             s.in_flight = true;
+            s.in_flight_priority = entry.priority;
             s.update_queued();
             Some(entry.frame)
         })
@@ -279,6 +308,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             self.with(|s| match s.entries.pop() {
                 Some(entry) => {
                     s.in_flight = true;
+                    s.in_flight_priority = entry.priority;
                     s.update_queued();
                     Poll::Ready(entry.frame)
                 }
@@ -294,11 +324,15 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// Reports the outcome of writing the in-flight frame of `len` bytes.
     pub fn complete(&self, len: usize, written: bool) {
         self.with(|s| {
+            let priority = s.in_flight_priority;
             if written {
                 s.stats.sent = s.stats.sent.wrapping_add(1);
                 s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
+                let l = s.level(priority);
+                l.sent = l.sent.wrapping_add(1);
             } else {
                 s.stats.dropped.count(DropReason::WriteError);
+                s.lost(priority);
             }
             s.in_flight = false;
             s.update_queued();

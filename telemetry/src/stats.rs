@@ -98,6 +98,18 @@ impl EvictCounts {
     }
 }
 
+/// Messages of one priority level (see [`pprz_messages::priority::level`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LevelStats {
+    /// Messages of this level accepted for sending to the device.
+    pub submitted: u32,
+    /// Written completely.
+    pub sent: u32,
+    /// Dropped or evicted (shed), or lost to a write error.
+    pub lost: u32,
+}
+
 /// Statistics of one device of the downlink (a snapshot).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -116,6 +128,10 @@ pub struct DeviceStats {
     pub queued: u16,
     /// Largest number of frames ever waiting in the queue.
     pub queue_high_water: u16,
+    /// The same accounting per priority level (high, normal, low; indexed by
+    /// [`pprz_messages::priority::level`]): `submitted - sent - lost` of a level are
+    /// still queued.
+    pub levels: [LevelStats; 3],
 }
 
 impl DeviceStats {

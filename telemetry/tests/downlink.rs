@@ -103,6 +103,9 @@ fn full_queue_evicts_oldest_of_least_important_never_equal() {
     let stats = downlink.stats(0).unwrap();
     assert_eq!((stats.submitted, stats.sent, stats.queued), (5, 3, 0));
     assert!(stats.is_balanced());
+    // All five are of the low level (priority < 128): three sent, two shed.
+    let low = stats.levels[pprz_messages::priority::level(5)];
+    assert_eq!((low.submitted, low.sent, low.lost), (5, 3, 2));
 }
 
 #[test]
@@ -265,6 +268,11 @@ proptest! {
             let stats: Vec<DeviceStats> = (0..3).map(|d| downlink.stats(d).unwrap()).collect();
             for s in &stats {
                 prop_assert!(s.is_balanced(), "{:?}", s);
+            }
+            for s in &stats {
+                let per_level: u32 = s.levels.iter().map(|l| l.submitted - l.sent - l.lost).sum();
+                prop_assert_eq!(per_level, u32::from(s.queued), "levels balance too: {:?}", s);
+                prop_assert_eq!(s.levels.iter().map(|l| l.submitted).sum::<u32>(), s.submitted);
             }
             let queued: u32 = stats.iter().map(|s| u32::from(s.queued)).sum();
             prop_assert_eq!(downlink.arena_stats().live as u32, queued, "arena frames = queued frames");

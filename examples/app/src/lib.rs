@@ -14,7 +14,7 @@
 //! ```ignore
 //! #[embassy_executor::task]
 //! async fn aircraft(downlink: &'static Dl, radio_rx: BufferedUartRx<'static>) {
-//!     pprz_example_app::run_aircraft(downlink, &TALLY, radio_rx, 0, Config::default()).await
+//!     pprz_example_app::run_aircraft(downlink, radio_rx, 0, Config::default()).await
 //! }
 //! ```
 
@@ -48,53 +48,6 @@ pub type M = CriticalSectionRawMutex;
 
 /// Our aircraft id.
 pub const AC_ID: u8 = 7;
-
-/// Index of the priority levels in [`Tally`]: acknowledgements, status, payload/debug.
-pub const LEVELS: [&str; 3] = ["high (acks)", "normal (status)", "low (payload/debug)"];
-
-/// The level of a priority: 0 high (>= 192), 1 normal (>= 128), 2 low.
-pub const fn level(priority: u8) -> usize {
-    if priority >= pprz_messages::priority::HIGH {
-        0
-    } else if priority >= pprz_messages::priority::NORMAL {
-        1
-    } else {
-        2
-    }
-}
-
-/// Messages the application submitted to the downlink, per priority level.
-pub struct Tally {
-    submitted: Mutex<M, Cell<[u32; 3]>>,
-}
-
-impl Tally {
-    /// All zero.
-    pub const fn new() -> Self {
-        Self {
-            submitted: Mutex::new(Cell::new([0; 3])),
-        }
-    }
-
-    fn count(&self, priority: u8) {
-        self.submitted.lock(|c| {
-            let mut v = c.get();
-            v[level(priority)] = v[level(priority)].wrapping_add(1);
-            c.set(v);
-        });
-    }
-
-    /// Submitted messages per level ([`LEVELS`]).
-    pub fn submitted(&self) -> [u32; 3] {
-        self.submitted.lock(Cell::get)
-    }
-}
-
-impl Default for Tally {
-    fn default() -> Self {
-        Self::new()
-    }
-}
 
 /// What the application does besides the periodic telemetry.
 #[derive(Debug, Clone, Copy, Default)]
@@ -182,14 +135,9 @@ impl Vehicle {
     }
 }
 
-/// Sends `msg` to every device and counts it in `tally` (drops are counted by the
-/// downlink itself).
-fn send<Msg: Message, const D: usize, const Q: usize>(
-    downlink: &Downlink<'_, M, D, Q>,
-    tally: &Tally,
-    msg: &Msg,
-) {
-    tally.count(Msg::PRIORITY);
+/// Sends `msg` to every device; a drop is counted by the downlink (per device, reason
+/// and priority level), so the result needs no handling here.
+fn send<Msg: Message, const D: usize, const Q: usize>(downlink: &Downlink<'_, M, D, Q>, msg: &Msg) {
     let _ = downlink.send(msg);
 }
 
@@ -204,7 +152,6 @@ const ANGLE_FRAC: f32 = 4096.0; // 2^12
 /// payload flood of `config`.
 pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
     downlink: &Downlink<'_, M, D, Q>,
-    tally: &Tally,
     radio_rx: R,
     link: usize,
     config: Config,
@@ -249,7 +196,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let md5 = [0x5E, 0x1F, 0x0B, 0x77, 0x21, 0x9D, 0xC4, 0x02];
         send(
             downlink,
-            tally,
             &Alive {
                 md5sum: VarArray::new(&md5),
             },
@@ -258,7 +204,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
     let version = || {
         send(
             downlink,
-            tally,
             &AutopilotVersion {
                 version: 10_000,
                 desc: "pprz-embassy example".into(),
@@ -269,7 +214,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let v = v();
         send(
             downlink,
-            tally,
             &Attitude {
                 phi: v.phi,
                 psi: v.psi,
@@ -282,7 +226,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let (lat, lon) = v.lat_lon();
         send(
             downlink,
-            tally,
             &GpsInt {
                 lat: (lat * 1e7) as i32,
                 lon: (lon * 1e7) as i32,
@@ -303,7 +246,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let v = v();
         send(
             downlink,
-            tally,
             &RotorcraftFp {
                 east: (v.east * POS_FRAC) as i32,
                 north: (v.north * POS_FRAC) as i32,
@@ -327,7 +269,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let v = v();
         send(
             downlink,
-            tally,
             &Ins {
                 ins_x: (v.north * POS_FRAC) as i32,
                 ins_y: (v.east * POS_FRAC) as i32,
@@ -345,7 +286,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let v = v();
         send(
             downlink,
-            tally,
             &Energy {
                 throttle: 55,
                 voltage: v.voltage,
@@ -361,7 +301,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let v = v();
         send(
             downlink,
-            tally,
             &RotorcraftStatus {
                 frame_rate: 50,
                 gps_status: values::RotorcraftStatusGpsStatus::V3D.raw(),
@@ -384,14 +323,13 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let down = downlink.stats(link).unwrap_or_default();
         let msg: DatalinkReport =
             reporter.lock(|r| r.borrow_mut().report(Instant::now(), &up, &down));
-        send(downlink, tally, &msg);
+        send(downlink, &msg);
     };
-    let uart_errors = || send(downlink, tally, &UartErrors::default());
+    let uart_errors = || send(downlink, &UartErrors::default());
     let gyro = || {
         let v = v();
         send(
             downlink,
-            tally,
             &ImuGyroRaw {
                 id: 1,
                 temp: 36.5,
@@ -405,7 +343,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
         let v = v();
         send(
             downlink,
-            tally,
             &ImuAccelRaw {
                 id: 1,
                 temp: 36.5,
@@ -418,7 +355,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
     let mag = || {
         send(
             downlink,
-            tally,
             &ImuMagRaw {
                 id: 1,
                 mx: 2100,
@@ -437,7 +373,7 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
             i
         });
         if let Some(value) = services.settings().get(index) {
-            send(downlink, tally, &DlValue { index, value });
+            send(downlink, &DlValue { index, value });
         }
     };
 
@@ -476,7 +412,6 @@ pub async fn run_aircraft<R: Read, const D: usize, const Q: usize>(
             if config.flood_bytes_per_s > 0 && flood_on.lock(Cell::get) {
                 send(
                     downlink,
-                    tally,
                     &Payload {
                         values: VarArray::new(&bytes),
                     },

@@ -1,0 +1,111 @@
+//! The simulated aircraft and the ground monitor talking over real loopback UDP sockets:
+//! telemetry arrives decoded, PING gets its PONG, SETTING its DL_VALUE acknowledgement,
+//! and under a 10x overload only low-priority messages are shed.
+
+use std::net::UdpSocket;
+use std::process::Command;
+
+/// Two free loopback UDP ports (bound then released; the test runs them at once).
+fn free_ports() -> (u16, u16) {
+    let a = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let b = UdpSocket::bind("127.0.0.1:0").unwrap();
+    (
+        a.local_addr().unwrap().port(),
+        b.local_addr().unwrap().port(),
+    )
+}
+
+fn run_sitl(extra: &[&str]) -> String {
+    let (ground, uplink) = free_ports();
+    let ground = format!("127.0.0.1:{ground}");
+    let uplink = format!("127.0.0.1:{uplink}");
+    let mut args = vec![
+        "--duration",
+        "6",
+        "--speed",
+        "3",
+        "--lines",
+        "--ground",
+        &ground,
+        "--uplink",
+        &uplink,
+    ];
+    args.extend_from_slice(extra);
+    let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+        .args(&args)
+        .output()
+        .expect("the simulation runs");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "sitl failed: {}\n{stdout}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// The summary row of a level: submitted, sent, shed, received.
+fn level_row(out: &str, level: &str) -> [u64; 4] {
+    let line = out
+        .lines()
+        .find(|l| l.trim_start().starts_with(level) && l.split_whitespace().count() == 5)
+        .unwrap_or_else(|| panic!("no summary row for {level}:\n{out}"));
+    let v: Vec<u64> = line
+        .split_whitespace()
+        .skip(1)
+        .map(|x| x.parse().unwrap())
+        .collect();
+    [v[0], v[1], v[2], v[3]]
+}
+
+#[test]
+fn telemetry_ping_and_setting_over_udp() {
+    let out = run_sitl(&[]);
+    let count = |name: &str| {
+        out.lines()
+            .filter(|l| l.starts_with(&format!("7 telemetry {name} ")))
+            .count()
+    };
+    // ATTITUDE is periodic at 0.25 s: at most 25 in 6 simulated seconds (fewer if the
+    // machine is slow to deliver the last ones before the run ends).
+    assert!(
+        (12..=25).contains(&count("ATTITUDE")),
+        "{} ATTITUDE",
+        count("ATTITUDE")
+    );
+    assert!(count("GPS_INT") >= 12);
+    assert!(out.contains("7 telemetry ROTORCRAFT_STATUS "), "{out}");
+    // The ground PINGs every second: PONGs come back.
+    assert!(
+        out.lines().filter(|l| *l == "7 telemetry PONG").count() >= 3,
+        "{out}"
+    );
+    // SETTING gain (index 2) = 2.5 at 3 s is acknowledged with DL_VALUE.
+    assert!(
+        out.contains("7 telemetry DL_VALUE index=2 value=2.5"),
+        "{out}"
+    );
+    // Nothing is shed on a link that is not overloaded.
+    for level in ["high", "normal", "low"] {
+        assert_eq!(level_row(&out, level)[2], 0, "{level} shed:\n{out}");
+    }
+}
+
+#[test]
+fn overload_sheds_only_low_priority() {
+    let out = run_sitl(&["--overload"]);
+    let [_, _, high_shed, high_received] = level_row(&out, "high");
+    let [_, _, normal_shed, _] = level_row(&out, "normal");
+    let [low_submitted, _, low_shed, _] = level_row(&out, "low");
+    assert_eq!(high_shed, 0, "{out}");
+    assert_eq!(normal_shed, 0, "{out}");
+    assert!(high_received >= 3);
+    assert!(
+        low_shed * 2 > low_submitted,
+        "most of the 10x flood is shed:\n{out}"
+    );
+    assert!(
+        out.contains("7 telemetry DL_VALUE index=2 value=2.5"),
+        "{out}"
+    );
+}
