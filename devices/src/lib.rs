@@ -1,21 +1,35 @@
-//! Devices of the Paparazzi telemetry stack.
-//!
-//! The generic device — one interface over every concrete driver (UART, USB, SD card,
-//! sockets) — is [`embedded_io_async`]'s [`Read`] and [`Write`]: any driver that
-//! implements them can carry telemetry and datalink frames, and they are re-exported here
-//! so the stack names one device interface. Adapters for concrete drivers (embassy-stm32
-//! UART, embassy-usb CDC-ACM, an SD card log, host sockets and files, a simulated radio
-//! link) are added to this crate behind features, so a firmware compiles only what it
-//! uses.
-//!
-//! ```
-//! use pprz_devices::{Read, Write};
-//!
-//! /// Anything that is a device can be handed to the stack.
-//! fn is_device<D: Read + Write>(_: &D) {}
-//! ```
+#![doc = include_str!("../README.md")]
 #![no_std]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(any(feature = "std", test))]
+extern crate std;
+
+pub mod counted;
+#[cfg(feature = "std")]
+pub mod host;
+#[cfg(feature = "sdlog")]
+pub mod sdlog;
+#[cfg(feature = "sim")]
+pub mod sim;
+#[cfg(feature = "stm32")]
+pub mod stm32;
+#[cfg(feature = "usb")]
+pub mod usb;
+
+pub use counted::{Counted, IoCounters, IoStats};
 pub use embedded_io_async::{ErrorKind, ErrorType, Read, Write};
+
+/// Adds `n` to a counter that only one task updates (the owner of the device half it
+/// counts); other tasks only read it. A load and a store, so it also works on cores
+/// without atomic read-modify-write (Cortex-M0).
+pub(crate) fn bump(counter: &core::sync::atomic::AtomicU32, n: u32) {
+    use core::sync::atomic::Ordering::Relaxed;
+    counter.store(counter.load(Relaxed).wrapping_add(n), Relaxed);
+}
+
+/// Saturating `usize` -> `u32` for counters of lengths.
+pub(crate) fn len_u32(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
