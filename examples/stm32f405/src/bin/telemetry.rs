@@ -1,0 +1,129 @@
+//! The example aircraft on an STM32F405 autopilot ("Apogee"-class).
+//!
+//! * Telemetry radio on USART1 (PB6 TX, PB7 RX) at 57600 baud, PPRZ v2: downlink writer
+//!   and datalink reader (PING, SETTING, GET_SETTING).
+//! * A second output: USB CDC-ACM (OTG FS, PA11/PA12), the same telemetry with the same
+//!   priorities; unplugged, its writes fail fast and are counted.
+//! * The application of `pprz-example-app`: simulated sensors and rotorcraft state,
+//!   periodic telemetry from the project's `telemetry.xml`, settings.
+
+#![no_std]
+#![no_main]
+
+use embassy_executor::Spawner;
+use embassy_stm32::peripherals::{USART1, USB_OTG_FS};
+use embassy_stm32::rcc::{
+    AHBPrescaler, APBPrescaler, Pll, PllMul, PllPDiv, PllPreDiv, PllQDiv, PllSource, Sysclk,
+};
+use embassy_stm32::usart::{BufferedInterruptHandler, BufferedUartRx, BufferedUartTx};
+use embassy_stm32::{bind_interrupts, usb};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+use embassy_usb::UsbDevice;
+use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
+use panic_halt as _;
+use pprz_devices::stm32::{UartErrorCounters, UartRx, f405};
+use pprz_devices::usb::{CdcTx, UsbConfig, UsbCounters};
+use pprz_example_app::{AC_ID, Config};
+use pprz_telemetry::pprz_transports::PprzV2;
+use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
+use static_cell::StaticCell;
+
+bind_interrupts!(struct Irqs {
+    USART1 => BufferedInterruptHandler<USART1>;
+    OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+});
+
+/// Radio (0) and USB (1), 32 frames each at most.
+type Dl = Downlink<'static, M, 2, 32>;
+type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
+
+/// Pending frames of both devices: about 2 s of a saturated 57600-baud radio.
+static ARENA: FrameArena<M, 8192> = FrameArena::new();
+static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+static RADIO_ERRORS: UartErrorCounters = UartErrorCounters::new();
+static UART_BUFFERS: StaticCell<([u8; 256], [u8; 256])> = StaticCell::new();
+static USB_COUNTERS: UsbCounters = UsbCounters::new();
+static USB_BUFFERS: StaticCell<([u8; 256], [u8; 256], [u8; 64], [u8; 256])> = StaticCell::new();
+static CDC_STATE: StaticCell<State> = StaticCell::new();
+
+#[embassy_executor::task]
+async fn radio_writer(downlink: &'static Dl, mut tx: BufferedUartTx<'static>) {
+    let _ = run_writer(downlink, 0, &mut tx).await;
+}
+
+#[embassy_executor::task]
+async fn usb_writer(downlink: &'static Dl, mut tx: CdcTx<'static, 'static, UsbDriver>) {
+    let _ = run_writer(downlink, 1, &mut tx).await;
+}
+
+#[embassy_executor::task]
+async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
+    device.run().await
+}
+
+#[embassy_executor::task]
+async fn aircraft(downlink: &'static Dl, rx: UartRx<'static, BufferedUartRx<'static>>) {
+    pprz_example_app::run_aircraft(downlink, rx, 0, Config::default()).await
+}
+
+/// 168 MHz from the 16 MHz HSI, 48 MHz for USB.
+fn clocks() -> embassy_stm32::Config {
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hsi = true;
+    config.rcc.pll_src = PllSource::HSI;
+    config.rcc.pll = Some(Pll {
+        prediv: PllPreDiv::DIV8,
+        mul: PllMul::MUL168,
+        divp: Some(PllPDiv::DIV2), // 168 MHz system clock
+        divq: Some(PllQDiv::DIV7), // 48 MHz USB clock
+        divr: None,
+    });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = AHBPrescaler::DIV1;
+    config.rcc.apb1_pre = APBPrescaler::DIV4;
+    config.rcc.apb2_pre = APBPrescaler::DIV2;
+    config
+}
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let p = embassy_stm32::init(clocks());
+
+    // Radio: USART1, interrupt driven, 256-byte buffers (44 ms of 57600 baud each way).
+    let (tx_buf, rx_buf) = UART_BUFFERS.init(([0; 256], [0; 256]));
+    let Ok(uart) = f405::usart1_buffered(p.USART1, p.PB7, p.PB6, Irqs, tx_buf, rx_buf, 57_600)
+    else {
+        // The baud rate is reachable from the clocks above; nothing to do without a radio.
+        return;
+    };
+    let (radio_tx, radio_rx) = uart.split();
+    let radio_rx = UartRx::new(radio_rx, &RADIO_ERRORS);
+
+    // USB CDC-ACM: a second telemetry output.
+    let (ep_out, config_desc, control, bos) = USB_BUFFERS.init(([0; 256], [0; 256], [0; 64], [0; 256]));
+    let driver = f405::usb_otg_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, ep_out, true);
+    let mut usb_config = embassy_usb::Config::new(0x1209, 0x0001);
+    usb_config.manufacturer = Some("pprz-embassy");
+    usb_config.product = Some("telemetry");
+    let mut builder = embassy_usb::Builder::new(driver, usb_config, config_desc, bos, &mut [], control);
+    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
+    let device = builder.build();
+    let Ok((_usb_rx, usb_tx)) =
+        pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default())
+    else {
+        return;
+    };
+
+    let downlink: &'static Dl = DOWNLINK.init(Downlink::new(
+        &ARENA,
+        AC_ID,
+        [
+            DeviceConfig::new(PprzV2::new().into()),
+            DeviceConfig::new(PprzV2::new().into()).depth(16),
+        ],
+    ));
+    spawner.spawn(usb_device(device).unwrap());
+    spawner.spawn(radio_writer(downlink, radio_tx).unwrap());
+    spawner.spawn(usb_writer(downlink, usb_tx).unwrap());
+    spawner.spawn(aircraft(downlink, radio_rx).unwrap());
+}
