@@ -43,7 +43,14 @@ static DOWNLINK: StaticCell<Dl> = StaticCell::new();
 static RADIO_ERRORS: UartErrorCounters = UartErrorCounters::new();
 static UART_BUFFERS: StaticCell<([u8; 256], [u8; 256])> = StaticCell::new();
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
-static USB_BUFFERS: StaticCell<([u8; 256], [u8; 256], [u8; 64], [u8; 256])> = StaticCell::new();
+/// USB buffers: OUT endpoints, configuration descriptor, control transfers, BOS descriptor.
+struct UsbBuffers {
+    ep_out: [u8; 256],
+    config_descriptor: [u8; 256],
+    control: [u8; 64],
+    bos_descriptor: [u8; 256],
+}
+static USB_BUFFERS: StaticCell<UsbBuffers> = StaticCell::new();
 static CDC_STATE: StaticCell<State> = StaticCell::new();
 
 #[embassy_executor::task]
@@ -100,12 +107,24 @@ async fn main(spawner: Spawner) {
     let radio_rx = UartRx::new(radio_rx, &RADIO_ERRORS);
 
     // USB CDC-ACM: a second telemetry output.
-    let (ep_out, config_desc, control, bos) = USB_BUFFERS.init(([0; 256], [0; 256], [0; 64], [0; 256]));
-    let driver = f405::usb_otg_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, ep_out, true);
+    let bufs = USB_BUFFERS.init(UsbBuffers {
+        ep_out: [0; 256],
+        config_descriptor: [0; 256],
+        control: [0; 64],
+        bos_descriptor: [0; 256],
+    });
+    let driver = f405::usb_otg_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, &mut bufs.ep_out, true);
     let mut usb_config = embassy_usb::Config::new(0x1209, 0x0001);
     usb_config.manufacturer = Some("pprz-embassy");
     usb_config.product = Some("telemetry");
-    let mut builder = embassy_usb::Builder::new(driver, usb_config, config_desc, bos, &mut [], control);
+    let mut builder = embassy_usb::Builder::new(
+        driver,
+        usb_config,
+        &mut bufs.config_descriptor,
+        &mut bufs.bos_descriptor,
+        &mut [],
+        &mut bufs.control,
+    );
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
     let device = builder.build();
     let Ok((_usb_rx, usb_tx)) =

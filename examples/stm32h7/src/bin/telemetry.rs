@@ -14,7 +14,9 @@
 use embassy_executor::Spawner;
 use embassy_stm32::bind_interrupts;
 use embassy_stm32::peripherals::{USART2, USART3};
-use embassy_stm32::usart::{self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx};
+use embassy_stm32::usart::{
+    self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx,
+};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_time::Instant;
 use panic_halt as _;
