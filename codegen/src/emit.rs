@@ -86,8 +86,31 @@ fn doc(out: &mut String, indent: &str, text: &str) {
     }
 }
 
+/// Free text from `messages.xml` made inert in Markdown: rustdoc must not read its
+/// brackets as links, its angle brackets as HTML or its stars as emphasis.
+fn escape_markdown(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '\\' | '[' | ']' | '*' | '`' | '_' | '#' | '|' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '&' => out.push_str("&amp;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
 fn field_doc(f: &FieldDef) -> String {
-    let mut d = f.description.clone().unwrap_or_default();
+    let mut d = f
+        .description
+        .as_deref()
+        .map(escape_markdown)
+        .unwrap_or_default();
     let mut meta = Vec::new();
     meta.push(format!("`{}`", f.xml_type));
     if let Some(u) = &f.unit {
