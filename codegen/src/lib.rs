@@ -265,14 +265,16 @@ impl Generator {
             .map_err(|e| Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string())))
     }
 
-    /// For a `build.rs`: generates into `$OUT_DIR/<file_name>` and tells Cargo to rerun
-    /// when an input changes.
-    ///
-    /// # Errors
-    /// As [`write_to`](Self::write_to), or `OUT_DIR` is not set (not run by Cargo).
-    pub fn write_to_out_dir(&self, file_name: &str) -> Result<PathBuf, Error> {
-        if let Source::File(path) = &self.source {
-            println!("cargo:rerun-if-changed={}", path.display());
+    /// `$OUT_DIR/<file_name>`, after telling Cargo to rerun the build script when an
+    /// input file changes.
+    fn out_dir_file(&self, file_name: &str) -> Result<PathBuf, Error> {
+        for source in [Some(&self.source), self.telemetry.as_ref()]
+            .into_iter()
+            .flatten()
+        {
+            if let Source::File(path) = source {
+                println!("cargo:rerun-if-changed={}", path.display());
+            }
         }
         if let Some(units) = &self.units {
             println!("cargo:rerun-if-changed={}", units.display());
@@ -283,7 +285,16 @@ impl Generator {
                 ErrorKind::Io("OUT_DIR is not set: call this from a build script".into()),
             )
         })?;
-        let path = PathBuf::from(out_dir).join(file_name);
+        Ok(PathBuf::from(out_dir).join(file_name))
+    }
+
+    /// For a `build.rs`: generates into `$OUT_DIR/<file_name>` and tells Cargo to rerun
+    /// when an input changes.
+    ///
+    /// # Errors
+    /// As [`write_to`](Self::write_to), or `OUT_DIR` is not set (not run by Cargo).
+    pub fn write_to_out_dir(&self, file_name: &str) -> Result<PathBuf, Error> {
+        let path = self.out_dir_file(file_name)?;
         self.write_to(&path)?;
         Ok(path)
     }
@@ -395,24 +406,7 @@ impl Generator {
     /// # Errors
     /// As [`write_telemetry_to`](Self::write_telemetry_to), or `OUT_DIR` is not set.
     pub fn write_telemetry_to_out_dir(&self, file_name: &str) -> Result<Vec<Diagnostic>, Error> {
-        for source in [Some(&self.source), self.telemetry.as_ref()]
-            .into_iter()
-            .flatten()
-        {
-            if let Source::File(path) = source {
-                println!("cargo:rerun-if-changed={}", path.display());
-            }
-        }
-        if let Some(units) = &self.units {
-            println!("cargo:rerun-if-changed={}", units.display());
-        }
-        let out_dir = std::env::var_os("OUT_DIR").ok_or_else(|| {
-            Error::single(
-                file_name,
-                ErrorKind::Io("OUT_DIR is not set: call this from a build script".into()),
-            )
-        })?;
-        let warnings = self.write_telemetry_to(PathBuf::from(out_dir).join(file_name))?;
+        let warnings = self.write_telemetry_to(self.out_dir_file(file_name)?)?;
         for w in &warnings {
             println!("cargo:warning={w}");
         }
