@@ -21,6 +21,20 @@ fn monitor(args: &[&str]) -> (bool, String, String) {
     )
 }
 
+/// Replays a PPRZLOG recording in line mode.
+fn replay(log: &std::path::Path) -> (bool, String, String) {
+    let log = log.to_str().unwrap();
+    monitor(&[
+        "--messages",
+        MESSAGES,
+        "--file",
+        log,
+        "--transport",
+        "pprzlog",
+        "--lines",
+    ])
+}
+
 /// PPRZ v2 frames of a few telemetry messages with garbage between them.
 fn stream() -> Vec<u8> {
     let mut out = vec![0x13, 0x99, 0x05, 0x00]; // noise and a false start
@@ -105,15 +119,7 @@ fn decodes_records_and_replays_the_same_output() {
     );
     assert_eq!(lines[4], "7 telemetry ALIVE md5sum=222,173");
 
-    let (ok, replay, _) = monitor(&[
-        "--messages",
-        MESSAGES,
-        "--file",
-        log.to_str().unwrap(),
-        "--transport",
-        "pprzlog",
-        "--lines",
-    ]);
+    let (ok, replay, _) = replay(&log);
     assert!(ok);
     assert_eq!(
         replay, live,
@@ -123,15 +129,7 @@ fn decodes_records_and_replays_the_same_output() {
     // A truncated recording: every whole record still decodes.
     let bytes = std::fs::read(&log).unwrap();
     std::fs::write(&log, &bytes[..bytes.len() - 3]).unwrap();
-    let (ok, partial, _) = monitor(&[
-        "--messages",
-        MESSAGES,
-        "--file",
-        log.to_str().unwrap(),
-        "--transport",
-        "pprzlog",
-        "--lines",
-    ]);
+    let (ok, partial, _) = replay(&log);
     assert!(ok);
     assert_eq!(partial.lines().count(), 4);
     let _ = std::fs::remove_dir_all(&dir);
