@@ -119,10 +119,10 @@ fn decodes_records_and_replays_the_same_output() {
     );
     assert_eq!(lines[4], "7 telemetry ALIVE md5sum=222,173");
 
-    let (ok, replay, _) = replay(&log);
+    let (ok, replayed, _) = replay(&log);
     assert!(ok);
     assert_eq!(
-        replay, live,
+        replayed, live,
         "a replay of the recording decodes to the same output"
     );
 
