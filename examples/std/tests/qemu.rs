@@ -1,0 +1,359 @@
+//! The emulated Cortex-M4 firmware (`examples/mps2-an386`) under QEMU's `mps2-an386`
+//! machine, with this test as its ground station: QEMU carries the firmware's UART0 over
+//! loopback TCP; the test decodes the telemetry, sends PING and SETTING frames up, and
+//! checks that PONG and the DL_VALUE acknowledgement come back and that the periodic
+//! telemetry of `telemetry.xml` arrives at its configured rates, measured on the guest's
+//! own clock (GPS_INT's `tow` field).
+//!
+//! Needs `qemu-system-arm` (or `PPRZ_QEMU`) and the firmware ELF, built first with
+//! `cargo build --release` in `examples/mps2-an386` (or named by `PPRZ_QEMU_FIRMWARE`).
+//! Without either the test is skipped with a note on stderr, unless
+//! `PPRZ_REQUIRE_QEMU=1` (CI) makes that a failure. QEMU is killed at the end, also when
+//! the test fails.
+
+use std::io::{ErrorKind, Read, Write as _};
+use std::net::{Ipv4Addr, TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use pprz_example_app::AC_ID;
+use pprz_ground::monitor::{Event, Monitor};
+use pprz_ground::set::RuntimeSet;
+use pprz_ground::uplink;
+use pprz_messages::{Decode, Message};
+use pprz_telemetry::messages::telemetry::{DlValue, GpsInt};
+use pprz_telemetry::periodic::SCHEDULE;
+use pprz_transports::{AnyTransport, Decoder, PprzV2};
+
+/// Guest time over which the periodic rates are measured, in ms (GPS_INT `tow`).
+const WINDOW_MS: u32 = 6_000;
+/// Wall-clock bound of the exchange, from the connection on (the guest starts then). A
+/// run takes the window plus a fraction of a second; QEMU is slower to start and its
+/// guest clock lags on a loaded machine, hence the margin.
+const DEADLINE: Duration = Duration::from_secs(20);
+/// The SETTING sent: index 2 is the example application's `gain`.
+const GAIN_INDEX: u8 = 2;
+const GAIN: f32 = 2.5;
+
+/// QEMU, killed and reaped when dropped (so also when the test panics).
+struct Qemu {
+    child: Child,
+}
+
+impl Qemu {
+    fn start(qemu: &str, firmware: &Path, port: u16) -> std::io::Result<Self> {
+        let child = Command::new(qemu)
+            .args([
+                "-M",
+                "mps2-an386",
+                "-nographic",
+                "-monitor",
+                "none",
+                "-serial",
+            ])
+            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+            .arg("-kernel")
+            .arg(firmware)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()?;
+        Ok(Self { child })
+    }
+
+    /// Connects to the serial port QEMU listens on (it starts the guest once we are
+    /// connected). `Err` with QEMU's stderr if it exited first.
+    fn connect(&mut self, port: u16) -> Result<TcpStream, String> {
+        let start = Instant::now();
+        loop {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                let mut stderr = String::new();
+                if let Some(mut pipe) = self.child.stderr.take() {
+                    let _ = pipe.read_to_string(&mut stderr);
+                }
+                return Err(format!("QEMU exited ({status}): {}", stderr.trim()));
+            }
+            match TcpStream::connect((Ipv4Addr::LOCALHOST, port)) {
+                Ok(stream) => return Ok(stream),
+                Err(e) if start.elapsed() > Duration::from_secs(10) => {
+                    return Err(format!("cannot connect to QEMU's serial port {port}: {e}"));
+                }
+                Err(_) => std::thread::sleep(Duration::from_millis(20)),
+            }
+        }
+    }
+}
+
+impl Drop for Qemu {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Skips the test with `reason`, or fails it if the environment requires QEMU.
+fn skip(reason: &str) {
+    if std::env::var("PPRZ_REQUIRE_QEMU").is_ok_and(|v| v == "1") {
+        panic!("PPRZ_REQUIRE_QEMU=1 but {reason}");
+    }
+    // The real stderr: the test harness captures `eprintln!`.
+    let _ = writeln!(std::io::stderr(), "qemu test skipped: {reason}");
+}
+
+/// `PPRZ_QEMU_FIRMWARE`, else the release build in the firmware crate's own target
+/// directory, else in `CARGO_TARGET_DIR` (where it lands when that is set).
+fn firmware_path() -> PathBuf {
+    if let Some(path) = std::env::var_os("PPRZ_QEMU_FIRMWARE") {
+        return PathBuf::from(path);
+    }
+    let elf = "thumbv7em-none-eabihf/release/aircraft";
+    let local = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../mps2-an386/target")
+        .join(elf);
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) if !local.is_file() => Path::new(&dir).join(elf),
+        _ => local,
+    }
+}
+
+/// A loopback TCP port that was free a moment ago.
+fn free_port() -> u16 {
+    let listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).expect("bind a loopback port");
+    listener.local_addr().expect("bound address").port()
+}
+
+/// One received message: its id and, for GPS_INT, the guest time it was sent at.
+struct Received {
+    class: u8,
+    id: u8,
+    tow_ms: Option<u32>,
+}
+
+#[test]
+fn firmware_answers_and_sends_telemetry_at_configured_rates() {
+    let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
+    let firmware = firmware_path();
+    if !firmware.is_file() {
+        skip(&format!(
+            "no firmware at {} (build it: cd examples/mps2-an386 && cargo build --release)",
+            firmware.display()
+        ));
+        return;
+    }
+    if Command::new(&qemu)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .map_or(true, |s| !s.success())
+    {
+        skip(&format!("{qemu} is not installed"));
+        return;
+    }
+
+    // Start QEMU and connect; a port taken between our probe and QEMU's bind makes QEMU
+    // exit, then another port is tried.
+    let mut attempts = Vec::new();
+    let (_qemu, mut stream) = loop {
+        let port = free_port();
+        let mut guard = Qemu::start(&qemu, &firmware, port).expect("QEMU starts");
+        match guard.connect(port) {
+            Ok(stream) => break (guard, stream),
+            Err(e) if attempts.len() < 2 => attempts.push(e),
+            Err(e) => panic!("{e} (earlier attempts: {attempts:?})"),
+        }
+    };
+    stream
+        .set_read_timeout(Some(Duration::from_millis(20)))
+        .expect("socket timeout");
+    let _ = stream.set_nodelay(true);
+
+    let set = RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../../messages.xml"))
+        .expect("messages.xml loads");
+    let transport = AnyTransport::from(PprzV2::new());
+    let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");
+    let setting = uplink::frame(
+        &set,
+        transport,
+        AC_ID,
+        "SETTING",
+        &[
+            ("index", f64::from(GAIN_INDEX)),
+            ("ac_id", f64::from(AC_ID)),
+            ("value", f64::from(GAIN)),
+        ],
+    )
+    .expect("SETTING frame");
+
+    // The ground tool's monitor (PONG and DL_VALUE events) and a typed decoder (guest
+    // time stamps) read the same bytes.
+    let mut monitor = Monitor::new(set, transport);
+    let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+    let mut received: Vec<Received> = Vec::new();
+    let mut pong_rtt: Option<f64> = None;
+    let mut monitor_saw_gain = false;
+    let mut ack: Option<(f64, Option<f64>)> = None;
+    let mut next_ping = 0.0;
+    let mut next_setting = 0.0;
+    let mut setting_first_sent: Option<f64> = None;
+    let mut buf = [0u8; 1024];
+    let mut first_byte: Option<f64> = None;
+    let start = Instant::now();
+    // Guest time of the first and the latest GPS_INT.
+    let mut tows: Option<(u32, u32)> = None;
+    while start.elapsed() < DEADLINE {
+        let now = start.elapsed().as_secs_f64();
+        // PING once the aircraft talks, again every second until a PONG; then the
+        // SETTING, again every second until acknowledged.
+        if !received.is_empty() && pong_rtt.is_none() && now >= next_ping {
+            stream.write_all(&ping).expect("send PING");
+            monitor.ping_sent(now);
+            next_ping = now + 1.0;
+        }
+        if pong_rtt.is_some() && ack.is_none() && now >= next_setting {
+            stream.write_all(&setting).expect("send SETTING");
+            monitor.setting_sent(now, GAIN_INDEX);
+            setting_first_sent.get_or_insert(now);
+            next_setting = now + 1.0;
+        }
+
+        let n = match stream.read(&mut buf) {
+            Ok(0) => panic!("QEMU closed the serial connection"),
+            Ok(n) => n,
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
+            Err(e) => panic!("reading QEMU's serial port: {e}"),
+        };
+        let bytes = &buf[..n];
+        let now = start.elapsed().as_secs_f64();
+        if n > 0 {
+            first_byte.get_or_insert(now);
+        }
+        monitor.feed(now, bytes, |_, _| {});
+        let mut input = bytes;
+        while let Some(frame) = decoder.feed(&mut input) {
+            assert_eq!(frame.source(), AC_ID, "frame from another aircraft");
+            let (class, id) = (frame.class(), frame.msg_id());
+            let tow_ms = ((class, id) == (GpsInt::CLASS_ID, GpsInt::ID)).then(|| {
+                GpsInt::decode(frame.payload())
+                    .expect("GPS_INT decodes")
+                    .tow
+            });
+            if (class, id) == (DlValue::CLASS_ID, DlValue::ID) {
+                let v = DlValue::decode(frame.payload()).expect("DL_VALUE decodes");
+                if v.index == GAIN_INDEX && v.value == GAIN && ack.is_none() {
+                    // The gain starts at 1.0: 2.5 is the SETTING applied.
+                    let after = setting_first_sent.map(|t| now - t);
+                    ack = Some((now, after));
+                }
+            }
+            if let Some(tow) = tow_ms {
+                tows = Some(tows.map_or((tow, tow), |(first, _)| (first, tow)));
+            }
+            received.push(Received { class, id, tow_ms });
+        }
+        // The monitor keeps its latest events only: look at them after every read.
+        for (_, event) in monitor.events() {
+            match event {
+                Event::Pong { rtt } => {
+                    pong_rtt.get_or_insert(*rtt);
+                }
+                Event::DlValue { index, value, .. } => {
+                    monitor_saw_gain |= *index == GAIN_INDEX && *value == f64::from(GAIN);
+                }
+            }
+        }
+        if pong_rtt.is_some()
+            && ack.is_some()
+            && tows.is_some_and(|(first, last)| last.saturating_sub(first) >= WINDOW_MS)
+        {
+            break;
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+
+    // The link is clean: every byte belongs to a verified frame the set knows.
+    let stats = *monitor.decoder_stats();
+    assert!(
+        stats.frames > 0,
+        "no telemetry from the firmware in {wall:.1} s"
+    );
+    assert_eq!(stats.errors(), 0, "decoder errors: {stats:?}");
+    assert_eq!(stats.dropped_bytes, 0, "bytes outside frames: {stats:?}");
+    assert_eq!(monitor.unknown(), 0, "unknown messages");
+    assert_eq!(monitor.malformed(), 0, "malformed messages");
+
+    // The datalink services answered.
+    let rtt = pong_rtt.unwrap_or_else(|| panic!("no PONG in {wall:.1} s"));
+    let (_, ack_after) =
+        ack.unwrap_or_else(|| panic!("no DL_VALUE acknowledging gain = {GAIN} in {wall:.1} s"));
+    let ack_after = ack_after.expect("DL_VALUE with the new gain only after the SETTING");
+    assert!(monitor_saw_gain, "the monitor missed the DL_VALUE");
+    assert!(
+        ack_after < 1.0,
+        "acknowledged {ack_after:.3} s after the SETTING"
+    );
+
+    // Periodic telemetry at the rates of telemetry.xml's default mode, on the guest's
+    // clock: between the first and the last GPS_INT (whose `tow` is the guest's time in
+    // ms), a message of period P arrives span / P times, give or take one at the edges.
+    let gps: Vec<(usize, u32)> = received
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.tow_ms.map(|t| (i, t)))
+        .collect();
+    let (Some(&(first_i, first_tow)), Some(&(last_i, last_tow))) = (gps.first(), gps.last()) else {
+        panic!("no GPS_INT");
+    };
+    let span_ms = last_tow - first_tow;
+    assert!(
+        span_ms >= WINDOW_MS,
+        "only {span_ms} ms of guest time in {wall:.1} s of wall-clock time"
+    );
+    let mode = &SCHEDULE.processes[0].modes[0];
+    let period_ms =
+        |ticks: u32| f64::from(ticks.max(1)) * 1000.0 / f64::from(SCHEDULE.frequency_hz);
+    let gps_period = mode
+        .messages
+        .iter()
+        .find(|m| m.is(GpsInt::CLASS_ID, GpsInt::ID))
+        .map(|m| period_ms(m.period_ticks))
+        .expect("GPS_INT is in the default mode");
+    for pair in gps.windows(2) {
+        let dt = f64::from(pair[1].1 - pair[0].1);
+        assert!(
+            (dt - gps_period).abs() <= gps_period / 10.0,
+            "GPS_INT {dt} ms after the previous one, configured every {gps_period} ms"
+        );
+    }
+    let mut report = Vec::new();
+    for m in mode.messages {
+        let period = period_ms(m.period_ticks);
+        // DL_VALUE is also an acknowledgement; rates need two periods in the window.
+        if m.name == "DL_VALUE" || 2.0 * period > f64::from(span_ms) {
+            continue;
+        }
+        let count = received[first_i + 1..=last_i]
+            .iter()
+            .filter(|r| m.is(r.class, r.id))
+            .count();
+        let expected = f64::from(span_ms) / period;
+        report.push(format!("{} {count} (expected {expected:.1})", m.name));
+        assert!(
+            (count as f64 - expected).abs() <= 1.0 + 1e-6,
+            "{}: {count} in {span_ms} ms of guest time, configured every {period} ms",
+            m.name
+        );
+    }
+    let _ = writeln!(
+        std::io::stderr(),
+        "qemu: {} frames in {wall:.1} s (first byte after {:.0} ms; guest clock at the end \
+         {last_tow} ms); PONG after {:.1} ms, gain acknowledged after {:.1} ms; over \
+         {span_ms} ms: {}",
+        stats.frames,
+        first_byte.unwrap_or(0.0) * 1e3,
+        rtt * 1e3,
+        ack_after * 1e3,
+        report.join(", ")
+    );
+}
