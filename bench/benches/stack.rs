@@ -35,6 +35,15 @@ fn parse(bencher: Bencher<'_, '_>) {
         .bench_local(|| stream::parse_stream(black_box(&bytes)));
 }
 
+/// Workload 2 through `Decoder::feed` (every byte copied into the decoder's buffer).
+#[divan::bench]
+fn parse_buffered(bencher: Bencher<'_, '_>) {
+    let bytes = stream::make_stream(MESSAGES);
+    bencher
+        .counter(BytesCount::new(bytes.len()))
+        .bench_local(|| stream::parse_stream_buffered(black_box(&bytes)));
+}
+
 /// Workload 3: 10 000 messages through send, arena, queue and writer to a sink.
 #[divan::bench]
 fn downlink(bencher: Bencher<'_, '_>) {

@@ -18,8 +18,9 @@
 //! the repository has the commands and the latest figures; footprint (workload 6) is
 //! measured by `bench/footprint.sh` on the `bench/footprint` firmware.
 //!
-//! [`proposals`] holds prototypes of the optimisations `BENCHMARKS.md` proposes to other
-//! crates, run by the same workloads (modes `encode-proposed`, `parse-proposed`).
+//! [`proposals`] holds the prototype of an optimisation `BENCHMARKS.md` measured and did
+//! not apply (fixed-offset message encoders), run by the same workload (mode
+//! `encode-proposed`).
 
 #![warn(missing_docs)]
 

@@ -9,16 +9,18 @@
 //!   the PPRZ v2 framing around it (`Encoder::payload_area` + `finish_frame`), frame
 //!   after frame into one buffer. This is what the downlink does per message and
 //!   transport, without the arena and queue.
-//! * [`parse_stream`]: the whole stream through the incremental PPRZ v2 [`Decoder`](pprz_transports::Decoder),
-//!   then the generated decoder of the message set (`AnyMessage::decode`, dispatching on
-//!   class and id), reading two fields of every message into a digest.
+//! * [`parse_stream`]: the whole stream through the incremental PPRZ v2 [`Decoder`](pprz_transports::Decoder)
+//!   (`feed_borrowed`: frames verified in place, no copy), then the generated decoder of
+//!   the message set (`AnyMessage::decode`, dispatching on class and id), reading two
+//!   fields of every message into a digest. [`parse_stream_buffered`] does the same
+//!   through `feed`, which copies every byte into the decoder's buffer.
 
 use core::fmt;
 
 use pprz_messages::Message;
 use pprz_telemetry::messages::AnyMessage;
 use pprz_telemetry::messages::telemetry::{self, Attitude, Gps};
-use pprz_transports::{Encoder, GROUND_ID, MsgHeader, PprzV2, PprzV2Decoder, TxMeta};
+use pprz_transports::{Encoder, Frame, GROUND_ID, MsgHeader, PprzV2, PprzV2Decoder, TxMeta};
 
 /// Messages of the encode and parse workloads.
 pub const MESSAGES: usize = 10_000;
@@ -167,25 +169,45 @@ fn digest_attitude(digest: u64, a: &Attitude) -> u64 {
     mix(mix(digest, a.phi.to_bits()), a.theta.to_bits())
 }
 
-/// Workload 2: feeds `stream` to a PPRZ v2 decoder and decodes every frame with the
+/// Counts `frame` and folds two fields of its message into the digest.
+#[inline]
+fn account(summary: &mut ParseSummary, frame: &Frame<'_>) {
+    summary.frames += 1;
+    match AnyMessage::decode(frame.class(), frame.msg_id(), frame.payload()) {
+        Ok(AnyMessage::Telemetry(telemetry::AnyMessage::Gps(g))) => {
+            summary.gps += 1;
+            summary.digest = digest_gps(summary.digest, &g);
+        }
+        Ok(AnyMessage::Telemetry(telemetry::AnyMessage::Attitude(a))) => {
+            summary.attitude += 1;
+            summary.digest = digest_attitude(summary.digest, &a);
+        }
+        _ => summary.other += 1,
+    }
+}
+
+/// Workload 2: feeds `stream` to a PPRZ v2 decoder with `Decoder::feed_borrowed` (whole
+/// frames are verified in the input and not copied) and decodes every frame with the
 /// generated decoder of the default message set, reading two fields of each message.
 pub fn parse_stream(stream: &[u8]) -> ParseSummary {
     let mut decoder = PprzV2Decoder::new(PprzV2::new());
     let mut summary = ParseSummary::default();
     let mut input = stream;
+    while let Some(frame) = decoder.feed_borrowed(&mut input) {
+        account(&mut summary, &frame);
+    }
+    summary
+}
+
+/// Workload 2 through `Decoder::feed` (every byte copied into the decoder's buffer, as
+/// the datalink reader and the ground tools do today); the same summary as
+/// [`parse_stream`].
+pub fn parse_stream_buffered(stream: &[u8]) -> ParseSummary {
+    let mut decoder = PprzV2Decoder::new(PprzV2::new());
+    let mut summary = ParseSummary::default();
+    let mut input = stream;
     while let Some(frame) = decoder.feed(&mut input) {
-        summary.frames += 1;
-        match AnyMessage::decode(frame.class(), frame.msg_id(), frame.payload()) {
-            Ok(AnyMessage::Telemetry(telemetry::AnyMessage::Gps(g))) => {
-                summary.gps += 1;
-                summary.digest = digest_gps(summary.digest, &g);
-            }
-            Ok(AnyMessage::Telemetry(telemetry::AnyMessage::Attitude(a))) => {
-                summary.attitude += 1;
-                summary.digest = digest_attitude(summary.digest, &a);
-            }
-            _ => summary.other += 1,
-        }
+        account(&mut summary, &frame);
     }
     summary
 }
@@ -216,6 +238,20 @@ mod tests {
         assert_eq!(GPS_FRAME_LEN, Gps::MAX_LEN + 8);
         assert_eq!(ATTITUDE_FRAME_LEN, Attitude::MAX_LEN + 8);
         assert_eq!(stream_len(3), 2 * GPS_FRAME_LEN + ATTITUDE_FRAME_LEN);
+    }
+
+    #[test]
+    fn both_parse_paths_give_the_expected_summary() {
+        let count = 101;
+        let bytes = make_stream(count);
+        assert_eq!(parse_stream(&bytes), expected_summary(count));
+        assert_eq!(parse_stream_buffered(&bytes), expected_summary(count));
+        // Noise before the frames and a frame cut at the end: the same frames both ways.
+        let mut noisy = vec![0x99, 0x03, 0x42];
+        noisy.extend_from_slice(&bytes[..bytes.len() - 1]);
+        let (a, b) = (parse_stream(&noisy), parse_stream_buffered(&noisy));
+        assert_eq!(a, b);
+        assert_eq!(a.frames as usize, count - 1);
     }
 
     #[test]

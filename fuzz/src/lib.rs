@@ -14,7 +14,7 @@
 //!   (a whole-stream scan) finds.
 
 use pprz_transports::{
-    AnyTransport, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, PprzLog, MAX_FRAME_LEN,
+    AnyTransport, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, MAX_FRAME_LEN, PprzLog,
 };
 
 fn check_frame(t: &AnyTransport, f: &Frame<'_>) {
@@ -53,7 +53,14 @@ fn check_stats<const N: usize>(d: &Decoder<AnyTransport, N>) {
     assert!(d.buffered() <= N);
 }
 
-fn decode<const N: usize>(t: AnyTransport, stream: &[u8], seed: u8) -> Vec<Vec<u8>> {
+/// Decodes `stream` in chunks drawn from `seed` (0: one chunk), with `feed` or, when
+/// `borrowed`, with the zero-copy `feed_borrowed`.
+fn decode<const N: usize>(
+    t: AnyTransport,
+    stream: &[u8],
+    seed: u8,
+    borrowed: bool,
+) -> Vec<Vec<u8>> {
     let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
     let mut out = Vec::new();
     let mut state = u32::from(seed);
@@ -68,7 +75,13 @@ fn decode<const N: usize>(t: AnyTransport, stream: &[u8], seed: u8) -> Vec<Vec<u
         let (chunk, tail) = rest.split_at(size.min(rest.len()));
         rest = tail;
         let mut input = chunk;
-        while let Some(f) = d.feed(&mut input) {
+        loop {
+            let frame = if borrowed {
+                d.feed_borrowed(&mut input)
+            } else {
+                d.feed(&mut input)
+            };
+            let Some(f) = frame else { break };
             check_frame(&t, &f);
             out.push(f.raw().to_vec());
         }
@@ -108,10 +121,13 @@ pub fn run(t: AnyTransport, data: &[u8]) {
     let Some((&seed, stream)) = data.split_first() else {
         return;
     };
-    let chunked = decode::<MAX_FRAME_LEN>(t, stream, seed);
-    let whole = decode::<MAX_FRAME_LEN>(t, stream, 0);
+    let chunked = decode::<MAX_FRAME_LEN>(t, stream, seed, false);
+    let whole = decode::<MAX_FRAME_LEN>(t, stream, 0, false);
     assert_eq!(chunked, whole);
     assert_eq!(whole, model(&t, MAX_FRAME_LEN, stream));
-    let small = decode::<32>(t, stream, seed);
+    // The zero-copy path finds exactly the same frames.
+    assert_eq!(decode::<MAX_FRAME_LEN>(t, stream, seed, true), whole);
+    let small = decode::<32>(t, stream, seed, false);
     assert_eq!(small, model(&t, 32, stream));
+    assert_eq!(decode::<32>(t, stream, seed, true), small);
 }

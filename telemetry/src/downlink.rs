@@ -79,6 +79,35 @@ impl<M: RawMutex, const N: usize> FrameAlloc for FrameArena<M, N> {
     }
 }
 
+/// What the shared send path needs from a message, through a vtable ([`Message`] itself,
+/// with its associated constants, is not object-safe).
+trait EncodeFields {
+    /// [`Message::encoded_len`].
+    fn fields_len(&self) -> usize;
+    /// [`Message::encode`]; the send path only needs to know whether it failed.
+    fn encode_fields(&self, buf: &mut [u8]) -> Option<usize>;
+}
+
+impl<Msg: Message> EncodeFields for Msg {
+    #[inline]
+    fn fields_len(&self) -> usize {
+        self.encoded_len()
+    }
+
+    #[inline]
+    fn encode_fields(&self, buf: &mut [u8]) -> Option<usize> {
+        self.encode(buf).ok()
+    }
+}
+
+/// Class, id and priority of a send, passed as one word to the shared send path.
+#[derive(Clone, Copy)]
+struct Route {
+    class: u8,
+    msg_id: u8,
+    priority: u8,
+}
+
 /// How a device is used by the downlink.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DeviceConfig {
@@ -277,15 +306,39 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
     ///
     /// # Errors
     /// The message was dropped for at least one device (counted there).
+    #[inline]
     pub fn send_to<Msg: Message>(
         &self,
         msg: &Msg,
         targets: Targets,
         priority: u8,
     ) -> Result<(), SendError> {
-        let header = MsgHeader::new(self.ac_id, GROUND_ID, Msg::CLASS_ID, Msg::ID);
+        let route = Route {
+            class: Msg::CLASS_ID,
+            msg_id: Msg::ID,
+            priority,
+        };
+        self.send_fields(msg, route, targets)
+    }
+
+    /// The send path of every message type: [`send_to`](Self::send_to) is a thin generic
+    /// wrapper around it, so this is compiled once per downlink type instead of once per
+    /// message type (about 450 bytes of flash each on a Cortex-M), for two indirect calls
+    /// through the message's vtable (`fields_len`, and `encode_fields` per transport).
+    fn send_fields(
+        &self,
+        msg: &dyn EncodeFields,
+        route: Route,
+        targets: Targets,
+    ) -> Result<(), SendError> {
+        let Route {
+            class,
+            msg_id,
+            priority,
+        } = route;
+        let header = MsgHeader::new(self.ac_id, GROUND_ID, class, msg_id);
         let meta = TxMeta::new(header).at((self.clock)());
-        let payload_len = msg.encoded_len();
+        let payload_len = msg.fields_len();
         let seq = self.next_seq();
         let mut error = None;
         // Frames are all built before any is queued, so a frame can be copied from an
@@ -325,9 +378,9 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
     }
 
     /// Builds the frame of `msg` for one transport in arena memory.
-    fn build<Msg: Message>(
+    fn build(
         &self,
-        msg: &Msg,
+        msg: &dyn EncodeFields,
         meta: &TxMeta,
         payload_len: usize,
         transport: AnyTransport,
@@ -346,8 +399,8 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
             return Ok(frame);
         }
         let n = msg
-            .encode(transport.payload_area(&mut frame))
-            .map_err(|_| DropReason::Encode)?;
+            .encode_fields(transport.payload_area(&mut frame))
+            .ok_or(DropReason::Encode)?;
         let len = transport
             .finish_frame(meta, &mut frame, n)
             .map_err(|_| DropReason::Encode)?;

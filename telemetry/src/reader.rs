@@ -173,7 +173,8 @@ impl<R: Read, F: Framing, const N: usize> Reader<R, F, N> {
     ) -> usize {
         let mut input = bytes;
         let mut frames = 0;
-        while let Some(frame) = self.decoder.feed(&mut input) {
+        // Frames that arrived whole in `bytes` are read in place, without a copy.
+        while let Some(frame) = self.decoder.feed_borrowed(&mut input) {
             datalink.handle(self.link, frame);
             frames += 1;
         }

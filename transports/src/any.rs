@@ -138,6 +138,10 @@ impl Framing for AnyTransport {
         dispatch!(self, t => t.verify(frame))
     }
 
+    fn check(&self, frame: &[u8]) -> Result<(), RxError> {
+        dispatch!(self, t => t.check(frame))
+    }
+
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
         dispatch!(self, t => t.view(frame))
     }

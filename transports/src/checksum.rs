@@ -37,9 +37,24 @@ impl PprzChecksum {
     }
 
     /// Adds every byte of `bytes`, in order.
+    ///
+    /// Unrolled by hand, 8 bytes per iteration: the release profile's `opt-level = "s"`
+    /// does not unroll loops, and a byte loop costs about twice as many instructions
+    /// (see `BENCHMARKS.md`, P1).
     #[inline]
     pub fn update(&mut self, bytes: &[u8]) {
-        for &byte in bytes {
+        let (chunks, rest) = bytes.as_chunks::<8>();
+        for &[x0, x1, x2, x3, x4, x5, x6, x7] in chunks {
+            self.push(x0);
+            self.push(x1);
+            self.push(x2);
+            self.push(x3);
+            self.push(x4);
+            self.push(x5);
+            self.push(x6);
+            self.push(x7);
+        }
+        for &byte in rest {
             self.push(byte);
         }
     }
@@ -81,6 +96,25 @@ mod tests {
             pprz(&[0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02]),
             (0x1C, 0xC4)
         );
+    }
+
+    #[test]
+    fn unrolled_update_matches_the_byte_rule() {
+        let bytes: [u8; 300] =
+            core::array::from_fn(|i| (i as u8).wrapping_mul(37).wrapping_add(11));
+        for n in 0..bytes.len() {
+            let (mut a, mut b) = (0u8, 0u8);
+            for &x in &bytes[..n] {
+                a = a.wrapping_add(x);
+                b = b.wrapping_add(a);
+            }
+            assert_eq!(pprz(&bytes[..n]), (a, b), "{n} bytes");
+            // Incremental, split anywhere: the same sums.
+            let mut ck = PprzChecksum::new();
+            ck.update(&bytes[..n / 3]);
+            ck.update(&bytes[n / 3..n]);
+            assert_eq!(ck.finish(), (a, b), "{n} bytes in two parts");
+        }
     }
 
     #[test]

@@ -15,6 +15,10 @@
 //! 4. A complete, verified frame is handed out as a borrowed [`Frame`] and its bytes
 //!    are consumed; scanning goes on after it.
 //!
+//! [`Decoder::feed`] copies every byte into the buffer and hands out views of it.
+//! [`Decoder::feed_borrowed`] finds the same frames but reads a frame that arrives whole
+//! in one input where it is, and hands out a view of the input (no copy).
+//!
 //! A false start byte that announces a long frame delays the frames after it until
 //! that many bytes have arrived (or until [`Decoder::flush`]); it never loses them.
 //! At the end of a stream (end of file, or a link that went silent), call
@@ -233,8 +237,100 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
             if input.is_empty() {
                 return None;
             }
-            self.refill(input);
+            self.refill(input, N);
         }
+    }
+
+    /// [`feed`](Decoder::feed) without a copy when it can: while nothing is buffered, a
+    /// frame that lies whole at the front of `input` is verified where it is and handed
+    /// out as a view of `input`. Everything else (garbage, a frame split across reads, a
+    /// rejected candidate, a frame longer than `N`) goes through the buffer as with
+    /// `feed`, except that the buffer takes only the bytes its candidate still needs, so
+    /// that the frames after a split one are again read in place.
+    ///
+    /// The frames found, their order and the counters are exactly those of `feed` on the
+    /// same bytes (the resynchronisation rules of the [module documentation](self)
+    /// hold unchanged); only the input is consumed in other steps, so
+    /// [`buffered`](Decoder::buffered) can differ between two calls. Like `feed`, it
+    /// returns `None` only once `input` is empty.
+    ///
+    /// The price is the lifetime: the frame may borrow `input`'s bytes, so they must
+    /// outlive it (`'i: 'd`), whereas `feed`'s frame borrows only the decoder. Reading
+    /// into a local buffer and feeding it, the usual loop, satisfies this:
+    ///
+    /// ```
+    /// use pprz_transports::{PprzV2, PprzV2Decoder};
+    /// let mut decoder = PprzV2Decoder::new(PprzV2::new());
+    /// let received = [0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4];
+    /// let mut input = &received[..];
+    /// while let Some(frame) = decoder.feed_borrowed(&mut input) {
+    ///     assert_eq!(frame.raw().as_ptr(), received.as_ptr()); // not copied
+    ///     assert_eq!((frame.source(), frame.msg_id()), (7, 2));
+    /// }
+    /// assert_eq!(decoder.stats().frames, 1);
+    /// ```
+    pub fn feed_borrowed<'d, 'i: 'd>(&'d mut self, input: &mut &'i [u8]) -> Option<Frame<'d>> {
+        loop {
+            if self.buffered() == 0 {
+                let bytes: &'i [u8] = input;
+                // Garbage before a start byte: dropped without copying, as `feed` does.
+                let start_byte = self.framing.start_byte();
+                let skip = bytes
+                    .iter()
+                    .position(|&b| b == start_byte)
+                    .unwrap_or(bytes.len());
+                self.stats.bytes_in = self.stats.bytes_in.wrapping_add(skip as u32);
+                self.stats.dropped_bytes = self.stats.dropped_bytes.wrapping_add(skip as u32);
+                let bytes = bytes.get(skip..).unwrap_or_default();
+                *input = bytes;
+                if let Some(frame) = self.in_place(bytes) {
+                    let len = frame.raw().len();
+                    *input = bytes.get(len..).unwrap_or_default();
+                    self.stats.bytes_in = self.stats.bytes_in.wrapping_add(len as u32);
+                    self.count_frame(len);
+                    return Some(frame);
+                }
+            }
+            if let Some((start, len)) = self.scan() {
+                return self.view(start, len);
+            }
+            if input.is_empty() {
+                return None;
+            }
+            let needed = self.needed();
+            self.refill(input, needed);
+        }
+    }
+
+    /// Bytes the buffered candidate still needs to be complete (one at a time while its
+    /// length is not known yet); `N`, as many as fit, when nothing is buffered.
+    fn needed(&self) -> usize {
+        let avail = self.buf.get(self.start..self.end).unwrap_or_default();
+        if avail.is_empty() {
+            return N;
+        }
+        match self.framing.rx_frame_len(avail) {
+            Ok(Some(total)) => total.saturating_sub(avail.len()).max(1),
+            _ => 1,
+        }
+    }
+
+    /// The frame at the front of `bytes` (which is empty or starts with the start byte),
+    /// if it is there whole and `feed` would accept it from the buffer.
+    #[inline]
+    fn in_place<'i>(&self, bytes: &'i [u8]) -> Option<Frame<'i>> {
+        let len = match self.framing.rx_frame_len(bytes) {
+            Ok(Some(len)) if len > 0 && len <= N => len,
+            _ => return None,
+        };
+        let frame = bytes.get(..len)?;
+        self.framing.check(frame).ok()?;
+        self.framing.view(frame).ok()
+    }
+
+    fn count_frame(&mut self, len: usize) {
+        self.stats.frames = self.stats.frames.wrapping_add(1);
+        self.stats.frame_bytes = self.stats.frame_bytes.wrapping_add(len as u32);
     }
 
     /// End of stream: abandons an incomplete candidate (counted in
@@ -253,13 +349,14 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
         }
     }
 
+    #[inline]
     fn view(&self, start: usize, len: usize) -> Option<Frame<'_>> {
         let frame = self.buf.get(start..start.checked_add(len)?)?;
         self.framing.view(frame).ok()
     }
 
-    /// Copies bytes from `input` into the buffer.
-    fn refill(&mut self, input: &mut &[u8]) {
+    /// Copies bytes from `input` into the buffer, at most `max` (at least 1).
+    fn refill(&mut self, input: &mut &[u8], max: usize) {
         let taken = if self.buffered() == 0 {
             // Nothing buffered: skip garbage without copying it.
             self.start = 0;
@@ -280,7 +377,7 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
             0
         };
         let rest = input.get(taken..).unwrap_or_default();
-        let n = N.saturating_sub(self.end).min(rest.len());
+        let n = N.saturating_sub(self.end).min(rest.len()).min(max);
         if let (Some(dst), Some(src)) = (self.buf.get_mut(self.end..self.end + n), rest.get(..n)) {
             dst.copy_from_slice(src);
             self.end += n;
@@ -336,16 +433,12 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
             };
             // Not all of the candidate is here yet.
             let frame = avail.get(..total)?;
-            let checked = self
-                .framing
-                .verify(frame)
-                .and_then(|()| self.framing.view(frame).map(|_| ()));
-            match checked {
+            // Verified without building the view: `view` builds it once, for the caller.
+            match self.framing.check(frame) {
                 Ok(()) => {
                     let start = self.start;
                     self.start += total;
-                    self.stats.frames = self.stats.frames.wrapping_add(1);
-                    self.stats.frame_bytes = self.stats.frame_bytes.wrapping_add(total as u32);
+                    self.count_frame(total);
                     return Some((start, total));
                 }
                 Err(e) => self.reject(e),
@@ -419,6 +512,251 @@ mod tests {
         assert!(d.flush().is_none());
         assert_eq!(d.stats().truncated, 1);
         assert_eq!(d.buffered(), 0);
+    }
+
+    extern crate std;
+    use crate::{AnyTransport, Frame, PprzLog, PprzV1, XBee24, XBee868};
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    /// A frame, owned, for comparisons.
+    type Owned = (Vec<u8>, crate::MsgHeader, Vec<u8>, crate::Extra);
+
+    fn owned(f: &Frame<'_>) -> Owned {
+        (
+            f.raw().to_vec(),
+            f.header(),
+            f.payload().to_vec(),
+            f.extra(),
+        )
+    }
+
+    fn invariant<F, const N: usize>(d: &Decoder<F, N>) {
+        let s = d.stats();
+        assert_eq!(
+            s.bytes_in,
+            s.frame_bytes
+                .wrapping_add(s.dropped_bytes)
+                .wrapping_add(d.buffered() as u32)
+        );
+    }
+
+    /// Decodes `stream` in chunks of `sizes` (cycled) with `feed` or `feed_borrowed`,
+    /// then flushes; checks the stats invariant after every call, and that the frames
+    /// `feed_borrowed` hands out from the input are views of the input.
+    fn decode<const N: usize>(
+        t: AnyTransport,
+        stream: &[u8],
+        sizes: &[usize],
+        borrowed: bool,
+    ) -> (Vec<Owned>, DecoderStats, usize) {
+        let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
+        let (mut out, mut in_place) = (Vec::new(), 0);
+        let mut rest = stream;
+        for &size in sizes.iter().cycle() {
+            if rest.is_empty() {
+                break;
+            }
+            let (chunk, tail) = rest.split_at(size.clamp(1, rest.len()));
+            rest = tail;
+            let mut input = chunk;
+            loop {
+                let frame = if borrowed {
+                    d.feed_borrowed(&mut input)
+                } else {
+                    d.feed(&mut input)
+                };
+                let Some(f) = frame else { break };
+                if chunk.as_ptr_range().contains(&f.raw().as_ptr()) {
+                    assert!(borrowed, "feed hands out views of its buffer only");
+                    in_place += 1;
+                }
+                out.push(owned(&f));
+                invariant(&d);
+            }
+            assert!(input.is_empty());
+            invariant(&d);
+        }
+        while let Some(f) = d.flush() {
+            out.push(owned(&f));
+        }
+        assert_eq!(d.buffered(), 0);
+        invariant(&d);
+        (out, *d.stats(), in_place)
+    }
+
+    fn transports() -> [AnyTransport; 5] {
+        [
+            PprzV2.into(),
+            PprzV1::new(2).into(),
+            PprzLog::TELEMETRY.into(),
+            XBee24::new().into(),
+            XBee868::new().into(),
+        ]
+    }
+
+    /// A stream of `parts`: `(kind, payload length, seed)` with kind 0..=3 a valid frame,
+    /// 4 noise, 5 a false start announcing a long frame, 6 a frame with a flipped bit,
+    /// 7 a frame cut short.
+    fn stream_of(t: &AnyTransport, parts: &[(u8, u8, u8)]) -> Vec<u8> {
+        let mut stream = Vec::new();
+        for &(kind, len, seed) in parts {
+            let payload: Vec<u8> = (0..len).map(|i| i.wrapping_mul(seed) ^ seed).collect();
+            let mut buf = [0u8; crate::MAX_FRAME_LEN];
+            let meta = TxMeta::new(MsgHeader::new(seed, 0, seed & 0x0F, len)).at(1234);
+            let Ok(n) = t.encode(
+                &meta,
+                &payload[..usize::from(len).min(t.max_payload_len())],
+                &mut buf,
+            ) else {
+                continue;
+            };
+            match kind {
+                0..=3 => stream.extend_from_slice(&buf[..n]),
+                4 => stream.extend(payload.iter().take(usize::from(seed % 9))),
+                5 => stream.extend_from_slice(&[t.start_byte(), seed | 0x80, 0x00, 0x10]),
+                6 => {
+                    buf[usize::from(seed) % n] ^= 1 << (len % 8);
+                    stream.extend_from_slice(&buf[..n]);
+                }
+                _ => stream.extend_from_slice(&buf[..n / 2]),
+            }
+        }
+        stream
+    }
+
+    proptest! {
+        /// `feed_borrowed` finds exactly the frames of `feed`, in the same order, with the
+        /// same counters, for any chunking and any decoder size; the stats invariant
+        /// holds after every call.
+        #[test]
+        fn feed_borrowed_finds_what_feed_finds(
+            parts in proptest::collection::vec((0u8..8, 0u8..80, any::<u8>()), 0..40),
+            sizes in proptest::collection::vec(1usize..300, 1..8),
+        ) {
+            for t in transports() {
+                let stream = stream_of(&t, &parts);
+                let fed = decode::<{ crate::MAX_FRAME_LEN }>(t, &stream, &sizes, false);
+                let borrowed = decode::<{ crate::MAX_FRAME_LEN }>(t, &stream, &sizes, true);
+                prop_assert_eq!(&fed.0, &borrowed.0);
+                prop_assert_eq!(fed.1, borrowed.1);
+                prop_assert_eq!(fed.1.bytes_in as usize, stream.len());
+                let fed = decode::<32>(t, &stream, &sizes, false);
+                let borrowed = decode::<32>(t, &stream, &sizes, true);
+                prop_assert_eq!(&fed.0, &borrowed.0);
+                prop_assert_eq!(fed.1, borrowed.1);
+            }
+        }
+    }
+
+    #[test]
+    fn feed_borrowed_copies_nothing_on_a_clean_stream() {
+        let t: AnyTransport = PprzV2.into();
+        let parts: Vec<(u8, u8, u8)> = (0..50u8).map(|i| (0, i % 30, i)).collect();
+        let stream = stream_of(&t, &parts);
+        let (frames, stats, in_place) = decode::<255>(t, &stream, &[stream.len()], true);
+        assert_eq!((frames.len(), in_place), (50, 50));
+        assert_eq!(
+            (stats.frames, stats.errors(), stats.dropped_bytes),
+            (50, 0, 0)
+        );
+        // Noise first, then the same frames: still in place after the noise.
+        let mut noisy = std::vec![0x12, 0x34];
+        noisy.extend_from_slice(&stream);
+        let (_, stats, in_place) = decode::<255>(t, &noisy, &[noisy.len()], true);
+        assert_eq!((stats.frames, stats.dropped_bytes, in_place), (50, 2, 50));
+    }
+
+    #[test]
+    fn feed_borrowed_copies_only_split_frames() {
+        // A continuous stream read in 64-byte chunks: the buffer takes only the rest of a
+        // frame split across two reads, so every frame that lies inside one read is read
+        // in place.
+        for t in transports() {
+            let parts: Vec<(u8, u8, u8)> =
+                (0..60u8).map(|i| (0, i.wrapping_mul(7) % 40, i)).collect();
+            let stream = stream_of(&t, &parts);
+            let mut whole = 0;
+            let mut pos = 0;
+            let mut d: Decoder<AnyTransport> = Decoder::new(t);
+            let mut offsets = Vec::new();
+            let mut rest = &stream[..];
+            while let Some(f) = d.feed(&mut rest) {
+                offsets.push((pos, f.raw().len()));
+                pos += f.raw().len();
+            }
+            for &(at, len) in &offsets {
+                if at / 64 == (at + len - 1) / 64 {
+                    whole += 1;
+                }
+            }
+            let (frames, stats, in_place) = decode::<255>(t, &stream, &[64], true);
+            assert_eq!((frames.len(), stats.errors()), (60, 0), "{t:?}");
+            assert_eq!(in_place, whole, "{t:?}");
+        }
+    }
+
+    #[test]
+    fn feed_borrowed_finds_a_frame_inside_a_false_start() {
+        let (good, n) = frame(3, &[1, 2, 3]);
+        let mut stream = [0u8; 260];
+        stream[0] = 0x99;
+        stream[1] = 200;
+        stream[2..2 + n].copy_from_slice(&good[..n]);
+        let mut d: Decoder<PprzV2, 255> = Decoder::new(PprzV2);
+        let mut input = &stream[..];
+        let f = d.feed_borrowed(&mut input).expect("frame");
+        assert_eq!(f.source(), 3);
+        assert_eq!(d.stats().checksum_errors, 1);
+        while d.feed_borrowed(&mut input).is_some() {}
+        assert!(d.flush().is_none());
+        let s = *d.stats();
+        assert_eq!(s.bytes_in, s.frame_bytes + s.dropped_bytes);
+    }
+
+    #[test]
+    fn feed_borrowed_counts_too_long_like_feed() {
+        let (big, n) = frame(5, &[0xAA; 100]);
+        let (small, m) = frame(6, &[1]);
+        let mut d: Decoder<PprzV2, 32> = Decoder::new(PprzV2);
+        let mut input = &big[..n];
+        assert!(d.feed_borrowed(&mut input).is_none());
+        let mut input = &small[..m];
+        assert_eq!(d.feed_borrowed(&mut input).map(|f| f.source()), Some(6));
+        assert_eq!(d.stats().too_long, 1);
+    }
+
+    #[test]
+    fn check_is_verify_and_view() {
+        for t in transports() {
+            let mut buf = [0u8; crate::MAX_FRAME_LEN];
+            let meta = TxMeta::new(MsgHeader::new(1, 2, 3, 4));
+            let n = t.encode(&meta, &[9, 8, 7], &mut buf).unwrap();
+            // Every prefix, every single-bit corruption, and LEN values too small for
+            // the headers (with the checksum fixed up by the encoder where possible).
+            let mut cases: Vec<Vec<u8>> = (0..=n).map(|k| buf[..k].to_vec()).collect();
+            for i in 0..n {
+                let mut c = buf[..n].to_vec();
+                c[i] ^= 0x04;
+                cases.push(c);
+            }
+            for short in 0..12u8 {
+                let mut c = buf[..n].to_vec();
+                c[1] = short;
+                cases.push(c);
+            }
+            for c in &cases {
+                let both = t.verify(c).and_then(|()| t.view(c).map(|_| ()));
+                assert_eq!(t.check(c), both, "{t:?} {c:02x?}");
+            }
+        }
+        // A PPRZ v2 frame too short for the message header, with a good checksum.
+        let (a, b) = crate::checksum::pprz(&[0x06, 0x07, 0x00]);
+        let short = [0x99, 0x06, 0x07, 0x00, a, b];
+        assert_eq!(PprzV2.verify(&short), Ok(()));
+        assert!(PprzV2.view(&short).is_err());
+        assert_eq!(PprzV2.check(&short), Err(RxError::BadLength));
+        assert_eq!(PprzV1::new(1).check(&short), Ok(()));
     }
 
     #[test]

@@ -182,28 +182,36 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> Packet<T> {
     }
 }
 
-/// Writes STX, LEN and the checksum around `DATA` already in `frame[2..len-2]`,
-/// with `emit_header` writing the message header at the start of `DATA`.
-fn finish(
+/// Writes the frame around the message fields already in place, in one pass: `head`
+/// (STX, LEN and the message header) at the start of `frame[..len]`, the checksum in
+/// its last two bytes. One bounds check for the whole frame; the checksum range comes
+/// from `len`, not from re-reading `LEN` in the buffer.
+#[inline]
+fn finish<const K: usize>(
     frame: &mut [u8],
     len: usize,
-    emit_header: impl FnOnce(&mut [u8]) -> Result<(), EncodeError>,
+    head: [u8; K],
 ) -> Result<usize, EncodeError> {
     let available = frame.len();
-    let frame = frame.get_mut(..len).ok_or(EncodeError::BufferTooSmall {
+    let too_small = EncodeError::BufferTooSmall {
         needed: len,
         available,
-    })?;
-    let length = u8::try_from(len).map_err(|_| EncodeError::PayloadTooLong {
+    };
+    let frame = frame.get_mut(..len).ok_or(too_small)?;
+    let (body, ck) = frame.split_last_chunk_mut::<TAIL_LEN>().ok_or(too_small)?;
+    *body.first_chunk_mut::<K>().ok_or(too_small)? = head;
+    let (a, b) = checksum::pprz(body.get(field::LEN..).unwrap_or_default());
+    *ck = [a, b];
+    Ok(len)
+}
+
+/// The `LEN` byte of a frame of `len` bytes.
+#[inline]
+fn length_byte(len: usize) -> Result<u8, EncodeError> {
+    u8::try_from(len).map_err(|_| EncodeError::PayloadTooLong {
         len,
         max: MAX_FRAME_LEN,
-    })?;
-    let mut packet = Packet::new_unchecked(frame);
-    packet.set_stx(STX);
-    packet.set_length(length);
-    emit_header(packet.data_mut())?;
-    packet.fill_checksum();
-    Ok(len)
+    })
 }
 
 /// Frame length announced by `head`, requiring room for `msg_header_len` bytes.
@@ -215,19 +223,48 @@ fn rx_len(head: &[u8], msg_header_len: usize) -> Result<Option<usize>, RxError> 
     }
 }
 
-/// Checks start byte, exact length and checksum of one frame.
-fn verify(frame: &[u8]) -> Result<(), RxError> {
-    let packet = Packet::new_checked(frame)?;
-    if packet.stx() != STX {
-        return Err(RxError::BadStart);
-    }
-    if packet.frame_len() != frame.len() {
+/// The frame `LEN` announces at the start of `buf` and its `DATA`, with the errors of
+/// [`Packet::new_checked`].
+#[inline]
+fn raw_and_data(buf: &[u8]) -> Result<(&[u8], &[u8]), RxError> {
+    let len = usize::from(*buf.get(field::LEN).ok_or(RxError::Truncated)?);
+    if len < OVERHEAD {
         return Err(RxError::BadLength);
     }
-    if packet.verify_checksum() {
-        Ok(())
+    let raw = buf.get(..len).ok_or(RxError::Truncated)?;
+    let data = raw.get(field::data(len)).unwrap_or_default();
+    Ok((raw, data))
+}
+
+/// Checks start byte, exact length and checksum of one frame.
+#[inline]
+fn verify(frame: &[u8]) -> Result<(), RxError> {
+    let (raw, _) = raw_and_data(frame)?;
+    if frame.first() != Some(&STX) {
+        return Err(RxError::BadStart);
+    }
+    if raw.len() != frame.len() {
+        return Err(RxError::BadLength);
+    }
+    match frame.split_last_chunk::<TAIL_LEN>() {
+        Some((body, &[ck_a, ck_b]))
+            if checksum::pprz(body.get(field::LEN..).unwrap_or_default()) == (ck_a, ck_b) =>
+        {
+            Ok(())
+        }
+        _ => Err(RxError::Checksum),
+    }
+}
+
+/// [`verify`], and room for a message header of `msg_header_len` bytes: exactly when
+/// both `verify` and the transport's `view` succeed.
+#[inline]
+fn check(frame: &[u8], msg_header_len: usize) -> Result<(), RxError> {
+    verify(frame)?;
+    if frame.len() < OVERHEAD + msg_header_len {
+        Err(RxError::BadLength)
     } else {
-        Err(RxError::Checksum)
+        Ok(())
     }
 }
 
@@ -260,6 +297,7 @@ impl Encoder for PprzV2 {
         V2_MAX_PAYLOAD_LEN
     }
 
+    #[inline]
     fn finish_frame(
         &self,
         meta: &TxMeta,
@@ -267,8 +305,17 @@ impl Encoder for PprzV2 {
         payload_len: usize,
     ) -> Result<usize, EncodeError> {
         let len = self.frame_len(payload_len)?;
-        meta.header.check()?;
-        finish(frame, len, |data| meta.header.emit_v2(data))
+        let h = &meta.header;
+        h.check()?;
+        let head = [
+            STX,
+            length_byte(len)?,
+            h.source,
+            h.destination,
+            (h.component << 4) | h.class,
+            h.msg_id,
+        ];
+        finish(frame, len, head)
     }
 }
 
@@ -289,9 +336,15 @@ impl Framing for PprzV2 {
         verify(frame)
     }
 
+    #[inline]
+    fn check(&self, frame: &[u8]) -> Result<(), RxError> {
+        check(frame, MsgHeader::V2_LEN)
+    }
+
+    #[inline]
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
-        let packet = Packet::new_checked(frame)?;
-        Frame::from_v2(packet.frame(), packet.data(), Extra::None)
+        let (raw, data) = raw_and_data(frame)?;
+        Frame::from_v2(raw, data, Extra::None)
     }
 }
 
@@ -338,17 +391,13 @@ impl Encoder for PprzV1 {
         payload_len: usize,
     ) -> Result<usize, EncodeError> {
         let len = self.frame_len(payload_len)?;
-        finish(frame, len, |data| match data {
-            [sender, msg_id, ..] => {
-                *sender = meta.header.source;
-                *msg_id = meta.header.msg_id;
-                Ok(())
-            }
-            _ => Err(EncodeError::BufferTooSmall {
-                needed: len,
-                available: len,
-            }),
-        })
+        let head = [
+            STX,
+            length_byte(len)?,
+            meta.header.source,
+            meta.header.msg_id,
+        ];
+        finish(frame, len, head)
     }
 }
 
@@ -369,9 +418,13 @@ impl Framing for PprzV1 {
         verify(frame)
     }
 
+    fn check(&self, frame: &[u8]) -> Result<(), RxError> {
+        check(frame, MsgHeader::V1_LEN)
+    }
+
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
-        let packet = Packet::new_checked(frame)?;
-        Frame::from_v1(packet.frame(), packet.data(), self.rx_class)
+        let (raw, data) = raw_and_data(frame)?;
+        Frame::from_v1(raw, data, self.rx_class)
     }
 }
 

@@ -289,6 +289,16 @@ impl Framing for PprzLog {
         }
     }
 
+    fn check(&self, frame: &[u8]) -> Result<(), RxError> {
+        self.verify(frame)?;
+        // What `view` needs besides: room for the v2 message header in `DATA`.
+        if frame.len() < OVERHEAD + MsgHeader::V2_LEN {
+            Err(RxError::BadLength)
+        } else {
+            Ok(())
+        }
+    }
+
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
         let packet = Packet::new_checked(frame)?;
         let info = LogInfo {

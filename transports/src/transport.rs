@@ -122,6 +122,7 @@ impl MsgHeader {
     /// Reads a v2 header from the start of `data`; returns it with the fields after it.
     ///
     /// Returns `None` when `data` is shorter than [`MsgHeader::V2_LEN`].
+    #[inline]
     pub fn parse_v2(data: &[u8]) -> Option<(Self, &[u8])> {
         match data {
             [source, destination, cc, msg_id, payload @ ..] => Some((
@@ -301,6 +302,7 @@ pub struct Frame<'a> {
 
 impl<'a> Frame<'a> {
     /// Builds a view from a v2 message (`data` = 4-byte header + fields).
+    #[inline]
     pub(crate) fn from_v2(raw: &'a [u8], data: &'a [u8], extra: Extra) -> Result<Self, RxError> {
         let (h, payload) = MsgHeader::parse_v2(data).ok_or(RxError::BadLength)?;
         Ok(Self {
@@ -533,11 +535,24 @@ pub trait Framing {
     /// Checks the integrity of exactly one frame (`frame.len()` is the length
     /// [`rx_frame_len`](Framing::rx_frame_len) gave): start byte, checksum and, for
     /// XBee, the API id. A frame is accepted when both `verify` and
-    /// [`view`](Framing::view) succeed.
+    /// [`view`](Framing::view) succeed (see [`check`](Framing::check)).
     fn verify(&self, frame: &[u8]) -> Result<(), RxError>;
 
     /// Builds the view of one frame without checking its checksum.
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError>;
+
+    /// Whether a frame is accepted: `Ok` exactly when both [`verify`](Framing::verify)
+    /// and [`view`](Framing::view) succeed on `frame`, otherwise the error of the first
+    /// that fails. The [`Decoder`](crate::Decoder) calls it on every complete candidate,
+    /// then builds the view once, for the frame it hands out.
+    ///
+    /// The default runs both (and drops the view); a transport whose `view` can only fail
+    /// on a few things `verify` does not check (a frame too short for its headers)
+    /// overrides it to check those without building the view, as the PPRZ transports do.
+    fn check(&self, frame: &[u8]) -> Result<(), RxError> {
+        self.verify(frame)?;
+        self.view(frame).map(|_| ())
+    }
 
     /// Parses the frame at the start of `buf` (bytes after it are ignored): verifies
     /// it and returns its view and length. Handy for datagrams and host tools.

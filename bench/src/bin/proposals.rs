@@ -1,38 +1,25 @@
-//! Workloads 1 and 2 with the prototypes of `pprz_bench::proposals` (the optimisations
-//! `BENCHMARKS.md` proposes to other crates), one named non-inlined function each, for
-//! callgrind like the `workloads` binary:
+//! Workload 1 with the prototype left in `pprz_bench::proposals` (fixed-offset message
+//! encoders instead of the generated ones, framed by the real `PprzV2::finish_frame`),
+//! one named non-inlined function, for callgrind like the `workloads` binary:
 //!
 //! ```text
 //! valgrind --tool=callgrind --toggle-collect='proposals::workload_encode_proposed' \
 //!     target/release/proposals --mode encode-proposed
 //! ```
 //!
-//! Modes: `encode-proposed` (proposed encoders and framing), `encode-framing-proposed`
-//! (current generated encoders, proposed framing), `parse-proposed`, `all` (default). A separate binary, so the
-//! prototypes cannot change how the code measured by `workloads` is inlined.
+//! Modes: `encode-proposed`, `all` (default, the same). A separate binary, so the
+//! prototype cannot change how the code measured by `workloads` is inlined.
 
 use std::hint::black_box;
 use std::process::ExitCode;
 
 use pprz_bench::proposals;
-use pprz_bench::stream::{self, MESSAGES, ParseSummary};
+use pprz_bench::stream::{self, MESSAGES};
 
-/// Workload 1 with the prototypes, measured.
+/// Workload 1 with the fixed-offset encoders, measured.
 #[inline(never)]
 fn workload_encode_proposed(count: usize, out: &mut [u8]) -> usize {
     proposals::encode_stream(count, out).expect("the buffer holds the stream")
-}
-
-/// Workload 1 with the current encoders and the proposed framing only, measured.
-#[inline(never)]
-fn workload_encode_framing_proposed(count: usize, out: &mut [u8]) -> usize {
-    proposals::encode_stream_framing_only(count, out).expect("the buffer holds the stream")
-}
-
-/// Workload 2 with the prototypes, measured.
-#[inline(never)]
-fn workload_parse_proposed(stream: &[u8]) -> ParseSummary {
-    proposals::parse_stream(stream)
 }
 
 fn run_encode() {
@@ -43,28 +30,7 @@ fn run_encode() {
     println!("units workload_encode_proposed {MESSAGES} message");
 }
 
-fn run_encode_framing() {
-    let mut out = vec![0u8; stream::stream_len(MESSAGES)];
-    let len = workload_encode_framing_proposed(black_box(MESSAGES), black_box(&mut out));
-    assert_eq!(out[..len], stream::make_stream(MESSAGES)[..], "same stream");
-    println!("encode-framing-proposed: {MESSAGES} messages -> {len} bytes, identical to `encode`");
-    println!("units workload_encode_framing_proposed {MESSAGES} message");
-}
-
-fn run_parse() {
-    let stream = stream::make_stream(MESSAGES);
-    let summary = workload_parse_proposed(black_box(&stream));
-    assert_eq!(summary, stream::expected_summary(MESSAGES), "parse result");
-    println!(
-        "parse-proposed: {} bytes -> {} frames, same summary as `parse`",
-        stream.len(),
-        summary.frames
-    );
-    println!("units workload_parse_proposed {} byte", stream.len());
-}
-
-const USAGE: &str =
-    "usage: proposals [--mode encode-proposed|encode-framing-proposed|parse-proposed|all]";
+const USAGE: &str = "usage: proposals [--mode encode-proposed|all]";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -77,14 +43,7 @@ fn main() -> ExitCode {
         }
     };
     match mode {
-        "encode-proposed" => run_encode(),
-        "encode-framing-proposed" => run_encode_framing(),
-        "parse-proposed" => run_parse(),
-        "all" => {
-            run_encode();
-            run_encode_framing();
-            run_parse();
-        }
+        "encode-proposed" | "all" => run_encode(),
         other => {
             eprintln!("unknown mode {other:?}\n{USAGE}");
             return ExitCode::FAILURE;

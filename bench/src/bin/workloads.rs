@@ -14,7 +14,8 @@
 //! its results and one `units <function> <count> <unit>` line that says what to divide
 //! the function's instruction count by.
 //!
-//! Modes: `encode`, `parse`, `downlink`, `arena-10`, `arena-50`, `arena-90`, `arena` (the
+//! Modes: `encode`, `parse` (`Decoder::feed_borrowed`), `parse-buffered` (`Decoder::feed`),
+//! `downlink`, `arena-10`, `arena-50`, `arena-90`, `arena` (the
 //! three fill levels and the fill at the first failure), `overload`, `all` (default).
 
 use std::hint::black_box;
@@ -36,6 +37,12 @@ fn workload_encode(count: usize, out: &mut [u8]) -> usize {
 #[inline(never)]
 fn workload_parse(stream: &[u8]) -> ParseSummary {
     stream::parse_stream(stream)
+}
+
+/// Workload 2 through `Decoder::feed` (every byte copied into the decoder), measured.
+#[inline(never)]
+fn workload_parse_buffered(stream: &[u8]) -> ParseSummary {
+    stream::parse_stream_buffered(stream)
 }
 
 /// Workload 3, measured: `count` messages through the downlink to a sink.
@@ -99,6 +106,18 @@ fn run_parse() {
         summary.digest
     );
     println!("units workload_parse {} byte", stream.len());
+}
+
+fn run_parse_buffered() {
+    let stream = stream::make_stream(MESSAGES);
+    let summary = workload_parse_buffered(black_box(&stream));
+    assert_eq!(summary, stream::expected_summary(MESSAGES), "parse result");
+    println!(
+        "parse-buffered: {} bytes -> {} frames, same summary as `parse`",
+        stream.len(),
+        summary.frames
+    );
+    println!("units workload_parse_buffered {} byte", stream.len());
 }
 
 fn run_downlink() {
@@ -165,8 +184,7 @@ fn run_overload() {
     print!("{}", overload::render(&report));
 }
 
-const USAGE: &str =
-    "usage: workloads [--mode encode|parse|downlink|arena-10|arena-50|arena-90|arena|overload|all]";
+const USAGE: &str = "usage: workloads [--mode encode|parse|parse-buffered|downlink|arena-10|arena-50|arena-90|arena|overload|all]";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -185,6 +203,7 @@ fn main() -> ExitCode {
     match mode {
         "encode" => run_encode(),
         "parse" => run_parse(),
+        "parse-buffered" => run_parse_buffered(),
         "downlink" => run_downlink(),
         "arena-10" => run_arena_level(10),
         "arena-50" => run_arena_level(50),
@@ -199,6 +218,7 @@ fn main() -> ExitCode {
         "all" => {
             run_encode();
             run_parse();
+            run_parse_buffered();
             run_downlink();
             for p in [10, 50, 90] {
                 run_arena_level(p);
