@@ -7,6 +7,8 @@ pub mod descriptor;
 pub mod dynamic;
 pub mod error;
 pub mod message;
+pub mod roles;
+pub mod schedule;
 pub mod wire;
 
 pub use descriptor::{BaseType, FieldDescriptor, FieldType, MessageDescriptor, MessageSet};
