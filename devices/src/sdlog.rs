@@ -3,8 +3,9 @@
 //!
 //! [`SdLog`] is an `embedded_io_async::Write` over one open file. Give it to a downlink
 //! writer task whose device uses the PPRZLOG transport, and every frame the downlink
-//! queues for it is appended to the file as a PPRZLOG record: the log holds exactly
-//! what the ground log tools read (PROTOCOLS.md section 3).
+//! queues for it is appended to the file as a PPRZLOG record, the format the ground log
+//! tools read: `0x99 | LEN | SOURCE | TIMESTAMP (u32 LE, 100 µs) | DATA (LEN bytes) | CK`
+//! (byte layout in `docs/wire-formats.md` and in `pprz_transports::pprzlog`).
 //!
 //! ```ignore
 //! // Firmware: an SD card on SPI, a log file named PPRZnnnn.LOG per boot.

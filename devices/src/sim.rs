@@ -513,11 +513,6 @@ pub struct SimTx<'a, M: RawMutex, const N: usize> {
 }
 
 impl<M: RawMutex, const N: usize> SimTx<'_, M, N> {
-    /// The direction this half writes.
-    pub fn direction(&self) -> Direction {
-        self.direction
-    }
-
     /// Counters of this half's direction.
     pub fn stats(&self) -> SimStats {
         self.link.stats(self.direction)
@@ -531,11 +526,6 @@ pub struct SimRx<'a, M: RawMutex, const N: usize> {
 }
 
 impl<M: RawMutex, const N: usize> SimRx<'_, M, N> {
-    /// The direction this half reads.
-    pub fn direction(&self) -> Direction {
-        self.direction
-    }
-
     /// Counters of this half's direction.
     pub fn stats(&self) -> SimStats {
         self.link.stats(self.direction)

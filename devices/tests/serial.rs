@@ -18,7 +18,7 @@ fn pty_both_ways() {
     peer.set_timeout(Duration::from_secs(5)).unwrap();
     let mut dev = HostDevice::serial_port(Box::new(port), HostConfig::default()).unwrap();
 
-    // PPRZ v2 ALIVE frame (PROTOCOLS.md) out to the peer.
+    // PPRZ v2 ALIVE frame (aircraft 7 to ground, md5sum [0, 1, 2]) out to the peer.
     let frame = [
         0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4,
     ];

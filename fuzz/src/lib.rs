@@ -14,7 +14,7 @@
 //!   (a whole-stream scan) finds.
 
 use pprz_transports::{
-    AnyTransport, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, MAX_FRAME_LEN, PprzLog,
+    AnyTransport, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, PprzLog, MAX_FRAME_LEN,
 };
 
 fn check_frame(t: &AnyTransport, f: &Frame<'_>) {

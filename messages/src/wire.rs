@@ -1,9 +1,9 @@
 //! Wire primitives: packed little-endian scalars, arrays, and the cursors that generated
 //! encoders and decoders are written with.
 //!
-//! Layout of a payload (PROTOCOLS.md section 5): fields follow each other in XML order,
-//! no padding, little-endian. A fixed array `T[N]` is `N` elements; a variable array
-//! `T[]` is one `uint8` element count followed by the elements.
+//! Layout of a payload (also in `docs/wire-formats.md`): fields follow each other in XML
+//! order, no padding, little-endian. A fixed array `T[N]` is `N` elements; a variable
+//! array `T[]` is one `uint8` element count followed by the elements.
 //!
 //! ```text
 //! ALIVE (md5sum: uint8[]) with [0, 1, 2]:   03 | 00 01 02

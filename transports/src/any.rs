@@ -28,23 +28,6 @@ use crate::pprzlog::PprzLog;
 use crate::transport::{EncodeError, Encoder, Frame, Framing, RxError, TxMeta};
 use crate::xbee::{XBee24, XBee868};
 
-/// Which transport, without its configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum TransportKind {
-    /// PPRZ protocol v1.
-    PprzV1,
-    /// PPRZ protocol v2.
-    PprzV2,
-    /// XBee 802.15.4 API.
-    XBee24,
-    /// XBee 868 API.
-    XBee868,
-    /// PPRZLOG records.
-    PprzLog,
-}
-
 /// One of the transports of this crate, chosen at run time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -60,19 +43,6 @@ pub enum AnyTransport {
     XBee868(XBee868),
     /// PPRZLOG records.
     PprzLog(PprzLog),
-}
-
-impl AnyTransport {
-    /// Which transport this is.
-    pub const fn kind(&self) -> TransportKind {
-        match self {
-            Self::PprzV1(_) => TransportKind::PprzV1,
-            Self::PprzV2(_) => TransportKind::PprzV2,
-            Self::XBee24(_) => TransportKind::XBee24,
-            Self::XBee868(_) => TransportKind::XBee868,
-            Self::PprzLog(_) => TransportKind::PprzLog,
-        }
-    }
 }
 
 macro_rules! dispatch {

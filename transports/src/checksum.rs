@@ -91,7 +91,7 @@ mod tests {
 
     #[test]
     fn pprz_worked_example() {
-        // PROTOCOLS.md worked v2 example, LEN..DATA.
+        // The worked v2 example (ALIVE from aircraft 7, `docs/wire-formats.md`), LEN..DATA.
         assert_eq!(
             pprz(&[0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02]),
             (0x1C, 0xC4)

@@ -91,28 +91,6 @@ impl DecoderStats {
     }
 }
 
-/// An incremental frame decoder; see [`Decoder`] for the one implementation.
-///
-/// Generic code (a datalink reader, a host tool) can take any `impl FrameDecoder`.
-pub trait FrameDecoder {
-    /// Takes bytes from the front of `input` and returns the next verified frame,
-    /// or `None` once `input` is empty and no complete frame is buffered.
-    ///
-    /// `feed` returns `None` only with `input` empty, so
-    /// `while let Some(f) = d.feed(&mut input) { .. }` uses up a whole chunk.
-    fn feed<'d>(&'d mut self, input: &mut &[u8]) -> Option<Frame<'d>>;
-
-    /// End of stream: abandons an incomplete candidate and rescans the buffered
-    /// bytes after its start byte. Call until it returns `None`.
-    fn flush(&mut self) -> Option<Frame<'_>>;
-
-    /// The counters.
-    fn stats(&self) -> &DecoderStats;
-
-    /// Bytes held in the buffer (a candidate frame waiting for its end).
-    fn buffered(&self) -> usize;
-}
-
 /// Incremental decoder for the transport `F`, with an `N`-byte buffer.
 ///
 /// `N` should be at least `framing.max_rx_frame_len()` ([`crate::MAX_FRAME_LEN`],
@@ -187,11 +165,6 @@ impl<F, const N: usize> Decoder<F, N> {
     /// The counters.
     pub const fn stats(&self) -> &DecoderStats {
         &self.stats
-    }
-
-    /// Sets every counter to zero.
-    pub fn reset_stats(&mut self) {
-        self.stats = DecoderStats::default();
     }
 
     /// Drops the buffered bytes (counted as dropped), e.g. after a link reset.
@@ -444,24 +417,6 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
                 Err(e) => self.reject(e),
             }
         }
-    }
-}
-
-impl<F: Framing, const N: usize> FrameDecoder for Decoder<F, N> {
-    fn feed<'d>(&'d mut self, input: &mut &[u8]) -> Option<Frame<'d>> {
-        Decoder::feed(self, input)
-    }
-
-    fn flush(&mut self) -> Option<Frame<'_>> {
-        Decoder::flush(self)
-    }
-
-    fn stats(&self) -> &DecoderStats {
-        Decoder::stats(self)
-    }
-
-    fn buffered(&self) -> usize {
-        Decoder::buffered(self)
     }
 }
 

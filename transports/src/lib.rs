@@ -11,8 +11,8 @@ pub mod pprzlog;
 pub mod transport;
 pub mod xbee;
 
-pub use any::{AnyTransport, TransportKind};
-pub use decoder::{Decoder, DecoderStats, FrameDecoder};
+pub use any::AnyTransport;
+pub use decoder::{Decoder, DecoderStats};
 pub use io::{WriteFrameError, write_frame};
 pub use pprz::{PprzV1, PprzV2};
 pub use pprzlog::PprzLog;

@@ -20,8 +20,8 @@
 //!
 //! # No-panic contract
 //!
-//! [`Packet::new_unchecked`] accessors may panic on a short buffer; once
-//! [`Packet::check_len`] (or [`Packet::new_checked`]) has succeeded, none of them can.
+//! Encoding, [`Framing`] and the [`Decoder`](crate::Decoder) are total: any input,
+//! however short or corrupt, gives a typed error, never a panic.
 
 use crate::checksum;
 use crate::transport::{EncodeError, Encoder, Extra, Frame, Framing, MsgHeader, RxError, TxMeta};
@@ -47,24 +47,10 @@ pub mod field {
     pub const LEN: usize = 1;
     /// First `DATA` byte.
     pub const DATA_START: usize = 2;
-    /// Transport header (STX, LEN).
-    pub const HEADER: Field = STX..DATA_START;
 
-    /// `DATA` of a frame of `frame_len` bytes.
+    /// `DATA` of a frame of `frame_len` bytes (at least [`OVERHEAD`](super::OVERHEAD)).
     pub const fn data(frame_len: usize) -> Field {
-        DATA_START..frame_len - 2
-    }
-    /// Bytes covered by the checksum in a frame of `frame_len` bytes.
-    pub const fn checked(frame_len: usize) -> Field {
-        LEN..frame_len - 2
-    }
-    /// Offset of `CK_A` in a frame of `frame_len` bytes.
-    pub const fn ck_a(frame_len: usize) -> usize {
-        frame_len - 2
-    }
-    /// Offset of `CK_B` in a frame of `frame_len` bytes.
-    pub const fn ck_b(frame_len: usize) -> usize {
-        frame_len - 1
+        DATA_START..frame_len.saturating_sub(super::TAIL_LEN)
     }
 }
 
@@ -72,115 +58,6 @@ pub mod field {
 pub const HEADER_LEN: usize = field::DATA_START;
 /// Length of the transport tail (after `DATA`).
 pub const TAIL_LEN: usize = 2;
-
-/// A zero-copy view of a PPRZ frame in a byte buffer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Packet<T: AsRef<[u8]>> {
-    buffer: T,
-}
-
-impl<T: AsRef<[u8]>> Packet<T> {
-    /// Wraps a buffer without checking it.
-    pub const fn new_unchecked(buffer: T) -> Packet<T> {
-        Packet { buffer }
-    }
-
-    /// Wraps a buffer after [`check_len`](Packet::check_len).
-    pub fn new_checked(buffer: T) -> Result<Packet<T>, RxError> {
-        let packet = Self::new_unchecked(buffer);
-        packet.check_len()?;
-        Ok(packet)
-    }
-
-    /// Checks that the buffer holds the whole frame its `LEN` announces and that
-    /// `LEN` is at least [`OVERHEAD`]. Bytes after the frame are allowed.
-    pub fn check_len(&self) -> Result<(), RxError> {
-        let buf = self.buffer.as_ref();
-        let len = match buf.get(field::LEN) {
-            Some(&len) => usize::from(len),
-            None => return Err(RxError::Truncated),
-        };
-        if len < OVERHEAD {
-            Err(RxError::BadLength)
-        } else if buf.len() < len {
-            Err(RxError::Truncated)
-        } else {
-            Ok(())
-        }
-    }
-
-    /// Returns the buffer.
-    pub fn into_inner(self) -> T {
-        self.buffer
-    }
-
-    /// The start byte.
-    pub fn stx(&self) -> u8 {
-        self.buffer.as_ref()[field::STX]
-    }
-
-    /// The `LEN` field: whole-frame length.
-    pub fn length(&self) -> u8 {
-        self.buffer.as_ref()[field::LEN]
-    }
-
-    /// Whole-frame length as a `usize`.
-    pub fn frame_len(&self) -> usize {
-        usize::from(self.length())
-    }
-
-    /// The checksum bytes `(CK_A, CK_B)` as received.
-    pub fn checksum(&self) -> (u8, u8) {
-        let buf = self.buffer.as_ref();
-        let len = self.frame_len();
-        (buf[field::ck_a(len)], buf[field::ck_b(len)])
-    }
-
-    /// Whether the checksum bytes match the frame.
-    pub fn verify_checksum(&self) -> bool {
-        let buf = self.buffer.as_ref();
-        checksum::pprz(&buf[field::checked(self.frame_len())]) == self.checksum()
-    }
-}
-
-impl<'a, T: AsRef<[u8]> + ?Sized> Packet<&'a T> {
-    /// `DATA`: the message header and fields.
-    pub fn data(&self) -> &'a [u8] {
-        &self.buffer.as_ref()[field::data(self.frame_len())]
-    }
-
-    /// The frame, without bytes after it.
-    pub fn frame(&self) -> &'a [u8] {
-        &self.buffer.as_ref()[..self.frame_len()]
-    }
-}
-
-impl<T: AsRef<[u8]> + AsMut<[u8]>> Packet<T> {
-    /// Sets the start byte.
-    pub fn set_stx(&mut self, value: u8) {
-        self.buffer.as_mut()[field::STX] = value;
-    }
-
-    /// Sets the `LEN` field.
-    pub fn set_length(&mut self, value: u8) {
-        self.buffer.as_mut()[field::LEN] = value;
-    }
-
-    /// Mutable `DATA` (per the `LEN` field).
-    pub fn data_mut(&mut self) -> &mut [u8] {
-        let range = field::data(self.frame_len());
-        &mut self.buffer.as_mut()[range]
-    }
-
-    /// Computes and writes `CK_A`, `CK_B` (per the `LEN` field).
-    pub fn fill_checksum(&mut self) {
-        let len = self.frame_len();
-        let buf = self.buffer.as_mut();
-        let (a, b) = checksum::pprz(&buf[field::checked(len)]);
-        buf[field::ck_a(len)] = a;
-        buf[field::ck_b(len)] = b;
-    }
-}
 
 /// Writes the frame around the message fields already in place, in one pass: `head`
 /// (STX, LEN and the message header) at the start of `frame[..len]`, the checksum in
@@ -223,8 +100,9 @@ fn rx_len(head: &[u8], msg_header_len: usize) -> Result<Option<usize>, RxError> 
     }
 }
 
-/// The frame `LEN` announces at the start of `buf` and its `DATA`, with the errors of
-/// [`Packet::new_checked`].
+/// The frame `LEN` announces at the start of `buf` and its `DATA` (bytes after the frame
+/// are ignored). [`RxError::Truncated`] if `buf` holds no `LEN` byte or fewer bytes than
+/// `LEN` announces, [`RxError::BadLength`] if `LEN` is below [`OVERHEAD`].
 #[inline]
 fn raw_and_data(buf: &[u8]) -> Result<(&[u8], &[u8]), RxError> {
     let len = usize::from(*buf.get(field::LEN).ok_or(RxError::Truncated)?);
@@ -432,8 +310,10 @@ impl Framing for PprzV1 {
 mod tests {
     use super::*;
 
-    /// PROTOCOLS.md worked example: ALIVE (telemetry class 1, id 2) from aircraft 7
-    /// to ground, `md5sum` = uint8[] [0, 1, 2] (count byte 3, then 0 1 2).
+    /// Worked example (also in `docs/wire-formats.md`): ALIVE (telemetry class 1, id 2)
+    /// from aircraft 7 to ground, `md5sum` = uint8[] [0, 1, 2] (count byte 3, then 0 1 2):
+    /// `99 | LEN=0C | 07 00 01 02 | 03 00 01 02 | CK`. Checksum over 0C 07 00 01 02 03 00 01 02:
+    ///   ck_a: 0C, 13, 13, 14, 16, 19, 19, 1A, 1C      ck_b: 0C, 1F, 32, 46, 5C, 75, 8E, A8, C4
     static V2_FRAME: [u8; 12] = [
         0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4,
     ];
@@ -446,24 +326,30 @@ mod tests {
 
     #[test]
     fn test_deconstruct() {
-        let packet = Packet::new_checked(&V2_FRAME[..]).unwrap();
-        assert_eq!(packet.stx(), 0x99);
-        assert_eq!(packet.length(), 12);
-        assert_eq!(packet.data(), &V2_FRAME[2..10]);
-        assert_eq!(packet.checksum(), (0x1C, 0xC4));
-        assert!(packet.verify_checksum());
+        // The frame's parts, through the verified view.
+        let (frame, len) = PprzV2.parse(&V2_FRAME).unwrap();
+        let raw = frame.raw();
+        assert_eq!(raw[field::STX], 0x99);
+        assert_eq!(raw[field::LEN], 12);
+        assert_eq!(len, 12);
+        assert_eq!(frame.data(), &V2_FRAME[2..10]);
+        assert_eq!(&V2_FRAME[field::data(len)], &V2_FRAME[2..10]);
+        assert_eq!((raw[10], raw[11]), (0x1C, 0xC4));
+        assert_eq!(checksum::pprz(&V2_FRAME[field::LEN..10]), (0x1C, 0xC4));
+        assert_eq!(PprzV2.verify(&V2_FRAME), Ok(()));
     }
 
     #[test]
     fn test_construct() {
-        let mut bytes = [0u8; 12];
-        let mut packet = Packet::new_unchecked(&mut bytes[..]);
-        packet.set_stx(STX);
-        packet.set_length(12);
-        packet
-            .data_mut()
-            .copy_from_slice(&[7, 0, 0x01, 2, 3, 0, 1, 2]);
-        packet.fill_checksum();
+        // In place: the fields at `header_len()`, then STX, LEN, the v2 header
+        // (07 00 01 02) and the checksum written around them.
+        let mut bytes = [0xEEu8; 12];
+        let fields_at = PprzV2.header_len();
+        assert_eq!(fields_at, HEADER_LEN + MsgHeader::V2_LEN);
+        bytes[fields_at..fields_at + 4].copy_from_slice(&V2_FIELDS);
+        let meta = TxMeta::new(MsgHeader::new(7, 0, 1, 2));
+        assert_eq!(PprzV2.finish_frame(&meta, &mut bytes, 4), Ok(12));
+        assert_eq!(&bytes[field::data(12)], &[7, 0, 0x01, 2, 3, 0, 1, 2]);
         assert_eq!(bytes, V2_FRAME);
     }
 
@@ -501,17 +387,23 @@ mod tests {
 
     #[test]
     fn test_check_len() {
+        // No LEN byte, or fewer bytes than LEN announces: truncated; LEN below the
+        // framing overhead: bad length. Through `parse` and through the view alone.
+        for t in [PprzV2.into(), PprzV1::new(1).into()] {
+            let t: crate::AnyTransport = t;
+            assert_eq!(t.parse(&[0x99]).unwrap_err(), RxError::Truncated);
+            assert_eq!(t.parse(&[0x99, 3, 0]).unwrap_err(), RxError::BadLength);
+            assert_eq!(t.parse(&V2_FRAME[..11]).unwrap_err(), RxError::Truncated);
+            assert_eq!(t.view(&[0x99]).unwrap_err(), RxError::Truncated);
+            assert_eq!(t.view(&[0x99, 3, 0]).unwrap_err(), RxError::BadLength);
+            assert_eq!(t.view(&V2_FRAME[..11]).unwrap_err(), RxError::Truncated);
+        }
+        // Bytes after the frame are allowed.
+        let mut longer = [0u8; 16];
+        longer[..12].copy_from_slice(&V2_FRAME);
         assert_eq!(
-            Packet::new_checked(&[0x99][..]).unwrap_err(),
-            RxError::Truncated
-        );
-        assert_eq!(
-            Packet::new_checked(&[0x99, 3, 0][..]).unwrap_err(),
-            RxError::BadLength
-        );
-        assert_eq!(
-            Packet::new_checked(&V2_FRAME[..11]).unwrap_err(),
-            RxError::Truncated
+            PprzV2.parse(&longer).map(|(f, n)| (f.raw(), n)),
+            Ok((&V2_FRAME[..], 12))
         );
     }
 

@@ -10,8 +10,9 @@ use pprz_transports::{
     write_frame,
 };
 
-/// PROTOCOLS.md worked v2 example: telemetry ALIVE (class 1, id 2) from aircraft 7 to
-/// ground, md5sum = uint8[] [0, 1, 2].
+/// The worked v2 example of `docs/wire-formats.md`: telemetry ALIVE (class 1, id 2) from
+/// aircraft 7 to ground, md5sum = uint8[] [0, 1, 2]:
+///   99 | LEN 0C | 07 00 01 02 | 03 00 01 02 | CK_A CK_B over 0C..02 = 1C C4
 const V2_EXAMPLE: [u8; 12] = [
     0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4,
 ];
@@ -68,14 +69,14 @@ fn check_alive(o: &Owned) {
 }
 
 #[test]
-fn protocols_md_example_encode() {
+fn v2_example_encode() {
     let mut out = [0u8; MAX_FRAME_LEN];
     let n = PprzV2::new().encode(&META, &FIELDS, &mut out).unwrap();
     assert_eq!(&out[..n], &V2_EXAMPLE);
 }
 
 #[test]
-fn protocols_md_example_encode_in_place() {
+fn v2_example_encode_in_place() {
     let t = PprzV2::new();
     assert_eq!((t.header_len(), t.tail_len()), (6, 2));
     let mut frame = [0xEEu8; 12];
@@ -85,7 +86,7 @@ fn protocols_md_example_encode_in_place() {
 }
 
 #[test]
-fn protocols_md_example_decode() {
+fn v2_example_decode() {
     let mut d: Decoder<PprzV2> = Decoder::new(PprzV2::new());
     let mut input = &V2_EXAMPLE[..];
     let f = d.feed(&mut input).unwrap();
@@ -104,7 +105,7 @@ fn protocols_md_example_decode() {
 }
 
 #[test]
-fn protocols_md_example_write_frame() {
+fn v2_example_write_frame() {
     let mut out = [0u8; 12];
     let mut w = &mut out[..];
     let n = embassy_futures::block_on(write_frame(&mut w, &PprzV2::new(), &META, &FIELDS));

@@ -176,7 +176,7 @@ fn noise_and_bit_flips_deterministic() {
             hidden += check_recovery::<MAX_FRAME_LEN>(t, &b, &sizes);
             total += b.intact.len();
         }
-        eprintln!("{:?}: {} hidden", t.kind(), hidden - before);
+        eprintln!("{t:?}: {} hidden", hidden - before);
     }
     eprintln!("{hidden} of {total} intact frames hidden under valid noise frames");
     // Noise forming a valid frame over a good one is rare (8-bit checksums are the
