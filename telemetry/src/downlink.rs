@@ -18,36 +18,42 @@
 //! reason ([`DeviceStats`]).
 //!
 //! # Set-up
+//! Everything is `const`, so the arena and the downlink are plain `static`s:
+//!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 //! use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Targets};
-//! use pprz_telemetry::messages::telemetry::{Attitude, DlValue};
-//! use pprz_telemetry::pprz_transports::{PprzLog, PprzV2};
-//! use static_cell::StaticCell;
+//! use pprz_telemetry::pprz_transports::{AnyTransport, PprzLog, PprzV2};
+//! use pprz_default::messages::telemetry::Attitude; // any generated message set
 //!
 //! // One arena for the pending frames of every device (size it for the backlog you accept:
 //! // e.g. 4 KiB holds ~50 typical 60-byte frames plus allocator overhead).
 //! static ARENA: FrameArena<M, 4096> = FrameArena::new();
 //! // Two devices, queues of up to 32 frames each.
-//! static DOWNLINK: StaticCell<Downlink<'static, M, 2, 32>> = StaticCell::new();
+//! static DOWNLINK: Downlink<'static, M, 2, 32> = Downlink::new(&ARENA, 7, [
+//!     DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),              // radio
+//!     DeviceConfig::new(AnyTransport::PprzLog(PprzLog::TELEMETRY)).depth(16), // SD card log
+//! ]);
 //!
-//! let downlink = DOWNLINK.init(Downlink::new(
-//!     &ARENA,
-//!     7, // our aircraft id
-//!     [
-//!         DeviceConfig::new(PprzV2::new().into()),              // radio
-//!         DeviceConfig::new(PprzLog::TELEMETRY.into()).depth(16), // SD card log
-//!     ],
-//! ));
-//! // From any task: returns at once.
-//! downlink.send(&Attitude { phi: 0.1, psi: 0.0, theta: 0.0 }).unwrap();
-//! downlink.send_to(&DlValue { index: 1, value: 2.0 }, Targets::only(0), 200).unwrap();
-//! assert_eq!(downlink.stats(0).unwrap().queued, 2);
-//! // Then spawn one writer per device: `run_writer(downlink, 0, &mut uart).await`.
+//! // At start-up: one port per device, each for the device's writer task.
+//! let [radio, log] = DOWNLINK.ports().unwrap();
+//! // spawner.spawn(radio_writer(radio, uart_tx)) with `run_writer(port, uart_tx).await`
+//!
+//! // From any task: returns at once. `sender()` is a copyable handle without the
+//! // downlink's generic parameters.
+//! let tx = DOWNLINK.sender();
+//! let attitude = Attitude { phi: 0.1, psi: 0.0, theta: 0.0 };
+//! tx.send(&attitude).unwrap(); // every device
+//! radio.device().send_with_priority(&attitude, 200).unwrap(); // only the radio
+//! tx.send_to(&attitude, Targets::from(log.device()), 10).unwrap();
+//! assert_eq!(radio.device().stats().queued, 2);
+//! assert_eq!(log.device().stats().queued, 2);
 //! ```
 
 use core::cell::Cell;
 use core::fmt;
+use core::future::poll_fn;
+use core::task::{Context, Poll};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
@@ -106,6 +112,17 @@ struct Route {
     class: u8,
     msg_id: u8,
     priority: u8,
+}
+
+impl Route {
+    #[inline]
+    fn of<Msg: Message>(priority: u8) -> Self {
+        Self {
+            class: Msg::CLASS_ID,
+            msg_id: Msg::ID,
+            priority,
+        }
+    }
 }
 
 /// How a device is used by the downlink.
@@ -216,6 +233,8 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     ac_id: u8,
     /// Global sequence number: the age of a frame across all queues, for eviction.
     seq: Mutex<M, Cell<u32>>,
+    /// Whether [`ports`](Self::ports) handed the ports out already.
+    ports_taken: Mutex<M, Cell<bool>>,
     /// PPRZLOG time stamps, in 100 µs ticks.
     clock: fn() -> u32,
 }
@@ -224,33 +243,44 @@ fn no_clock() -> u32 {
     0
 }
 
+/// [`Downlink::ports`] was called before: each device has one port, handed out once.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PortsTaken;
+
+impl fmt::Display for PortsTaken {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("the downlink's ports were taken already (one writer per device)")
+    }
+}
+
+impl core::error::Error for PortsTaken {}
+
 impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
     const VALID: () = assert!(D > 0 && D <= 32, "a downlink has 1..=32 devices");
 
     /// A downlink for aircraft `ac_id` over `devices`, frames allocated in `arena`.
-    pub fn new(arena: &'a (dyn FrameAlloc + Sync), ac_id: u8, devices: [DeviceConfig; D]) -> Self {
+    /// A `const fn`, so the downlink can be a `static`.
+    pub const fn new(
+        arena: &'a (dyn FrameAlloc + Sync),
+        ac_id: u8,
+        devices: [DeviceConfig; D],
+    ) -> Self {
         let () = Self::VALID;
-        let queues = core::array::from_fn(|i| {
-            let q = FrameQueue::new();
-            let depth = devices[i].depth;
-            if depth > 0 {
-                q.set_depth(depth);
-            }
-            q
-        });
         Self {
             arena,
             devices,
-            queues,
+            queues: [const { FrameQueue::new() }; D],
             ac_id,
             seq: Mutex::new(Cell::new(0)),
+            ports_taken: Mutex::new(Cell::new(false)),
             clock: no_clock,
         }
     }
 
     /// Sets the clock that stamps PPRZLOG records (100 µs ticks, e.g. from
     /// `embassy_time::Instant::now().as_micros() / 100`).
-    pub fn with_clock(mut self, clock: fn() -> u32) -> Self {
+    pub const fn with_clock(mut self, clock: fn() -> u32) -> Self {
         self.clock = clock;
         self
     }
@@ -266,18 +296,8 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
     }
 
     /// The configuration of device `index`.
-    pub fn device(&self, index: usize) -> Option<&DeviceConfig> {
+    pub fn config(&self, index: usize) -> Option<&DeviceConfig> {
         self.devices.get(index)
-    }
-
-    /// The queue of device `index` (for its writer task and for inspection).
-    pub fn queue(&self, index: usize) -> Option<&FrameQueue<'a, M, Q>> {
-        self.queues.get(index)
-    }
-
-    /// The queue and flush setting of device `index`, for [`crate::run_writer`].
-    pub(crate) fn writer_parts(&self, device: usize) -> Option<(&FrameQueue<'a, M, Q>, bool)> {
-        Some((self.queues.get(device)?, self.devices.get(device)?.flush))
     }
 
     /// Statistics of device `index`.
@@ -313,12 +333,7 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
         targets: Targets,
         priority: u8,
     ) -> Result<(), SendError> {
-        let route = Route {
-            class: Msg::CLASS_ID,
-            msg_id: Msg::ID,
-            priority,
-        };
-        self.send_fields(msg, route, targets)
+        self.send_fields(msg, Route::of::<Msg>(priority), targets)
     }
 
     /// The send path of every message type: [`send_to`](Self::send_to) is a thin generic
@@ -359,7 +374,11 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
             }
         }
         for (device, frame) in frames {
-            if self.queues[device].push(priority, seq, frame) == Pushed::Dropped {
+            let depth = match self.devices[device].depth {
+                0 => Q,
+                depth => depth,
+            };
+            if self.queues[device].push(priority, seq, frame, depth) == Pushed::Dropped {
                 error = Some(SendError {
                     device,
                     reason: DropReason::QueueFull,
@@ -433,6 +452,350 @@ impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
             }
         }
         Err(DropReason::ArenaFull)
+    }
+}
+
+impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
+    /// A copyable, type-erased handle that sends through this downlink: what tasks and
+    /// callbacks that only send should hold, so the downlink's mutex, device count and
+    /// queue capacity do not appear in their signatures.
+    pub fn sender(&self) -> Sender<'_> {
+        Sender { core: self }
+    }
+
+    /// The ports of the devices, in the order of the configurations given to
+    /// [`new`](Self::new): one per device, handed out once. Each goes to the device's
+    /// writer task ([`run_writer`](crate::run_writer)); its [`Port::device`] handle names
+    /// the device for readers (replies) and targeted sends.
+    ///
+    /// ```
+    /// # use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+    /// # use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
+    /// # use pprz_telemetry::pprz_transports::{AnyTransport, PprzLog, PprzV2};
+    /// static ARENA: FrameArena<M, 2048> = FrameArena::new();
+    /// static DOWNLINK: Downlink<'static, M, 2, 16> = Downlink::new(&ARENA, 7, [
+    ///     DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+    ///     DeviceConfig::new(AnyTransport::PprzLog(PprzLog::TELEMETRY)),
+    /// ]);
+    /// let [radio, log] = DOWNLINK.ports().unwrap();
+    /// assert_eq!((radio.device().index(), log.device().index()), (0, 1));
+    /// assert!(DOWNLINK.ports().is_err()); // one writer per device
+    /// ```
+    ///
+    /// # Errors
+    /// [`PortsTaken`] if the ports were handed out before.
+    pub fn ports(&self) -> Result<[Port<'_>; D], PortsTaken> {
+        if self.ports_taken.lock(|t| t.replace(true)) {
+            return Err(PortsTaken);
+        }
+        Ok(core::array::from_fn(|index| Port {
+            device: Device {
+                core: self,
+                // D <= 32.
+                index: index as u8,
+            },
+        }))
+    }
+}
+
+/// What the type-erased handles ([`Sender`], [`Device`], [`Port`]) need from a
+/// [`Downlink`] of any mutex, device count and queue capacity.
+trait Core: Sync {
+    fn ac_id(&self) -> u8;
+    fn device_count(&self) -> usize;
+    fn config(&self, device: usize) -> Option<DeviceConfig>;
+    fn send_fields(
+        &self,
+        msg: &dyn EncodeFields,
+        route: Route,
+        targets: Targets,
+    ) -> Result<(), SendError>;
+    fn stats(&self, device: usize) -> Option<DeviceStats>;
+    fn arena_stats(&self) -> ArenaStats;
+    fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>>;
+    fn complete(&self, device: usize, len: usize, written: bool);
+}
+
+impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M, D, Q> {
+    fn ac_id(&self) -> u8 {
+        self.ac_id
+    }
+
+    fn device_count(&self) -> usize {
+        D
+    }
+
+    fn config(&self, device: usize) -> Option<DeviceConfig> {
+        self.devices.get(device).copied()
+    }
+
+    fn send_fields(
+        &self,
+        msg: &dyn EncodeFields,
+        route: Route,
+        targets: Targets,
+    ) -> Result<(), SendError> {
+        Downlink::send_fields(self, msg, route, targets)
+    }
+
+    fn stats(&self, device: usize) -> Option<DeviceStats> {
+        Downlink::stats(self, device)
+    }
+
+    fn arena_stats(&self) -> ArenaStats {
+        Downlink::arena_stats(self)
+    }
+
+    fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>> {
+        self.queues.get(device)?.try_receive(cx)
+    }
+
+    fn complete(&self, device: usize, len: usize, written: bool) {
+        if let Some(q) = self.queues.get(device) {
+            q.complete(len, written);
+        }
+    }
+}
+
+/// A copyable handle that sends through a [`Downlink`] of any size
+/// ([`Downlink::sender`]), like embassy-sync's `DynamicSender`: sending never blocks.
+#[derive(Clone, Copy)]
+pub struct Sender<'d> {
+    core: &'d dyn Core,
+}
+
+impl fmt::Debug for Sender<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Sender")
+            .field("ac_id", &self.core.ac_id())
+            .field("devices", &self.core.device_count())
+            .finish()
+    }
+}
+
+impl<'d> Sender<'d> {
+    /// Sends `msg` to every device at the message's own priority; see
+    /// [`Downlink::send`].
+    ///
+    /// # Errors
+    /// The message was dropped for at least one device (counted there).
+    #[inline]
+    pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.send_to(msg, Targets::ALL, Msg::PRIORITY)
+    }
+
+    /// Sends `msg` to `targets` with `priority`; see [`Downlink::send_to`].
+    ///
+    /// # Errors
+    /// The message was dropped for at least one device (counted there).
+    #[inline]
+    pub fn send_to<Msg: Message>(
+        &self,
+        msg: &Msg,
+        targets: Targets,
+        priority: u8,
+    ) -> Result<(), SendError> {
+        self.core
+            .send_fields(msg, Route::of::<Msg>(priority), targets)
+    }
+
+    /// Our aircraft id.
+    pub fn ac_id(&self) -> u8 {
+        self.core.ac_id()
+    }
+
+    /// Number of devices of the downlink.
+    pub fn devices(&self) -> usize {
+        self.core.device_count()
+    }
+
+    /// Statistics of device `index`.
+    pub fn stats(&self, index: usize) -> Option<DeviceStats> {
+        self.core.stats(index)
+    }
+
+    /// Statistics of the shared arena.
+    pub fn arena_stats(&self) -> ArenaStats {
+        self.core.arena_stats()
+    }
+}
+
+/// Names one device of a [`Downlink`]: obtained from the device's [`Port`], so a reader
+/// given this handle replies on the device its requests came in on, by construction.
+/// Copyable; sending through it never blocks.
+#[derive(Clone, Copy)]
+pub struct Device<'d> {
+    core: &'d dyn Core,
+    index: u8,
+}
+
+impl fmt::Debug for Device<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Device")
+            .field("index", &self.index)
+            .finish_non_exhaustive()
+    }
+}
+
+impl PartialEq for Device<'_> {
+    /// The same device of the same downlink.
+    fn eq(&self, other: &Self) -> bool {
+        core::ptr::addr_eq(self.core, other.core) && self.index == other.index
+    }
+}
+
+impl Eq for Device<'_> {}
+
+impl<'d> Device<'d> {
+    /// The device's index in its downlink (the order of the configurations).
+    pub fn index(&self) -> usize {
+        usize::from(self.index)
+    }
+
+    /// Sends `msg` to this device only, at the message's own priority.
+    ///
+    /// # Errors
+    /// The message was dropped (counted in this device's statistics).
+    #[inline]
+    pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.send_with_priority(msg, Msg::PRIORITY)
+    }
+
+    /// Sends `msg` to this device only, with `priority`.
+    ///
+    /// # Errors
+    /// The message was dropped (counted in this device's statistics).
+    #[inline]
+    pub fn send_with_priority<Msg: Message>(
+        &self,
+        msg: &Msg,
+        priority: u8,
+    ) -> Result<(), SendError> {
+        self.core
+            .send_fields(msg, Route::of::<Msg>(priority), Targets::from(*self))
+    }
+
+    /// Statistics of this device.
+    pub fn stats(&self) -> DeviceStats {
+        self.core.stats(self.index()).unwrap_or_default()
+    }
+
+    /// The configuration of this device.
+    pub fn config(&self) -> DeviceConfig {
+        // A device handle only exists for an index of its downlink.
+        self.core
+            .config(self.index())
+            .unwrap_or(DeviceConfig::new(AnyTransport::PprzV2(
+                pprz_transports::PprzV2::new(),
+            )))
+    }
+
+    /// A handle sending to every device of the same downlink.
+    pub fn sender(&self) -> Sender<'d> {
+        Sender { core: self.core }
+    }
+}
+
+impl From<Device<'_>> for Targets {
+    fn from(device: Device<'_>) -> Self {
+        Targets::only(device.index())
+    }
+}
+
+/// The consumer side of one device's queue, handed out once per device by
+/// [`Downlink::ports`]: for the device's writer task ([`run_writer`](crate::run_writer)),
+/// or for code that drains the queue itself. Not copyable, so a device has one writer.
+pub struct Port<'d> {
+    device: Device<'d>,
+}
+
+impl fmt::Debug for Port<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Port")
+            .field("device", &self.device.index)
+            .finish()
+    }
+}
+
+impl<'d> Port<'d> {
+    /// The handle of this port's device.
+    pub fn device(&self) -> Device<'d> {
+        self.device
+    }
+
+    /// The most important frame waiting, if any. Report how its write went with
+    /// [`Outgoing::finish`]; dropping it unreported counts a failed write.
+    pub fn try_next(&mut self) -> Option<Outgoing<'_>> {
+        let frame = self.device.core.try_receive(self.device.index(), None)?;
+        Some(Outgoing {
+            frame,
+            device: self.device,
+            done: false,
+        })
+    }
+
+    /// Waits for the most important frame; as [`try_next`](Self::try_next).
+    pub async fn next(&mut self) -> Outgoing<'_> {
+        let device = self.device;
+        let frame = poll_fn(|cx| match device.core.try_receive(device.index(), Some(cx)) {
+            Some(frame) => Poll::Ready(frame),
+            None => Poll::Pending,
+        })
+        .await;
+        Outgoing {
+            frame,
+            device,
+            done: false,
+        }
+    }
+}
+
+/// A frame taken from a device's queue: its bytes, to write to the device, then
+/// [`finish`](Self::finish) to count the outcome. Dropped unfinished (e.g. a writer
+/// cancelled mid-write), it counts as a failed write, so every frame is counted once.
+/// Its arena memory is released when it is dropped.
+pub struct Outgoing<'p> {
+    frame: FrameBuf<'p>,
+    device: Device<'p>,
+    done: bool,
+}
+
+impl fmt::Debug for Outgoing<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Outgoing")
+            .field("device", &self.device.index)
+            .field("len", &self.frame.len())
+            .finish()
+    }
+}
+
+impl Outgoing<'_> {
+    /// Counts the frame as sent (`written`) or as a
+    /// [`DropReason::WriteError`] drop, and releases its memory.
+    pub fn finish(mut self, written: bool) {
+        self.done = true;
+        self.device
+            .core
+            .complete(self.device.index(), self.frame.len(), written);
+    }
+}
+
+impl core::ops::Deref for Outgoing<'_> {
+    type Target = [u8];
+
+    fn deref(&self) -> &[u8] {
+        &self.frame
+    }
+}
+
+impl Drop for Outgoing<'_> {
+    fn drop(&mut self) {
+        if !self.done {
+            self.device
+                .core
+                .complete(self.device.index(), self.frame.len(), false);
+        }
+        // The frame's memory returns to the arena after this, when its fields drop.
     }
 }
 

@@ -8,6 +8,10 @@
 //!     ^ evicted first: oldest of the lowest priority         ^ sent next
 //! ```
 //!
+//! This module is internal: the downlink is its only producer, and a device's
+//! [`Port`](crate::Port) its only consumer, so no public path can unbalance the
+//! accounting (every frame pushed is sent, dropped or evicted, and counted once).
+//!
 //! # Why not `embassy_sync::PriorityChannel`
 //! It is a binary heap: equal priorities come out in no particular order unless the key
 //! carries a sequence number, it cannot evict, and its 0.8.0 `poll_ready_to_send` is
@@ -22,8 +26,7 @@
 //! entries), `receive` is O(1); `Q` is the queue capacity, typically 8..64.
 
 use core::cell::RefCell;
-use core::future::poll_fn;
-use core::task::Poll;
+use core::task::Context;
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
@@ -79,8 +82,6 @@ struct State<'a, const Q: usize> {
     /// Invariant: sorted by priority ascending, and within a priority by age descending
     /// (newest first), so the last entry is the most important and oldest.
     entries: heapless::Vec<Entry<'a>, Q>,
-    /// Runtime depth limit, `1..=Q`.
-    depth: usize,
     /// Whether the writer holds a frame taken from this queue, and its priority.
     in_flight: bool,
     in_flight_priority: u8,
@@ -121,8 +122,8 @@ impl<'a, const Q: usize> State<'a, Q> {
 
 /// The priority queue of one device.
 ///
-/// `'a` is the lifetime of the frame arena; `Q` the capacity (the depth can be lowered
-/// at run time with [`set_depth`](Self::set_depth)).
+/// `'a` is the lifetime of the frame arena; `Q` the capacity (each push may set a lower
+/// depth limit).
 pub struct FrameQueue<'a, M: RawMutex, const Q: usize> {
     state: Mutex<M, RefCell<State<'a, Q>>>,
 }
@@ -139,7 +140,6 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         Self {
             state: Mutex::new(RefCell::new(State {
                 entries: heapless::Vec::new(),
-                depth: Q,
                 in_flight: false,
                 in_flight_priority: 0,
                 waker: WakerRegistration::new(),
@@ -174,27 +174,6 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         self.state.lock(|s| f(&mut s.borrow_mut()))
     }
 
-    /// Limits the queue to `depth` frames (clamped to `1..=Q`). Frames beyond a lowered
-    /// depth stay queued; new ones then evict or are dropped.
-    pub fn set_depth(&self, depth: usize) {
-        self.with(|s| s.depth = depth.clamp(1, Q));
-    }
-
-    /// The depth limit.
-    pub fn depth(&self) -> usize {
-        self.with(|s| s.depth)
-    }
-
-    /// Frames waiting (not counting the one being written).
-    pub fn len(&self) -> usize {
-        self.with(|s| s.entries.len())
-    }
-
-    /// Whether no frame is waiting.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// A snapshot of the statistics.
     pub fn stats(&self) -> DeviceStats {
         self.with(|s| s.stats)
@@ -210,16 +189,18 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         });
     }
 
-    /// Queues a frame. When the queue is full, the oldest of its least important frames
-    /// is evicted if it is strictly less important than `priority`; otherwise the new
-    /// frame is dropped. Either way it is counted. Never blocks.
-    pub fn push(&self, priority: u8, seq: u32, frame: FrameBuf<'a>) -> Pushed {
+    /// Queues a frame. When the queue holds `depth` frames (clamped to `1..=Q`), the
+    /// oldest of its least important frames is evicted if it is strictly less important
+    /// than `priority`; otherwise the new frame is dropped. Either way it is counted.
+    /// Never blocks.
+    pub fn push(&self, priority: u8, seq: u32, frame: FrameBuf<'a>, depth: usize) -> Pushed {
+        let depth = depth.clamp(1, Q);
         // Evicted or rejected frames are released after the lock is let go.
         let mut released = None;
         let result = self.with(|s| {
             s.submitted(priority);
             let mut result = Pushed::Queued;
-            if s.entries.len() >= s.depth {
+            if s.entries.len() >= depth {
                 match s.candidate() {
                     Some(i) if s.entries[i].priority < priority => {
                         let victim = s.entries.remove(i);
@@ -290,35 +271,24 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         evicted.is_some()
     }
 
-    /// Takes the most important frame, if any, and marks it in flight.
-    pub fn try_receive(&self) -> Option<FrameBuf<'a>> {
-        self.with(|s| {
-            let entry = s.entries.pop()?;
-            s.in_flight = true;
-            s.in_flight_priority = entry.priority;
-            s.update_queued();
-            Some(entry.frame)
-        })
-    }
-
-    /// Waits for the most important frame and marks it in flight. For the device's one
-    /// writer task; report the outcome with [`complete`](Self::complete).
-    pub async fn receive(&self) -> FrameBuf<'a> {
-        poll_fn(|cx| {
-            self.with(|s| match s.entries.pop() {
-                Some(entry) => {
-                    s.in_flight = true;
-                    s.in_flight_priority = entry.priority;
-                    s.update_queued();
-                    Poll::Ready(entry.frame)
-                }
-                None => {
+    /// Takes the most important frame and marks it in flight; with a context, registers
+    /// the waker when there is none. For the device's one consumer, which reports the
+    /// outcome with [`complete`](Self::complete).
+    pub fn try_receive(&self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
+        self.with(|s| match s.entries.pop() {
+            Some(entry) => {
+                s.in_flight = true;
+                s.in_flight_priority = entry.priority;
+                s.update_queued();
+                Some(entry.frame)
+            }
+            None => {
+                if let Some(cx) = cx {
                     s.waker.register(cx.waker());
-                    Poll::Pending
                 }
-            })
+                None
+            }
         })
-        .await
     }
 
     /// Reports the outcome of writing the in-flight frame of `len` bytes.

@@ -4,26 +4,45 @@
 //!
 //! # One transport per device, one device per transport
 //! A [`Reader`] *owns* its device and its transport's decoder, so the pairing is 1:1 by
-//! construction (the thesis' registration step, enforced by the compiler): a device
-//! cannot be read by two transports, and a decoder cannot read two devices.
+//! construction: a device cannot be read by two transports, and a decoder cannot read
+//! two devices. It also holds the [`Device`] handle of the same device in the downlink,
+//! taken from that device's port, so every message it delivers carries the device its
+//! replies go to.
 //!
 //! ```
-//! use pprz_telemetry::reader::Reader;
-//! use pprz_telemetry::pprz_transports::PprzV2;
-//! let mut uart: &[u8] = &[0x99, 0x08, 0x00, 0x07, 0x02, 0x08, 0x19, 0x49]; // PING, any Read
-//! let radio = Reader::<_, _>::new(&mut uart, PprzV2::new(), 0);
-//! assert_eq!(radio.link(), 0);
+//! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+//! use pprz_telemetry::reader::{Datalink, Reader};
+//! use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
+//! use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
+//!
+//! static ARENA: FrameArena<M, 1024> = FrameArena::new();
+//! static DOWNLINK: Downlink<'static, M, 1, 8> =
+//!     Downlink::new(&ARENA, 7, [DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()))]);
+//! static DATALINK: Datalink<'static, M, 4> = Datalink::new(7);
+//!
+//! let [radio] = DOWNLINK.ports().unwrap();
+//! let uart: &[u8] = &[0x99, 0x08, 0x00, 0x07, 0x02, 0x08, 0x19, 0x49]; // PING, any Read
+//! let mut reader = Reader::<_, _>::new(uart, PprzV2::new(), radio.device());
+//! reader.feed(&[0x99, 0x08, 0x00, 0x07, 0x02, 0x08, 0x19, 0x49], &DATALINK);
+//! assert_eq!(DATALINK.stats().received, 1);
+//! // In a task: `reader.run(&DATALINK).await`, next to `run_writer(radio, uart_tx)`.
 //! ```
 //!
 //! Reading the same device with a second transport does not compile:
 //!
 //! ```compile_fail,E0499
-//! use pprz_telemetry::reader::Reader;
-//! use pprz_telemetry::pprz_transports::{PprzV1, PprzV2};
+//! # use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+//! # use pprz_telemetry::reader::Reader;
+//! # use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
+//! # use pprz_telemetry::pprz_transports::{AnyTransport, PprzV1, PprzV2};
+//! # static ARENA: FrameArena<M, 1024> = FrameArena::new();
+//! # static DOWNLINK: Downlink<'static, M, 1, 8> =
+//! #     Downlink::new(&ARENA, 7, [DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()))]);
+//! # let [radio] = DOWNLINK.ports().unwrap();
 //! let mut uart: &[u8] = &[];
-//! let radio = Reader::<_, _>::new(&mut uart, PprzV2::new(), 0);
-//! let other = Reader::<_, _>::new(&mut uart, PprzV1::new(2), 1); // `uart` is the radio's
-//! drop((radio, other));
+//! let a = Reader::<_, _>::new(&mut uart, PprzV2::new(), radio.device());
+//! let b = Reader::<_, _>::new(&mut uart, PprzV1::new(2), radio.device()); // `uart` is a's
+//! drop((a, b));
 //! ```
 //!
 //! # Destination filtering
@@ -39,7 +58,6 @@
 //! not cancel-safe should set the idle time to `None`.)
 
 use core::cell::RefCell;
-use core::convert::Infallible;
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
@@ -48,7 +66,8 @@ use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::Read;
 use pprz_transports::{BROADCAST_ID, Decoder, DecoderStats, Frame, Framing, MAX_FRAME_LEN};
 
-use crate::registry::{Received, Registry};
+use crate::downlink::Device;
+use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber};
 
 /// Counters of the uplink (all readers of one [`Datalink`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -66,20 +85,35 @@ pub struct UplinkStats {
     pub last_received: Option<Instant>,
 }
 
-/// The uplink side of an aircraft: its id and the subscribers of received messages.
-/// Shared by all readers.
+/// Where a [`Reader`] delivers the frames it decodes on devices that live for `'d`:
+/// a [`Datalink`], or a structure built around one.
+pub trait Inbox<'d> {
+    /// Handles one decoded frame.
+    fn deliver(&self, rx: &Received<'_, 'd>);
+    /// Counts an error reported by the device's `read`.
+    fn read_error(&self);
+}
+
+/// A built-in handler run before the subscribers (the one-link facade's services).
+pub(crate) trait Handler<'d> {
+    /// Handles `rx` if it is one of its messages; returns whether it was.
+    fn handle(&self, rx: &Received<'_, 'd>) -> bool;
+}
+
+/// The uplink side of an aircraft: its id, the subscribers of received messages and
+/// the uplink counters. Shared by all readers; `const`, so it can be a `static`.
 pub struct Datalink<'a, M: RawMutex, const N: usize> {
     ac_id: u8,
-    registry: Registry<'a, N>,
+    registry: Registry<'a, M, N>,
     stats: Mutex<M, RefCell<UplinkStats>>,
 }
 
 impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
-    /// The datalink of aircraft `ac_id`, with a registry filled at start-up.
-    pub const fn new(ac_id: u8, registry: Registry<'a, N>) -> Self {
+    /// The datalink of aircraft `ac_id`, with an empty registry of `N` subscriptions.
+    pub const fn new(ac_id: u8) -> Self {
         Self {
             ac_id,
-            registry,
+            registry: Registry::new(),
             stats: Mutex::new(RefCell::new(UplinkStats {
                 received: 0,
                 not_for_us: 0,
@@ -95,6 +129,23 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
         self.ac_id
     }
 
+    /// Subscribes to received messages; see [`Registry::subscribe`].
+    ///
+    /// # Errors
+    /// [`RegistryFull`] when `N` subscriptions exist already.
+    pub fn subscribe(
+        &self,
+        filter: Filter,
+        subscriber: &'a dyn Subscriber<'a>,
+    ) -> Result<(), RegistryFull> {
+        self.registry.subscribe(filter, subscriber)
+    }
+
+    /// The subscriber registry.
+    pub fn registry(&self) -> &Registry<'a, M, N> {
+        &self.registry
+    }
+
     /// A snapshot of the uplink counters.
     pub fn stats(&self) -> UplinkStats {
         self.stats.lock(|s| *s.borrow())
@@ -104,46 +155,67 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
         self.stats.lock(|s| f(&mut s.borrow_mut()));
     }
 
-    /// Handles one decoded frame received on `link`: destination filter, counters,
-    /// subscribers.
-    pub fn handle(&self, link: usize, frame: Frame<'_>) {
+    /// Applies the destination filter and counts: whether `frame` is for us.
+    fn accept(&self, frame: &Frame<'_>) -> bool {
         if let Some(dest) = frame.destination()
             && dest != self.ac_id
             && dest != BROADCAST_ID
         {
             self.count(|s| s.not_for_us = s.not_for_us.wrapping_add(1));
-            return;
+            return false;
         }
         let now = Instant::now();
         self.count(|s| {
             s.received = s.received.wrapping_add(1);
             s.last_received = Some(now);
         });
-        if self.registry.dispatch(&Received { link, frame }) == 0 {
+        true
+    }
+
+    /// Handles one received frame: destination filter, counters, then `first` (built-in
+    /// services, if any) and the registry's subscribers.
+    pub(crate) fn deliver_with(&self, rx: &Received<'_, 'a>, first: Option<&dyn Handler<'a>>) {
+        if !self.accept(&rx.frame) {
+            return;
+        }
+        let by_first = first.is_some_and(|f| f.handle(rx));
+        let by_subscribers = self.registry.dispatch(rx) > 0;
+        if !(by_first || by_subscribers) {
             self.count(|s| s.unhandled = s.unhandled.wrapping_add(1));
         }
     }
 }
 
+impl<'a, M: RawMutex, const N: usize> Inbox<'a> for Datalink<'a, M, N> {
+    fn deliver(&self, rx: &Received<'_, 'a>) {
+        self.deliver_with(rx, None);
+    }
+
+    fn read_error(&self) {
+        self.count(|s| s.read_errors = s.read_errors.wrapping_add(1));
+    }
+}
+
 /// Reads one device with one transport; see the [module documentation](self).
 ///
-/// `N` is the decoder's buffer: the longest frame it can hold.
-pub struct Reader<R, F: Framing, const N: usize = MAX_FRAME_LEN> {
+/// `'d` is the lifetime of the downlink whose [`Device`] handle the reader holds; `N` is
+/// the decoder's buffer: the longest frame it can hold.
+pub struct Reader<'d, R, F: Framing, const N: usize = MAX_FRAME_LEN> {
     io: R,
     decoder: Decoder<F, N>,
-    link: usize,
+    device: Device<'d>,
     idle: Option<Duration>,
 }
 
-impl<R: Read, F: Framing, const N: usize> Reader<R, F, N> {
-    /// A reader of `io` with `framing`; `link` names it in [`Received::link`] (by
-    /// convention the index of the same device in the downlink, for replies). Idle flush
-    /// after 20 ms.
-    pub fn new(io: R, framing: F, link: usize) -> Self {
+impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
+    /// A reader of `io` with `framing`, for the device `device` of the downlink (from
+    /// the device's [`Port::device`](crate::Port::device)): messages it delivers carry
+    /// that device, where replies go. Idle flush after 20 ms.
+    pub fn new(io: R, framing: F, device: Device<'d>) -> Self {
         Self {
             io,
             decoder: Decoder::new(framing),
-            link,
+            device,
             idle: Some(Duration::from_millis(20)),
         }
     }
@@ -154,9 +226,9 @@ impl<R: Read, F: Framing, const N: usize> Reader<R, F, N> {
         self
     }
 
-    /// The link index.
-    pub fn link(&self) -> usize {
-        self.link
+    /// The device this reader reads (and replies on).
+    pub fn device(&self) -> Device<'d> {
+        self.device
     }
 
     /// Counters of this reader's decoder (frames, checksum errors, ...).
@@ -164,40 +236,48 @@ impl<R: Read, F: Framing, const N: usize> Reader<R, F, N> {
         *self.decoder.stats()
     }
 
-    /// Feeds bytes that arrived by other means (a DMA buffer, a datagram), handling every
-    /// complete frame; returns how many frames were decoded.
-    pub fn feed<M: RawMutex, const S: usize>(
-        &mut self,
-        bytes: &[u8],
-        datalink: &Datalink<'_, M, S>,
-    ) -> usize {
+    /// Feeds bytes that arrived by other means (a DMA buffer, a datagram), delivering
+    /// every complete frame to `inbox`; returns how many frames were decoded.
+    pub fn feed<'x, I: Inbox<'x> + ?Sized>(&mut self, bytes: &[u8], inbox: &I) -> usize
+    where
+        'd: 'x,
+    {
         let mut input = bytes;
         let mut frames = 0;
         // Frames that arrived whole in `bytes` are read in place, without a copy.
         while let Some(frame) = self.decoder.feed_borrowed(&mut input) {
-            datalink.handle(self.link, frame);
+            inbox.deliver(&Received {
+                device: self.device,
+                frame,
+            });
             frames += 1;
         }
         frames
     }
 
-    /// End of input or idle line: handles the frames held behind an incomplete false
+    /// End of input or idle line: delivers the frames held behind an incomplete false
     /// start; returns how many.
-    pub fn flush<M: RawMutex, const S: usize>(&mut self, datalink: &Datalink<'_, M, S>) -> usize {
+    pub fn flush<'x, I: Inbox<'x> + ?Sized>(&mut self, inbox: &I) -> usize
+    where
+        'd: 'x,
+    {
         let mut frames = 0;
         while let Some(frame) = self.decoder.flush() {
-            datalink.handle(self.link, frame);
+            inbox.deliver(&Received {
+                device: self.device,
+                frame,
+            });
             frames += 1;
         }
         frames
     }
 
-    /// Reads and dispatches forever. Read errors are counted and reading goes on (after
-    /// a short pause, so a failing device cannot spin the executor).
-    pub async fn run<M: RawMutex, const S: usize>(
-        &mut self,
-        datalink: &Datalink<'_, M, S>,
-    ) -> Infallible {
+    /// Reads and delivers forever. Read errors are counted and reading goes on (after a
+    /// short pause, so a failing device cannot spin the executor).
+    pub async fn run<'x, I: Inbox<'x> + ?Sized>(&mut self, inbox: &I) -> !
+    where
+        'd: 'x,
+    {
         let mut buf = [0u8; 64];
         loop {
             let pending = self.decoder.buffered() > 0;
@@ -213,16 +293,16 @@ impl<R: Read, F: Framing, const N: usize> Reader<R, F, N> {
             match read {
                 Some(Ok(0)) | None => {
                     // End of input or idle line.
-                    self.flush(datalink);
+                    self.flush(inbox);
                     if matches!(read, Some(Ok(0))) {
                         Timer::after(Duration::from_millis(10)).await;
                     }
                 }
                 Some(Ok(n)) => {
-                    self.feed(buf.get(..n).unwrap_or_default(), datalink);
+                    self.feed(buf.get(..n).unwrap_or_default(), inbox);
                 }
                 Some(Err(_)) => {
-                    datalink.count(|s| s.read_errors = s.read_errors.wrapping_add(1));
+                    inbox.read_error();
                     Timer::after(Duration::from_millis(10)).await;
                 }
             }

@@ -9,22 +9,22 @@
 //!
 //! ```
 //! use core::sync::atomic::{AtomicU32, Ordering};
-//! use pprz_telemetry::registry::{Filter, Registry};
-//! use pprz_telemetry::messages::datalink::Block;
-//! use pprz_messages::Decode;
+//! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+//! use pprz_telemetry::registry::{Filter, Received, Registry};
+//! use pprz_default::messages::datalink::Block; // any generated message set
 //!
 //! static BLOCKS: AtomicU32 = AtomicU32::new(0);
-//! let on_block = |rx: &pprz_telemetry::registry::Received<'_>| {
+//! fn on_block(rx: &Received<'_, '_>) {
 //!     if let Ok(block) = rx.decode::<Block>() {
 //!         BLOCKS.fetch_add(u32::from(block.block_id), Ordering::Relaxed);
 //!     }
-//! };
-//! let mut registry: Registry<'_, 8> = Registry::new();
-//! registry.subscribe(Filter::message::<Block>(), &on_block).unwrap();
-//! assert_eq!(registry.len(), 1);
+//! }
+//! static REGISTRY: Registry<'static, M, 8> = Registry::new();
+//! REGISTRY.subscribe(Filter::message::<Block>(), &on_block).unwrap();
+//! assert_eq!(REGISTRY.len(), 1);
 //! ```
 
-use core::cell::Cell;
+use core::cell::{Cell, RefCell};
 use core::fmt;
 
 use embassy_sync::blocking_mutex::Mutex;
@@ -33,18 +33,20 @@ use embassy_sync::channel::Channel;
 use pprz_messages::{Decode, DecodeError, Message};
 use pprz_transports::Frame;
 
-/// A message received on a link: the checksum-verified frame view and where it came
-/// from.
+use crate::downlink::{Device, SendError};
+
+/// A message received on a device: the checksum-verified frame view (borrowed from the
+/// reader's buffer for `'f`) and the device it came in on (the reader's, a handle that
+/// lives for `'d`), where [`reply`](Self::reply) sends.
 #[derive(Debug, Clone, Copy)]
-pub struct Received<'f> {
-    /// The link (reader) it came from: by convention the index of the same device in the
-    /// downlink, so replies go out where the request came in.
-    pub link: usize,
+pub struct Received<'f, 'd> {
+    /// The device it came in on.
+    pub device: Device<'d>,
     /// The frame: source, destination, class, component, message id, payload.
     pub frame: Frame<'f>,
 }
 
-impl<'f> Received<'f> {
+impl<'f, 'd> Received<'f, 'd> {
     /// Class id of the message.
     pub fn class_id(&self) -> u8 {
         self.frame.class()
@@ -74,18 +76,27 @@ impl<'f> Received<'f> {
         }
         M::decode(self.payload())
     }
+
+    /// Sends `msg` on the device the message came in on, at `msg`'s priority; never
+    /// blocks.
+    ///
+    /// # Errors
+    /// The reply was dropped (counted in that device's statistics).
+    pub fn reply<M: Message>(&self, msg: &M) -> Result<(), SendError> {
+        self.device.send(msg)
+    }
 }
 
-/// Something that handles received messages. Implemented for every
-/// `Fn(&Received) + Sync` closure or function.
-pub trait Subscriber: Sync {
+/// Something that handles received messages arriving on devices that live for `'d`.
+/// Implemented for every `Fn(&Received<'_, '_>) + Sync` closure or function.
+pub trait Subscriber<'d>: Sync {
     /// Handles one message. Called by the reader task: keep it short, or hand the
     /// message to a task (see [`ChannelSubscriber`]).
-    fn on_message(&self, rx: &Received<'_>);
+    fn on_message(&self, rx: &Received<'_, 'd>);
 }
 
-impl<F: Fn(&Received<'_>) + Sync> Subscriber for F {
-    fn on_message(&self, rx: &Received<'_>) {
+impl<'d, F: Fn(&Received<'_, 'd>) + Sync> Subscriber<'d> for F {
+    fn on_message(&self, rx: &Received<'_, 'd>) {
         self(rx)
     }
 }
@@ -150,58 +161,98 @@ impl fmt::Display for RegistryFull {
 impl core::error::Error for RegistryFull {}
 
 /// Up to `N` subscriptions, in registration order.
-pub struct Registry<'a, const N: usize> {
-    entries: heapless::Vec<(Filter, &'a dyn Subscriber), N>,
+///
+/// Subscriptions are added through `&self` (at start-up, typically), so a registry can
+/// be a `static`; `M` protects the list (each lock is short and never held while a
+/// subscriber runs, so a subscriber may use the registry).
+pub struct Registry<'a, M: RawMutex, const N: usize> {
+    /// `entries[..len]` are the subscriptions. (A plain array: no drop glue, so a
+    /// subscriber may borrow the structure that holds the registry.)
+    inner: Mutex<M, RefCell<Subscriptions<'a, N>>>,
 }
 
-impl<'a, const N: usize> Registry<'a, N> {
+struct Subscriptions<'a, const N: usize> {
+    len: usize,
+    entries: [Option<(Filter, &'a dyn Subscriber<'a>)>; N],
+}
+
+impl<'a, M: RawMutex, const N: usize> Registry<'a, M, N> {
     /// An empty registry.
     pub const fn new() -> Self {
         Self {
-            entries: heapless::Vec::new(),
+            inner: Mutex::new(RefCell::new(Subscriptions {
+                len: 0,
+                entries: [None; N],
+            })),
         }
     }
 
-    /// Adds a subscription (at start-up, before the readers run).
+    /// Adds a subscription.
     ///
     /// # Errors
     /// [`RegistryFull`] when `N` subscriptions exist already.
     pub fn subscribe(
-        &mut self,
+        &self,
         filter: Filter,
-        subscriber: &'a dyn Subscriber,
+        subscriber: &'a dyn Subscriber<'a>,
     ) -> Result<(), RegistryFull> {
-        self.entries
-            .push((filter, subscriber))
-            .map_err(|_| RegistryFull { capacity: N })
+        self.inner.lock(|s| {
+            let mut s = s.borrow_mut();
+            let len = s.len;
+            let slot = s
+                .entries
+                .get_mut(len)
+                .ok_or(RegistryFull { capacity: N })?;
+            *slot = Some((filter, subscriber));
+            s.len = len + 1;
+            Ok(())
+        })
     }
 
     /// Number of subscriptions.
     pub fn len(&self) -> usize {
-        self.entries.len()
+        self.inner.lock(|s| s.borrow().len)
     }
 
     /// Whether there is no subscription.
     pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
+        self.len() == 0
     }
 
     /// Calls every subscriber whose filter matches, in registration order; returns how
     /// many were called.
-    pub fn dispatch(&self, rx: &Received<'_>) -> usize {
+    pub fn dispatch(&self, rx: &Received<'_, 'a>) -> usize {
         let (class_id, msg_id) = (rx.class_id(), rx.msg_id());
         let mut called = 0;
-        for (filter, subscriber) in &self.entries {
-            if filter.matches(class_id, msg_id) {
-                subscriber.on_message(rx);
-                called += 1;
-            }
+        let mut from = 0;
+        while let Some((subscriber, next)) = self.find(from, class_id, msg_id) {
+            subscriber.on_message(rx);
+            called += 1;
+            from = next;
         }
         called
     }
+
+    /// The first subscriber from slot `from` on whose filter matches, and the slot after
+    /// it; the lock is released before the subscriber is called.
+    fn find(
+        &self,
+        from: usize,
+        class_id: u8,
+        msg_id: u8,
+    ) -> Option<(&'a dyn Subscriber<'a>, usize)> {
+        self.inner.lock(|s| {
+            let s = s.borrow();
+            let entries = s.entries.get(from..s.len)?;
+            entries.iter().enumerate().find_map(|(i, e)| {
+                e.filter(|(f, _)| f.matches(class_id, msg_id))
+                    .map(|(_, sub)| (sub, from + i + 1))
+            })
+        })
+    }
 }
 
-impl<const N: usize> Default for Registry<'_, N> {
+impl<M: RawMutex, const N: usize> Default for Registry<'_, M, N> {
     fn default() -> Self {
         Self::new()
     }
@@ -209,9 +260,9 @@ impl<const N: usize> Default for Registry<'_, N> {
 
 /// A received message copied out of the reader's buffer, for async subscribers.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct OwnedMessage {
-    /// The link it came from.
-    pub link: usize,
+pub struct OwnedMessage<'d> {
+    /// The device it came in on (where [`reply`](Self::reply) sends).
+    pub device: Device<'d>,
     /// Sender id.
     pub source: u8,
     /// Destination id (`None` on PPRZ v1, which has none).
@@ -226,12 +277,12 @@ pub struct OwnedMessage {
     pub payload: heapless::Vec<u8, 256>,
 }
 
-impl OwnedMessage {
+impl<'d> OwnedMessage<'d> {
     /// Copies a received message; `None` if its payload exceeds 256 bytes (no Paparazzi
     /// transport carries that much).
-    pub fn copy(rx: &Received<'_>) -> Option<Self> {
+    pub fn copy(rx: &Received<'_, 'd>) -> Option<Self> {
         Some(Self {
-            link: rx.link,
+            device: rx.device,
             source: rx.frame.source(),
             destination: rx.frame.destination(),
             class_id: rx.class_id(),
@@ -254,6 +305,14 @@ impl OwnedMessage {
         }
         M::decode(&self.payload)
     }
+
+    /// Sends `msg` on the device the message came in on; as [`Received::reply`].
+    ///
+    /// # Errors
+    /// The reply was dropped (counted in that device's statistics).
+    pub fn reply<M: Message>(&self, msg: &M) -> Result<(), SendError> {
+        self.device.send(msg)
+    }
 }
 
 /// Feeds an async subscriber task through a [`Channel`] of capacity `K`: the reader
@@ -265,22 +324,22 @@ impl OwnedMessage {
 /// use pprz_telemetry::registry::{ChannelSubscriber, Filter, OwnedMessage, Registry};
 /// # use critical_section as _;
 ///
-/// static INBOX: Channel<M, OwnedMessage, 4> = Channel::new();
+/// static INBOX: Channel<M, OwnedMessage<'static>, 4> = Channel::new();
 /// static NAV: ChannelSubscriber<'static, M, 4> = ChannelSubscriber::new(&INBOX);
+/// static REGISTRY: Registry<'static, M, 8> = Registry::new();
 ///
-/// let mut registry: Registry<'static, 8> = Registry::new();
-/// registry.subscribe(Filter::Class(2), &NAV).unwrap();
+/// REGISTRY.subscribe(Filter::Class(2), &NAV).unwrap();
 /// // In the navigation task: `let msg = INBOX.receive().await;`
 /// assert_eq!(NAV.dropped(), 0);
 /// ```
 pub struct ChannelSubscriber<'c, M: RawMutex, const K: usize> {
-    channel: &'c Channel<M, OwnedMessage, K>,
+    channel: &'c Channel<M, OwnedMessage<'c>, K>,
     dropped: Mutex<M, Cell<u32>>,
 }
 
 impl<'c, M: RawMutex, const K: usize> ChannelSubscriber<'c, M, K> {
     /// A subscriber that forwards into `channel`.
-    pub const fn new(channel: &'c Channel<M, OwnedMessage, K>) -> Self {
+    pub const fn new(channel: &'c Channel<M, OwnedMessage<'c>, K>) -> Self {
         Self {
             channel,
             dropped: Mutex::new(Cell::new(0)),
@@ -293,8 +352,8 @@ impl<'c, M: RawMutex, const K: usize> ChannelSubscriber<'c, M, K> {
     }
 }
 
-impl<M: RawMutex + Sync, const K: usize> Subscriber for ChannelSubscriber<'_, M, K> {
-    fn on_message(&self, rx: &Received<'_>) {
+impl<'c, M: RawMutex + Sync, const K: usize> Subscriber<'c> for ChannelSubscriber<'c, M, K> {
+    fn on_message(&self, rx: &Received<'_, 'c>) {
         let sent = OwnedMessage::copy(rx).is_some_and(|m| self.channel.try_send(m).is_ok());
         if !sent {
             self.dropped.lock(|d| d.set(d.get().wrapping_add(1)));

@@ -28,8 +28,9 @@
 //! executor), the missed ticks run at once, so the tick count stays locked to time.
 //!
 //! # Modes
-//! Each process has an active mode, the first one at start-up. [`set_mode`] (or the
-//! ground, through a [`ModeSetting`] in the settings table) switches it; the switch takes
+//! Each process has an active mode, the first one at start-up, held in a [`Modes`] that
+//! the scheduler reads. [`set_mode`] (or the ground, through a [`ModeSetting`] in the
+//! settings table) switches it; the switch takes
 //! effect from the next tick on (a callback switching modes does not change the tick that
 //! is running). Because phases are relative to the global tick count, switching is
 //! immediate and deterministic: the messages of the new mode fire on their next due tick,
@@ -48,11 +49,12 @@
 //! ```
 //! use core::sync::atomic::{AtomicU32, Ordering};
 //! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-//! use pprz_telemetry::periodic::{self, main};
-//! use pprz_telemetry::scheduler::Scheduler;
+//! use pprz_default::periodic::{self, main}; // any generated schedule
+//! use pprz_telemetry::scheduler::{Modes, Scheduler};
 //!
+//! static MODES: Modes<'static, { periodic::PROCESSES }> = Modes::new(&periodic::SCHEDULE);
 //! static SCHEDULER: Scheduler<'static, CriticalSectionRawMutex, { periodic::PROCESSES }, 8> =
-//!     Scheduler::new(&periodic::SCHEDULE);
+//!     Scheduler::new(&MODES);
 //! static ALIVE_SENT: AtomicU32 = AtomicU32::new(0);
 //!
 //! fn send_alive() {
@@ -67,16 +69,17 @@
 //! }
 //! // ALIVE every 2.1 s in the default mode: ticks 0, 126, ... over a minute.
 //! assert_eq!(ALIVE_SENT.load(Ordering::Relaxed), 29);
-//! SCHEDULER.set_mode(main::PROCESS, main::MODE_DEBUG).unwrap();
-//! assert_eq!(SCHEDULER.mode(main::PROCESS), Some(main::MODE_DEBUG));
+//! MODES.set_mode(main::PROCESS, main::MODE_DEBUG).unwrap(); // or SETTING from the ground
+//! assert_eq!(MODES.mode(main::PROCESS), Some(main::MODE_DEBUG));
 //! ```
 //!
 //! [`tick`]: Scheduler::tick
-//! [`set_mode`]: Scheduler::set_mode
+//! [`set_mode`]: Modes::set_mode
 //! [`register`]: Scheduler::register
 
 use core::cell::RefCell;
 use core::fmt;
+use core::sync::atomic::{AtomicUsize, Ordering};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
@@ -283,8 +286,7 @@ struct Entry<'a> {
     callback: Callback<'a>,
 }
 
-struct Inner<'a, const P: usize, const C: usize> {
-    modes: [usize; P],
+struct Inner<'a, const C: usize> {
     stats: SchedulerStats,
     /// Registered callbacks in `entries[..stats.callbacks]`, in registration order.
     /// (A plain array: the scheduler has no drop glue, so a callback may borrow the
@@ -292,10 +294,97 @@ struct Inner<'a, const P: usize, const C: usize> {
     entries: [Option<Entry<'a>>; C],
 }
 
-/// Runs a [`Schedule`]: `P` is the number of processes it can hold (at least the
-/// schedule's; the generated `PROCESSES` constant), `C` the number of callbacks.
+/// The active mode of each process of a [`Schedule`] (at most `P` processes; the
+/// generated `PROCESSES` constant), separate from the [`Scheduler`] that reads it, so
+/// the settings table (which the ground writes through) can switch modes without
+/// borrowing the scheduler and its callbacks. `const`, so it can be a `static`; every
+/// process starts in its first mode.
+pub struct Modes<'a, const P: usize> {
+    schedule: &'a Schedule<'a>,
+    active: [AtomicUsize; P],
+}
+
+impl<'a, const P: usize> Modes<'a, P> {
+    /// The modes of `schedule`, every process in its first mode.
+    ///
+    /// # Panics
+    /// If the schedule has more than `P` processes or a tick frequency of 0 (at compile
+    /// time when evaluated in a constant context, e.g. a `static`).
+    pub const fn new(schedule: &'a Schedule<'a>) -> Self {
+        assert!(
+            schedule.processes.len() <= P,
+            "the schedule has more processes than the modes' P"
+        );
+        assert!(schedule.frequency_hz > 0, "the tick frequency is 0 Hz");
+        Self {
+            schedule,
+            active: [const { AtomicUsize::new(0) }; P],
+        }
+    }
+
+    /// The schedule.
+    pub fn schedule(&self) -> &'a Schedule<'a> {
+        self.schedule
+    }
+
+    /// The active mode of `process`.
+    pub fn mode(&self, process: usize) -> Option<usize> {
+        if process >= self.schedule.processes.len() {
+            return None;
+        }
+        self.active.get(process).map(|m| m.load(Ordering::Relaxed))
+    }
+
+    /// Switches `process` to `mode` (indices in the schedule; the generated
+    /// `periodic::<process>::PROCESS` and `MODE_*` constants), from the scheduler's next
+    /// tick on.
+    ///
+    /// # Errors
+    /// Unknown process or mode.
+    pub fn set_mode(&self, process: usize, mode: usize) -> Result<(), ModeError> {
+        let p = self
+            .schedule
+            .processes
+            .get(process)
+            .ok_or(ModeError::UnknownProcess)?;
+        if mode >= p.modes.len() {
+            return Err(ModeError::UnknownMode);
+        }
+        let slot = self.active.get(process).ok_or(ModeError::UnknownProcess)?;
+        slot.store(mode, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Switches a process to a mode by their names; as [`set_mode`](Self::set_mode).
+    ///
+    /// # Errors
+    /// Unknown process or mode.
+    pub fn set_mode_by_name(&self, process: &str, mode: &str) -> Result<(), ModeError> {
+        let p = self
+            .schedule
+            .process_index(process)
+            .ok_or(ModeError::UnknownProcess)?;
+        let m = self.schedule.processes[p]
+            .mode_index(mode)
+            .ok_or(ModeError::UnknownMode)?;
+        self.set_mode(p, m)
+    }
+
+    /// The active mode of `process` as a setting, for the settings table of the
+    /// datalink services
+    /// ([`Settings::add_mode`](crate::services::Settings::add_mode)).
+    ///
+    /// # Errors
+    /// [`ModeError::UnknownProcess`].
+    pub fn setting(&self, process: usize) -> Result<ModeSetting<'_>, ModeError> {
+        ModeSetting::new(self, process)
+    }
+}
+
+/// Runs a [`Schedule`] whose active modes are in a [`Modes`] of `P` processes; `C` is
+/// the number of callbacks.
 ///
-/// `M` protects the active modes, the counters and the callback list (each lock is
+/// `M` protects the counters and the callback list (each lock is
 /// short and never held while a callback runs): `CriticalSectionRawMutex` to share the
 /// scheduler between tasks and interrupts (e.g. a `static`), `NoopRawMutex` within one
 /// executor.
@@ -304,25 +393,17 @@ struct Inner<'a, const P: usize, const C: usize> {
 /// due message one scan of the `C` callback slots.
 pub struct Scheduler<'a, M: RawMutex, const P: usize, const C: usize> {
     schedule: &'a Schedule<'a>,
-    inner: Mutex<M, RefCell<Inner<'a, P, C>>>,
+    modes: &'a Modes<'a, P>,
+    inner: Mutex<M, RefCell<Inner<'a, C>>>,
 }
 
 impl<'a, M: RawMutex, const P: usize, const C: usize> Scheduler<'a, M, P, C> {
-    /// A scheduler for `schedule`, every process in its first mode, no callbacks.
-    ///
-    /// # Panics
-    /// If the schedule has more than `P` processes or a tick frequency of 0 (at compile
-    /// time when evaluated in a constant context, e.g. a `static`).
-    pub const fn new(schedule: &'a Schedule<'a>) -> Self {
-        assert!(
-            schedule.processes.len() <= P,
-            "the schedule has more processes than the scheduler's P"
-        );
-        assert!(schedule.frequency_hz > 0, "the tick frequency is 0 Hz");
+    /// A scheduler for the schedule of `modes`, no callbacks.
+    pub const fn new(modes: &'a Modes<'a, P>) -> Self {
         Self {
-            schedule,
+            schedule: modes.schedule,
+            modes,
             inner: Mutex::new(RefCell::new(Inner {
-                modes: [0; P],
                 stats: SchedulerStats {
                     ticks: 0,
                     due: 0,
@@ -415,66 +496,9 @@ impl<'a, M: RawMutex, const P: usize, const C: usize> Scheduler<'a, M, P, C> {
         })
     }
 
-    /// The active mode of `process`.
-    pub fn mode(&self, process: usize) -> Option<usize> {
-        if process >= self.schedule.processes.len() {
-            return None;
-        }
-        self.inner
-            .lock(|inner| inner.borrow().modes.get(process).copied())
-    }
-
-    /// Switches `process` to `mode` (indices in the schedule; the generated
-    /// `periodic::<process>::PROCESS` and `MODE_*` constants), from the next tick on.
-    ///
-    /// # Errors
-    /// Unknown process or mode.
-    pub fn set_mode(&self, process: usize, mode: usize) -> Result<(), ModeError> {
-        let p = self
-            .schedule
-            .processes
-            .get(process)
-            .ok_or(ModeError::UnknownProcess)?;
-        if mode >= p.modes.len() {
-            return Err(ModeError::UnknownMode);
-        }
-        self.inner.lock(|inner| {
-            let mut inner = inner.borrow_mut();
-            match inner.modes.get_mut(process) {
-                Some(m) => {
-                    *m = mode;
-                    Ok(())
-                }
-                None => Err(ModeError::UnknownProcess),
-            }
-        })
-    }
-
-    /// Switches a process to a mode by their names; as [`set_mode`](Self::set_mode).
-    ///
-    /// # Errors
-    /// Unknown process or mode.
-    pub fn set_mode_by_name(&self, process: &str, mode: &str) -> Result<(), ModeError> {
-        let p = self
-            .schedule
-            .process_index(process)
-            .ok_or(ModeError::UnknownProcess)?;
-        let m = self.schedule.processes[p]
-            .mode_index(mode)
-            .ok_or(ModeError::UnknownMode)?;
-        self.set_mode(p, m)
-    }
-
-    /// The active mode of `process` as a setting, for the settings table of the
-    /// datalink services (SETTING / GET_SETTING / DL_VALUE).
-    ///
-    /// # Errors
-    /// [`ModeError::UnknownProcess`].
-    pub fn mode_setting(&self, process: usize) -> Result<ModeSetting<'_>, ModeError>
-    where
-        Self: Sync,
-    {
-        ModeSetting::new(self, process)
+    /// The active modes this scheduler runs.
+    pub fn modes(&self) -> &'a Modes<'a, P> {
+        self.modes
     }
 
     /// Counters since start-up.
@@ -485,12 +509,14 @@ impl<'a, M: RawMutex, const P: usize, const C: usize> Scheduler<'a, M, P, C> {
     /// Runs one tick: calls the callbacks of every message due in the active mode of
     /// each process (see the [module docs](self) for timing and order), and counts.
     pub fn tick(&self) -> TickReport {
-        let (tick, modes) = self.inner.lock(|inner| {
+        let tick = self.inner.lock(|inner| {
             let mut inner = inner.borrow_mut();
             let tick = inner.stats.ticks;
             inner.stats.ticks += 1;
-            (tick, inner.modes)
+            tick
         });
+        // The modes in force for the whole tick, even if a callback switches one.
+        let modes: [usize; P] = core::array::from_fn(|p| self.modes.mode(p).unwrap_or(0));
         let mut report = TickReport {
             tick,
             due: 0,
@@ -563,7 +589,7 @@ impl<'a, M: RawMutex, const P: usize, const C: usize> Scheduler<'a, M, P, C> {
     }
 }
 
-impl<M: RawMutex, const P: usize, const C: usize> ModeControl for Scheduler<'_, M, P, C> {
+impl<const P: usize> ModeControl for Modes<'_, P> {
     fn processes(&self) -> usize {
         self.schedule.processes.len()
     }
@@ -573,10 +599,10 @@ impl<M: RawMutex, const P: usize, const C: usize> ModeControl for Scheduler<'_, 
     }
 
     fn mode(&self, process: usize) -> Option<usize> {
-        Scheduler::mode(self, process)
+        Modes::mode(self, process)
     }
 
     fn set_mode(&self, process: usize, mode: usize) -> Result<(), ModeError> {
-        Scheduler::set_mode(self, process, mode)
+        Modes::set_mode(self, process, mode)
     }
 }

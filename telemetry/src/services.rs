@@ -2,50 +2,65 @@
 //!
 //! * `PING` -> `PONG` (round-trip time measurement).
 //! * `SETTING(index, ac_id, value)` -> apply through the [`Settings`] table, then
-//!   acknowledge with `DL_VALUE(index, value read back)` at high priority.
+//!   acknowledge with `DL_VALUE(index, value read back)`.
 //! * `GET_SETTING(index, ac_id)` -> `DL_VALUE(index, value)`.
 //!
-//! Replies go out on the link the request came in on (the downlink device whose index is
-//! the reader's link). A request for another aircraft id or an unknown setting index
-//! gets no reply and is counted ([`ServiceStats`]).
+//! The services work with any generated message set `S` that has these messages: `S`
+//! implements [`ServiceSet`] (the generator implements it on the generated `Set` type when
+//! PING, PONG, SETTING, GET_SETTING and DL_VALUE are present with Paparazzi's fields; a set
+//! without them does not compile here). Replies go out on the device the request came in
+//! on, at the reply message's priority (PONG and DL_VALUE are acknowledgements, high in the
+//! default set). A request for another aircraft id or an unknown setting index gets no
+//! reply and is counted ([`ServiceStats`]).
 //!
 //! ```
 //! use core::sync::atomic::{AtomicU32, Ordering};
 //! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
-//! use pprz_telemetry::services::{Services, Settings};
-//! # use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
-//! # use pprz_telemetry::pprz_transports::PprzV2;
-//! # static ARENA: FrameArena<M, 2048> = FrameArena::new();
-//! # let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&ARENA, 7, [DeviceConfig::new(PprzV2::new().into())]);
+//! use pprz_telemetry::reader::Datalink;
+//! use pprz_telemetry::services::Services;
+//! use pprz_default::messages::Set; // any generated set with the services' messages
 //!
 //! // An application setting stored as f32 bits in an atomic.
 //! static GAIN: AtomicU32 = AtomicU32::new(0);
-//! let get_gain = || f32::from_bits(GAIN.load(Ordering::Relaxed));
-//! let set_gain = |v: f32| GAIN.store(v.to_bits(), Ordering::Relaxed);
+//! fn get_gain() -> f32 { f32::from_bits(GAIN.load(Ordering::Relaxed)) }
+//! fn set_gain(v: f32) { GAIN.store(v.to_bits(), Ordering::Relaxed) }
 //!
-//! let mut settings: Settings<'_, 16> = Settings::new();
-//! let index = settings.add("gain", &get_gain, &set_gain).unwrap();
+//! static SERVICES: Services<'static, Set, M, 16> = Services::new(7);
+//! static DATALINK: Datalink<'static, M, 8> = Datalink::new(7);
+//!
+//! let index = SERVICES.settings().add("gain", &get_gain, &set_gain).unwrap();
 //! assert_eq!(index, 0);
-//! let services: Services<'_, '_, M, 1, 8, 16> = Services::new(&downlink, settings);
-//! // Register with the datalink's registry: `services.subscribe(&mut registry)`.
-//! # let mut registry: pprz_telemetry::registry::Registry<'_, 4> = pprz_telemetry::registry::Registry::new();
-//! # services.subscribe(&mut registry).unwrap();
+//! SERVICES.subscribe(DATALINK.registry()).unwrap(); // takes SUBSCRIPTIONS (3) entries
 //! ```
+//!
+//! The one-link facade ([`Link`](crate::Link)) runs these services without a registry
+//! entry.
 
 use core::cell::RefCell;
 use core::fmt;
+use core::marker::PhantomData;
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::Instant;
 use pprz_messages::Message;
+use pprz_messages::roles::{
+    GetSettingRequest, LinkReport, Pong, ServiceSet, SettingRequest, SettingValue,
+};
 
-use crate::downlink::{Downlink, Targets};
-use crate::messages::datalink::{GetSetting, Ping, Setting};
-use crate::messages::telemetry::{DatalinkReport, DlValue, Pong};
-use crate::reader::UplinkStats;
+use crate::reader::{Handler, UplinkStats};
 use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber};
+use crate::scheduler::ModeSetting;
 use crate::stats::DeviceStats;
+
+/// How a setting is read and written.
+#[derive(Clone, Copy)]
+enum Access<'a> {
+    /// Application closures or functions.
+    Fns(&'a (dyn Fn() -> f32 + Sync), &'a (dyn Fn(f32) + Sync)),
+    /// The active telemetry mode of a process.
+    Mode(ModeSetting<'a>),
+}
 
 /// One entry of the settings table: a name and typed access through `f32`, the type
 /// `SETTING` and `DL_VALUE` carry.
@@ -53,8 +68,30 @@ use crate::stats::DeviceStats;
 pub struct SettingEntry<'a> {
     /// Name, for display.
     pub name: &'a str,
-    get: &'a (dyn Fn() -> f32 + Sync),
-    set: &'a (dyn Fn(f32) + Sync),
+    access: Access<'a>,
+}
+
+impl SettingEntry<'_> {
+    /// The current value.
+    pub fn get(&self) -> f32 {
+        match self.access {
+            Access::Fns(get, _) => get(),
+            Access::Mode(mode) => mode.get(),
+        }
+    }
+
+    /// Sets the value (a value the setting refuses, such as an unknown telemetry mode,
+    /// leaves it unchanged) and returns the value read back.
+    pub fn set(&self, value: f32) -> f32 {
+        match self.access {
+            Access::Fns(_, set) => set(value),
+            Access::Mode(mode) => {
+                // Refused values leave the mode in force, which the read-back reports.
+                let _ = mode.set(value);
+            }
+        }
+        self.get()
+    }
 }
 
 impl fmt::Debug for SettingEntry<'_> {
@@ -82,66 +119,105 @@ impl fmt::Display for SettingsFull {
 impl core::error::Error for SettingsFull {}
 
 /// The settings the ground can read and write, by index (the index is the position of
-/// registration, as the ground's settings file numbers them).
-pub struct Settings<'a, const S: usize> {
-    entries: heapless::Vec<SettingEntry<'a>, S>,
+/// registration, as the ground's settings file numbers them). Up to `N` (at most 256)
+/// settings, added through `&self`, so the table can be a `static` or part of one.
+pub struct Settings<'a, M: RawMutex, const N: usize> {
+    inner: Mutex<M, RefCell<Table<'a, N>>>,
 }
 
-impl<'a, const S: usize> Settings<'a, S> {
+/// (A plain array: no drop glue, so a setting may borrow the structure holding it.)
+struct Table<'a, const N: usize> {
+    len: usize,
+    entries: [Option<SettingEntry<'a>>; N],
+}
+
+impl<'a, M: RawMutex, const N: usize> Settings<'a, M, N> {
     /// An empty table.
     pub const fn new() -> Self {
         Self {
-            entries: heapless::Vec::new(),
+            inner: Mutex::new(RefCell::new(Table {
+                len: 0,
+                entries: [None; N],
+            })),
         }
     }
 
-    /// Registers a setting; returns its index.
+    fn push(&self, entry: SettingEntry<'a>) -> Result<u8, SettingsFull> {
+        self.inner.lock(|t| {
+            let mut t = t.borrow_mut();
+            let len = t.len;
+            let index = u8::try_from(len).map_err(|_| SettingsFull { capacity: N })?;
+            let slot = t
+                .entries
+                .get_mut(len)
+                .ok_or(SettingsFull { capacity: N })?;
+            *slot = Some(entry);
+            t.len = len + 1;
+            Ok(index)
+        })
+    }
+
+    /// Registers a setting read by `get` and written by `set` (closures or functions);
+    /// returns its index.
     ///
     /// # Errors
-    /// [`SettingsFull`] when the table holds `S` settings (or 256, the most an index
+    /// [`SettingsFull`] when the table holds `N` settings (or 256, the most an index
     /// byte can address).
     pub fn add(
-        &mut self,
+        &self,
         name: &'a str,
         get: &'a (dyn Fn() -> f32 + Sync),
         set: &'a (dyn Fn(f32) + Sync),
     ) -> Result<u8, SettingsFull> {
-        let index = u8::try_from(self.entries.len()).map_err(|_| SettingsFull { capacity: S })?;
-        self.entries
-            .push(SettingEntry { name, get, set })
-            .map_err(|_| SettingsFull { capacity: S })?;
-        Ok(index)
+        self.push(SettingEntry {
+            name,
+            access: Access::Fns(get, set),
+        })
     }
 
-    /// The entry at `index`.
-    pub fn entry(&self, index: u8) -> Option<&SettingEntry<'a>> {
-        self.entries.get(usize::from(index))
+    /// Registers the active telemetry mode of a process as a setting (see
+    /// [`Modes::setting`](crate::scheduler::Modes::setting)), so the ground switches
+    /// telemetry modes with SETTING; returns its index.
+    ///
+    /// # Errors
+    /// [`SettingsFull`], as [`add`](Self::add).
+    pub fn add_mode(&self, name: &'a str, mode: ModeSetting<'a>) -> Result<u8, SettingsFull> {
+        self.push(SettingEntry {
+            name,
+            access: Access::Mode(mode),
+        })
+    }
+
+    /// The entry at `index` (a copy: calling it holds no lock).
+    pub fn entry(&self, index: u8) -> Option<SettingEntry<'a>> {
+        self.inner.lock(|t| {
+            let t = t.borrow();
+            t.entries.get(..t.len)?.get(usize::from(index)).copied()?
+        })
     }
 
     /// The value of setting `index`.
     pub fn get(&self, index: u8) -> Option<f32> {
-        self.entry(index).map(|e| (e.get)())
+        self.entry(index).map(|e| e.get())
     }
 
     /// Sets setting `index`, returning the value read back (what the ground is told).
     pub fn set(&self, index: u8, value: f32) -> Option<f32> {
-        let e = self.entry(index)?;
-        (e.set)(value);
-        Some((e.get)())
+        self.entry(index).map(|e| e.set(value))
     }
 
     /// Number of settings.
     pub fn len(&self) -> usize {
-        self.entries.len()
+        self.inner.lock(|t| t.borrow().len)
     }
 
     /// Whether the table is empty.
     pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
+        self.len() == 0
     }
 }
 
-impl<const S: usize> Default for Settings<'_, S> {
+impl<M: RawMutex, const N: usize> Default for Settings<'_, M, N> {
     fn default() -> Self {
         Self::new()
     }
@@ -167,46 +243,40 @@ pub struct ServiceStats {
     pub replies_dropped: u32,
 }
 
-/// PING, SETTING and GET_SETTING handling; see the [module documentation](self).
-///
-/// `'s` is the lifetime of the services' borrows (downlink, settings), `'a` the
-/// downlink's own (its arena).
-pub struct Services<'s, 'a, M: RawMutex, const D: usize, const Q: usize, const S: usize> {
-    downlink: &'s Downlink<'a, M, D, Q>,
-    settings: Settings<'s, S>,
+/// PING, SETTING and GET_SETTING handling for message set `S`, with a settings table of
+/// `N` entries; see the [module documentation](self).
+pub struct Services<'a, S, M: RawMutex, const N: usize> {
+    ac_id: u8,
+    settings: Settings<'a, M, N>,
     stats: Mutex<M, RefCell<ServiceStats>>,
+    set: PhantomData<fn() -> S>,
 }
 
-impl<'s, 'a, M: RawMutex, const D: usize, const Q: usize, const S: usize>
-    Services<'s, 'a, M, D, Q, S>
-{
-    /// Services replying through `downlink`, for aircraft `downlink.ac_id()`.
-    pub fn new(downlink: &'s Downlink<'a, M, D, Q>, settings: Settings<'s, S>) -> Self {
+impl<'a, S, M: RawMutex, const N: usize> Services<'a, S, M, N> {
+    /// Registry entries [`subscribe`](Self::subscribe) takes: PING, SETTING and
+    /// GET_SETTING.
+    pub const SUBSCRIPTIONS: usize = 3;
+
+    /// Services for aircraft `ac_id`, with an empty settings table.
+    pub const fn new(ac_id: u8) -> Self {
         Self {
-            downlink,
-            settings,
-            stats: Mutex::new(RefCell::new(ServiceStats::default())),
+            ac_id,
+            settings: Settings::new(),
+            stats: Mutex::new(RefCell::new(ServiceStats {
+                pings: 0,
+                settings: 0,
+                get_settings: 0,
+                wrong_ac_id: 0,
+                unknown_index: 0,
+                malformed: 0,
+                replies_dropped: 0,
+            })),
+            set: PhantomData,
         }
     }
 
-    /// Subscribes the services to PING, SETTING and GET_SETTING.
-    ///
-    /// # Errors
-    /// The registry has no room for the three subscriptions.
-    pub fn subscribe<'r, const N: usize>(
-        &'r self,
-        registry: &mut Registry<'r, N>,
-    ) -> Result<(), RegistryFull>
-    where
-        Self: Subscriber,
-    {
-        registry.subscribe(Filter::message::<Ping>(), self)?;
-        registry.subscribe(Filter::message::<Setting>(), self)?;
-        registry.subscribe(Filter::message::<GetSetting>(), self)
-    }
-
-    /// The settings table.
-    pub fn settings(&self) -> &Settings<'s, S> {
+    /// The settings table (add settings here at start-up).
+    pub fn settings(&self) -> &Settings<'a, M, N> {
         &self.settings
     }
 
@@ -219,31 +289,9 @@ impl<'s, 'a, M: RawMutex, const D: usize, const Q: usize, const S: usize>
         self.stats.lock(|s| f(&mut s.borrow_mut()));
     }
 
-    fn reply<Msg: Message>(&self, rx: &Received<'_>, msg: &Msg) {
-        if self
-            .downlink
-            .send_to(msg, Targets::only(rx.link), Msg::PRIORITY)
-            .is_err()
-        {
+    fn reply<Msg: Message>(&self, rx: &Received<'_, '_>, msg: &Msg) {
+        if rx.reply(msg).is_err() {
             self.count(|s| s.replies_dropped = s.replies_dropped.wrapping_add(1));
-        }
-    }
-
-    /// Sends `DL_VALUE(index, value)` if the request is for us and the index exists.
-    fn value_reply(&self, rx: &Received<'_>, index: u8, ac_id: u8, value: Option<f32>) -> bool {
-        if ac_id != self.downlink.ac_id() {
-            self.count(|s| s.wrong_ac_id = s.wrong_ac_id.wrapping_add(1));
-            return false;
-        }
-        match value {
-            Some(value) => {
-                self.reply(rx, &DlValue { index, value });
-                true
-            }
-            None => {
-                self.count(|s| s.unknown_index = s.unknown_index.wrapping_add(1));
-                false
-            }
         }
     }
 
@@ -252,47 +300,93 @@ impl<'s, 'a, M: RawMutex, const D: usize, const Q: usize, const S: usize>
     }
 }
 
-impl<M: RawMutex + Sync, const D: usize, const Q: usize, const S: usize> Subscriber
-    for Services<'_, '_, M, D, Q, S>
-{
-    fn on_message(&self, rx: &Received<'_>) {
-        match (rx.class_id(), rx.msg_id()) {
-            (Ping::CLASS_ID, Ping::ID) => {
-                if rx.decode::<Ping>().is_ok() {
-                    self.reply(rx, &Pong);
-                    self.count(|s| s.pings = s.pings.wrapping_add(1));
-                } else {
-                    self.malformed();
-                }
+impl<'a, S: ServiceSet, M: RawMutex + Sync, const N: usize> Services<'a, S, M, N> {
+    /// Subscribes the services to PING, SETTING and GET_SETTING in `registry`
+    /// ([`SUBSCRIPTIONS`](Self::SUBSCRIPTIONS) entries).
+    ///
+    /// # Errors
+    /// The registry has no room for the three subscriptions.
+    pub fn subscribe<R: RawMutex, const C: usize>(
+        &'a self,
+        registry: &Registry<'a, R, C>,
+    ) -> Result<(), RegistryFull> {
+        registry.subscribe(Filter::message::<S::Ping>(), self)?;
+        registry.subscribe(Filter::message::<S::Setting>(), self)?;
+        registry.subscribe(Filter::message::<S::GetSetting>(), self)
+    }
+
+    /// Sends `DL_VALUE(index, value)` if the request is for us and the index exists.
+    fn value_reply(&self, rx: &Received<'_, '_>, index: u8, ac_id: u8, value: Option<f32>) -> bool {
+        if ac_id != self.ac_id {
+            self.count(|s| s.wrong_ac_id = s.wrong_ac_id.wrapping_add(1));
+            return false;
+        }
+        match value {
+            Some(value) => {
+                self.reply(rx, &S::DlValue::new(index, value));
+                true
             }
-            (Setting::CLASS_ID, Setting::ID) => match rx.decode::<Setting>() {
-                Ok(req) => {
-                    // Applied only when the request is for us (and the index exists).
-                    let value = (req.ac_id == self.downlink.ac_id())
-                        .then(|| self.settings.set(req.index, req.value))
-                        .flatten();
-                    if self.value_reply(rx, req.index, req.ac_id, value) {
-                        self.count(|s| s.settings = s.settings.wrapping_add(1));
-                    }
-                }
-                Err(_) => self.malformed(),
-            },
-            (GetSetting::CLASS_ID, GetSetting::ID) => match rx.decode::<GetSetting>() {
-                Ok(req) => {
-                    let value = self.settings.get(req.index);
-                    if self.value_reply(rx, req.index, req.ac_id, value) {
-                        self.count(|s| s.get_settings = s.get_settings.wrapping_add(1));
-                    }
-                }
-                Err(_) => self.malformed(),
-            },
-            _ => {}
+            None => {
+                self.count(|s| s.unknown_index = s.unknown_index.wrapping_add(1));
+                false
+            }
         }
     }
 }
 
-/// Builds DATALINK_REPORT messages from the uplink and downlink counters; rates are
-/// computed since the previous report.
+impl<'d, S: ServiceSet, M: RawMutex + Sync, const N: usize> Handler<'d>
+    for Services<'_, S, M, N>
+{
+    fn handle(&self, rx: &Received<'_, 'd>) -> bool {
+        let id = (rx.class_id(), rx.msg_id());
+        if id == (S::Ping::CLASS_ID, S::Ping::ID) {
+            if rx.decode::<S::Ping>().is_ok() {
+                self.reply(rx, &S::Pong::pong());
+                self.count(|s| s.pings = s.pings.wrapping_add(1));
+            } else {
+                self.malformed();
+            }
+        } else if id == (S::Setting::CLASS_ID, S::Setting::ID) {
+            match rx.decode::<S::Setting>() {
+                Ok(req) => {
+                    // Applied only when the request is for us (and the index exists).
+                    let value = (req.ac_id() == self.ac_id)
+                        .then(|| self.settings.set(req.index(), req.value()))
+                        .flatten();
+                    if self.value_reply(rx, req.index(), req.ac_id(), value) {
+                        self.count(|s| s.settings = s.settings.wrapping_add(1));
+                    }
+                }
+                Err(_) => self.malformed(),
+            }
+        } else if id == (S::GetSetting::CLASS_ID, S::GetSetting::ID) {
+            match rx.decode::<S::GetSetting>() {
+                Ok(req) => {
+                    let value = self.settings.get(req.index());
+                    if self.value_reply(rx, req.index(), req.ac_id(), value) {
+                        self.count(|s| s.get_settings = s.get_settings.wrapping_add(1));
+                    }
+                }
+                Err(_) => self.malformed(),
+            }
+        } else {
+            return false;
+        }
+        true
+    }
+}
+
+impl<'d, S: ServiceSet, M: RawMutex + Sync, const N: usize> Subscriber<'d>
+    for Services<'_, S, M, N>
+{
+    fn on_message(&self, rx: &Received<'_, 'd>) {
+        self.handle(rx);
+    }
+}
+
+/// Builds DATALINK_REPORT contents from the uplink and downlink counters; rates are
+/// computed since the previous report. Convert the [`LinkReport`] into the set's message
+/// with `.into()` (the generated `DatalinkReport` implements `From<LinkReport>`).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct LinkReporter {
     previous: Option<(Instant, UplinkStats, DeviceStats)>,
@@ -310,7 +404,7 @@ impl LinkReporter {
         now: Instant,
         uplink: &UplinkStats,
         downlink: &DeviceStats,
-    ) -> DatalinkReport {
+    ) -> LinkReport {
         let uplink_lost_time = match uplink.last_received {
             Some(t) => {
                 u16::try_from(now.saturating_duration_since(t).as_secs()).unwrap_or(u16::MAX)
@@ -330,7 +424,7 @@ impl LinkReporter {
             None => (0, 0),
         };
         self.previous = Some((now, *uplink, *downlink));
-        DatalinkReport {
+        LinkReport {
             uplink_lost_time,
             uplink_nb_msgs: uplink.received as u16,
             downlink_nb_msgs: downlink.downlink_nb_msgs(),

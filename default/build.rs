@@ -1,21 +1,20 @@
-//! Generates the project's default message set (`../messages.xml`) into
-//! `pprz_telemetry::messages`, and its periodic telemetry schedule (`../telemetry.xml`,
-//! resolved against that message set) into `pprz_telemetry::periodic`.
+//! Generates the default message set (`messages.xml`, in this package) into
+//! `pprz_default::messages`, and its periodic telemetry schedule (`telemetry.xml`, resolved
+//! against that message set) into `pprz_default::periodic`.
 
 use std::path::Path;
 
 fn main() {
     let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
-    let root = Path::new(&manifest).join("..");
-    let generator = pprz_codegen::Generator::new(root.join("messages.xml"));
+    let dir = Path::new(&manifest);
+    let generator = pprz_codegen::Generator::new(dir.join("messages.xml"));
     if let Err(e) = generator.write_to_out_dir("messages.rs") {
         eprintln!("{e}");
         std::process::exit(1);
     }
     // Warnings (none expected) are printed as `cargo:warning=`.
     if let Err(e) = generator
-        .telemetry(root.join("telemetry.xml"))
-        .scheduler_crate("crate::scheduler")
+        .telemetry(dir.join("telemetry.xml"))
         .write_telemetry_to_out_dir("periodic.rs")
     {
         eprintln!("{e}");

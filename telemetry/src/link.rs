@@ -1,0 +1,214 @@
+//! The one-link facade: the common case of one device (a radio, a USB port, a UDP
+//! socket) carrying telemetry down and datalink commands up, with the PING / SETTING /
+//! GET_SETTING services, in one `static` and one task.
+//!
+//! ```text
+//!   any task ── LINK.send(&msg) ──► priority queue (frames in ARENA) ──► writer ──► tx
+//!                                                                          │
+//!   rx ──► reader (decoder, destination filter) ──► services (PING, SETTING, GET_SETTING)
+//!                                              └──► your subscribers    replies ┘
+//! ```
+//!
+//! [`Link::run`] is that one task: the writer, the reader and the services, until the
+//! end of time. A firmware needs two statics and a task:
+//!
+//! ```
+//! use pprz_telemetry::{FrameArena, Link, LinkMutex};
+//! use pprz_default::messages::{Set, telemetry::Attitude}; // your generated set
+//!
+//! static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
+//! static LINK: Link<'static, Set> = Link::new(&ARENA, 7); // aircraft 7, PPRZ v2
+//!
+//! // #[embassy_executor::task]
+//! async fn radio(tx: impl embedded_io_async::Write, rx: impl embedded_io_async::Read) {
+//!     let Err(e) = LINK.run(tx, rx).await; // never returns, unless started twice
+//!     panic!("{e}");
+//! }
+//!
+//! // Anywhere, from any task: never blocks.
+//! LINK.send(&Attitude { phi: 0.1, psi: 0.0, theta: 0.0 }).unwrap();
+//! assert_eq!(LINK.stats().downlink.queued, 1);
+//! ```
+//!
+//! Settings and subscribers are added at start-up, before or after `run` starts:
+//! `LINK.settings().add("gain", &get, &set)`, `LINK.subscribe(Filter::message::<Block>(),
+//! &on_block)`. Several devices, several transports per message or a log beside the
+//! radio: use [`Downlink`] and its [`Port`](crate::Port)s directly; this facade is built
+//! on them.
+
+use core::convert::Infallible;
+
+use embassy_futures::select::{Either, select};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embedded_io_async::{Read, Write};
+use pprz_messages::Message;
+use pprz_messages::roles::ServiceSet;
+use pprz_transports::{AnyTransport, PprzV2};
+
+use crate::arena::ArenaStats;
+use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, PortsTaken, SendError, Sender};
+use crate::reader::{Datalink, Inbox, Reader, UplinkStats};
+use crate::registry::{Filter, Received, RegistryFull, Subscriber};
+use crate::services::{ServiceStats, Services, Settings};
+use crate::stats::DeviceStats;
+use crate::writer::run_writer;
+
+/// The mutex of a [`Link`] (a critical section: the link may be used from any task and
+/// from interrupts); also the one to give its [`FrameArena`](crate::FrameArena).
+pub type LinkMutex = CriticalSectionRawMutex;
+
+/// One device with telemetry, datalink and services, for message set `S`; see the
+/// [module documentation](self).
+///
+/// * `Q`: the most frames waiting for the device (when full, less important frames are
+///   evicted, or the new one dropped, and counted).
+/// * `SETTINGS`: capacity of the settings table.
+/// * `SUBSCRIBERS`: capacity of the subscriber registry (the services need none of it).
+pub struct Link<
+    'a,
+    S,
+    const Q: usize = 32,
+    const SETTINGS: usize = 16,
+    const SUBSCRIBERS: usize = 8,
+> {
+    downlink: Downlink<'a, LinkMutex, 1, Q>,
+    datalink: Datalink<'a, LinkMutex, SUBSCRIBERS>,
+    services: Services<'a, S, LinkMutex, SETTINGS>,
+}
+
+/// Counters of a [`Link`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkStats {
+    /// The downlink: messages submitted, sent, dropped and evicted by reason and level.
+    pub downlink: DeviceStats,
+    /// The uplink: messages received, for another aircraft, unhandled, read errors.
+    pub uplink: UplinkStats,
+    /// The services: requests answered and refused.
+    pub services: ServiceStats,
+    /// The frame arena.
+    pub arena: ArenaStats,
+}
+
+impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
+    Link<'a, S, Q, SETTINGS, SUBSCRIBERS>
+{
+    /// A link for aircraft `ac_id` speaking PPRZ v2, frames allocated in `arena`.
+    pub const fn new(arena: &'a (dyn FrameAlloc + Sync), ac_id: u8) -> Self {
+        Self::with_device(
+            arena,
+            ac_id,
+            DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+        )
+    }
+
+    /// A link for aircraft `ac_id` over a device configured by `config` (its transport
+    /// is used both ways; e.g. `AnyTransport::XBee24(XBee24::new())`).
+    pub const fn with_device(
+        arena: &'a (dyn FrameAlloc + Sync),
+        ac_id: u8,
+        config: DeviceConfig,
+    ) -> Self {
+        Self {
+            downlink: Downlink::new(arena, ac_id, [config]),
+            datalink: Datalink::new(ac_id),
+            services: Services::new(ac_id),
+        }
+    }
+
+    /// Our aircraft id.
+    pub fn ac_id(&self) -> u8 {
+        self.downlink.ac_id()
+    }
+
+    /// Sends `msg` at its own priority; never blocks.
+    ///
+    /// # Errors
+    /// The message was dropped (too large, or no room for it: counted in
+    /// [`LinkStats::downlink`]).
+    pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.downlink.send(msg)
+    }
+
+    /// Sends `msg` with `priority` instead of its own; never blocks.
+    ///
+    /// # Errors
+    /// As [`send`](Self::send).
+    pub fn send_with_priority<Msg: Message>(&self, msg: &Msg, priority: u8) -> Result<(), SendError> {
+        self.downlink.send_to(msg, crate::Targets::ALL, priority)
+    }
+
+    /// A copyable handle that sends through this link, for code that should not name
+    /// the link's type.
+    pub fn sender(&self) -> Sender<'_> {
+        self.downlink.sender()
+    }
+
+    /// The settings table the SETTING and GET_SETTING services read and write.
+    pub fn settings(&self) -> &Settings<'a, LinkMutex, SETTINGS> {
+        self.services.settings()
+    }
+
+    /// Subscribes to received messages (the services' messages are answered whether or
+    /// not someone subscribes to them too).
+    ///
+    /// # Errors
+    /// [`RegistryFull`] when `SUBSCRIBERS` subscriptions exist already.
+    pub fn subscribe(
+        &self,
+        filter: Filter,
+        subscriber: &'a dyn Subscriber<'a>,
+    ) -> Result<(), RegistryFull> {
+        self.datalink.subscribe(filter, subscriber)
+    }
+
+    /// A snapshot of every counter.
+    pub fn stats(&self) -> LinkStats {
+        LinkStats {
+            downlink: self.downlink.stats(0).unwrap_or_default(),
+            uplink: self.datalink.stats(),
+            services: self.services.stats(),
+            arena: self.downlink.arena_stats(),
+        }
+    }
+}
+
+impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
+    Link<'a, S, Q, SETTINGS, SUBSCRIBERS>
+{
+    /// Runs the link forever: writes the queued frames to `tx` (most important first),
+    /// reads `rx`, answers PING, SETTING and GET_SETTING on it and hands every other
+    /// message for us to the subscribers.
+    ///
+    /// # Errors
+    /// Returns at once with [`PortsTaken`] if the link runs already (or ran before): a
+    /// device has one writer.
+    pub async fn run<W: Write, R: Read>(&'a self, tx: W, rx: R) -> Result<Infallible, PortsTaken> {
+        let [port] = self.downlink.ports()?;
+        let transport = port.device().config().transport;
+        let mut reader: Reader<'a, R, AnyTransport> = Reader::new(rx, transport, port.device());
+        let inbox = LinkInbox { link: self };
+        match select(run_writer(port, tx), reader.run(&inbox)).await {
+            Either::First(never) | Either::Second(never) => never,
+        }
+    }
+}
+
+/// The link's reader delivers here: destination filter and counters, the services,
+/// then the subscribers.
+struct LinkInbox<'l, 'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize> {
+    link: &'l Link<'a, S, Q, SETTINGS, SUBSCRIBERS>,
+}
+
+impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
+    Inbox<'a> for LinkInbox<'_, 'a, S, Q, SETTINGS, SUBSCRIBERS>
+{
+    fn deliver(&self, rx: &Received<'_, 'a>) {
+        self.link
+            .datalink
+            .deliver_with(rx, Some(&self.link.services));
+    }
+
+    fn read_error(&self) {
+        self.link.datalink.read_error();
+    }
+}
