@@ -20,6 +20,7 @@ use pprz_messages::{BaseType, FieldType};
 
 use crate::model::{Class, FieldDef, MessageDef, Protocol};
 use crate::names;
+use crate::roles::{self, RoleMessage, Roles, SetRole};
 
 /// What the emitter needs besides the model.
 #[derive(Debug, Clone)]
@@ -173,15 +174,16 @@ pub(crate) fn emit(protocol: &Protocol, opts: &Options) -> String {
         env!("CARGO_PKG_VERSION"),
         protocol.file
     );
-    emit_set(&mut out, protocol, opts);
+    emit_message_table(&mut out, protocol, opts);
     emit_any(&mut out, protocol, opts);
+    emit_roles(&mut out, protocol, opts);
     for class in &protocol.classes {
         emit_class(&mut out, class, opts);
     }
     out
 }
 
-fn emit_set(out: &mut String, protocol: &Protocol, opts: &Options) {
+fn emit_message_table(out: &mut String, protocol: &Protocol, opts: &Options) {
     let rt = &opts.runtime;
     let mut all: Vec<(u8, u8, String)> = protocol
         .classes
@@ -324,6 +326,117 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
         "encode(buf)",
     );
     out!(out, "}}\n");
+}
+
+/// The `Set` type, and the traits of `roles` for what the set fills (see [`crate::roles`]).
+///
+/// A message that fits its role implements the message's role trait even when its set
+/// role is incomplete (a `PING` without a `DL_VALUE` still implements `roles::Ping`):
+/// code that needs only that message can use it, while code that needs the set role
+/// still does not compile, and the documentation of `Set` says why.
+fn emit_roles(out: &mut String, protocol: &Protocol, opts: &Options) {
+    let rt = &opts.runtime;
+    let roles = Roles::of(protocol);
+    let code = |s: &str| format!("`{s}`");
+    let mut d = format!(
+        "The message set of this file, for the runtime's set-generic code: the roles of\n\
+         `{rt}::roles` the set fills are implemented on this type.\n"
+    );
+    let mut alone = Vec::new();
+    for role in SetRole::ALL {
+        match roles.set(role) {
+            Ok(fits) => {
+                let names: Vec<String> = fits.iter().map(|(m, _)| code(m.name())).collect();
+                let _ = write!(d, "\n- `{}`: {}.", role.name(), roles::list(&names));
+            }
+            Err(why) => {
+                let _ = write!(d, "\n- no `{}`: {}.", role.name(), why.join("; "));
+                for &m in role.messages() {
+                    if let Some(Ok(fit)) = roles.get(m) {
+                        alone.push(format!("`{}` ({})", m.role(), code(&fit.path)));
+                    }
+                }
+            }
+        }
+    }
+    if !alone.is_empty() {
+        let _ = write!(
+            d,
+            "\n\nMessages that fit their role implement it without the set role: {}.",
+            roles::list(&alone)
+        );
+    }
+    doc(out, "", &d);
+    out!(
+        out,
+        "#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]"
+    );
+    out!(out, "pub struct Set;\n");
+    for (m, fit) in &roles.messages {
+        if let Ok(fit) = fit {
+            emit_message_role(out, rt, *m, &fit.path);
+        }
+    }
+    for role in SetRole::ALL {
+        if let Ok(fits) = roles.set(role) {
+            out!(out, "impl {rt}::roles::{} for Set {{", role.name());
+            for (m, fit) in fits {
+                out!(out, "    type {} = {};", m.assoc(), fit.path);
+            }
+            out!(out, "}}\n");
+        }
+    }
+}
+
+/// The role trait of message `m` (of type `path`), whose fields are those of the role.
+fn emit_message_role(out: &mut String, rt: &str, m: RoleMessage, path: &str) {
+    let role = format!("{rt}::roles::{}", m.role());
+    let fields = m.fields();
+    match m {
+        RoleMessage::Ping => {
+            out!(out, "impl {role} for {path} {{}}\n");
+        }
+        RoleMessage::Pong => {
+            out!(out, "impl {role} for {path} {{");
+            out!(out, "    fn pong() -> Self {{");
+            out!(out, "        Self");
+            out!(out, "    }}");
+            out!(out, "}}\n");
+        }
+        RoleMessage::Setting | RoleMessage::GetSetting => {
+            out!(out, "impl {role} for {path} {{");
+            for (name, ty) in fields {
+                out!(out, "    fn {name}(&self) -> {} {{", ty.rust_name());
+                out!(out, "        self.{name}");
+                out!(out, "    }}");
+            }
+            out!(out, "}}\n");
+        }
+        RoleMessage::DlValue => {
+            let params: Vec<String> = fields
+                .iter()
+                .map(|(name, ty)| format!("{name}: {}", ty.rust_name()))
+                .collect();
+            let names: Vec<&str> = fields.iter().map(|(name, _)| *name).collect();
+            out!(out, "impl {role} for {path} {{");
+            out!(out, "    fn new({}) -> Self {{", params.join(", "));
+            out!(out, "        Self {{ {} }}", names.join(", "));
+            out!(out, "    }}");
+            out!(out, "}}\n");
+        }
+        RoleMessage::DatalinkReport => {
+            out!(out, "impl From<{rt}::roles::LinkReport> for {path} {{");
+            out!(out, "    fn from(r: {rt}::roles::LinkReport) -> Self {{");
+            out!(out, "        Self {{");
+            for (name, _) in fields {
+                out!(out, "            {name}: r.{name},");
+            }
+            out!(out, "        }}");
+            out!(out, "    }}");
+            out!(out, "}}\n");
+            out!(out, "impl {role} for {path} {{}}\n");
+        }
+    }
 }
 
 fn emit_class(out: &mut String, class: &Class, opts: &Options) {

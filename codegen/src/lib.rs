@@ -5,8 +5,9 @@
 //! source file that a crate `include!`s. The generated code is `no_std`, allocation-free
 //! and builds on the [`pprz_messages`] runtime crate: per message a struct with typed
 //! fields implementing [`pprz_messages::Message`] and [`pprz_messages::Decode`], per
-//! class an `AnyMessage` enum that decodes by id, enums for `values` attributes, and a
-//! `MESSAGES` descriptor table for generic tools.
+//! class an `AnyMessage` enum that decodes by id, enums for `values` attributes, a
+//! `MESSAGES` descriptor table for generic tools, and a `Set` type naming the set for the
+//! runtime (see [below](#the-set-type-and-its-roles)).
 //!
 //! # From a `build.rs` (as prost-build or mavlink-bindgen are used)
 //!
@@ -54,6 +55,38 @@
 //! </msg_class></protocol>"#;
 //! let err = pprz_codegen::Generator::from_str("bad.xml", xml).generate().unwrap_err();
 //! assert!(err.to_string().starts_with("error: bad.xml:2:30: message BAD, field x: unknown type `uint9`"));
+//! ```
+//!
+//! # The `Set` type and its roles
+//!
+//! The runtime's services are generic over the message set: they ask a type for the
+//! messages they speak through the traits of [`pprz_messages::roles`]. Every generated
+//! file has a `pub struct Set;` implementing those the set fills:
+//!
+//! - `ServiceSet` when the set has `PING`, `SETTING` and `GET_SETTING` in class
+//!   `datalink`, and `PONG` and `DL_VALUE` in class `telemetry`;
+//! - `LinkReportSet` when it has `DATALINK_REPORT` in class `telemetry`;
+//!
+//! each with exactly the fields of the table in [`pprz_messages::roles`] (names and types,
+//! in order, no extra field; ids and priorities are the set's own). Classes are matched by
+//! name. A message that fits implements its own role trait (`roles::Ping`,
+//! `roles::SettingValue`, ...) even when the rest of its set role is missing. The doc
+//! comment of `Set` lists the roles filled and, for each one that is not, why (a message
+//! missing or left out by the selection, in another class, or with other fields):
+//!
+//! ```
+//! let xml = r#"<protocol><msg_class name="telemetry" id="1">
+//!   <message name="DATALINK_REPORT" id="30">
+//!     <field name="uplink_lost_time" type="uint16"/><field name="uplink_nb_msgs" type="uint16"/>
+//!     <field name="downlink_nb_msgs" type="uint16"/><field name="downlink_rate" type="uint16"/>
+//!     <field name="uplink_rate" type="uint16"/><field name="downlink_ovrn" type="uint8"/>
+//!   </message></msg_class></protocol>"#;
+//! let code = pprz_codegen::Generator::from_str("inline.xml", xml).generate().unwrap();
+//! assert!(code.contains("impl ::pprz_messages::roles::LinkReportSet for Set {"));
+//! assert!(!code.contains("roles::ServiceSet for Set"));
+//! assert!(code.contains(
+//!     "no `ServiceSet`: `PING`, `PONG`, `SETTING`, `GET_SETTING` and `DL_VALUE` missing."
+//! ));
 //! ```
 //!
 //! # Periodic telemetry (`telemetry.xml`)
@@ -120,6 +153,7 @@ mod error;
 pub mod model;
 mod names;
 pub mod reference;
+mod roles;
 pub mod telemetry;
 mod xml;
 

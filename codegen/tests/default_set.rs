@@ -1,14 +1,31 @@
-//! The project's `messages.xml` against the PPRZLINK reference: every message it shares
-//! with the reference is wire-identical (same class, id, field order and types), and the
-//! messages a flight stack needs to talk to Paparazzi ground tools are there.
+//! The project's default message set (`default/messages.xml`) against the PPRZLINK
+//! reference: every message it shares with the reference is wire-identical (same class,
+//! id, field order and types), the messages a flight stack needs to talk to Paparazzi
+//! ground tools are there, and its generated `Set` fills every role of
+//! `pprz_messages::roles`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use pprz_codegen::{Protocol, reference};
+use pprz_codegen::{Generator, Protocol, reference};
+
+fn default_file() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../default/messages.xml")
+}
 
 fn default_set() -> Protocol {
-    Protocol::from_file(Path::new(env!("CARGO_MANIFEST_DIR")).join("../messages.xml"))
-        .expect("the default messages.xml is valid")
+    Protocol::from_file(default_file()).expect("the default messages.xml is valid")
+}
+
+#[test]
+fn generated_set_fills_every_role() {
+    let code = Generator::new(default_file()).generate().unwrap();
+    for role in ["ServiceSet", "LinkReportSet"] {
+        assert!(
+            code.contains(&format!("impl ::pprz_messages::roles::{role} for Set {{")),
+            "{role}"
+        );
+    }
+    assert!(!code.contains("- no `"), "a role is not filled");
 }
 
 #[test]

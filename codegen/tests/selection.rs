@@ -20,20 +20,26 @@ fn names(g: Generator) -> Vec<String> {
 fn everything_by_default() {
     assert_eq!(
         names(Generator::new(FIXTURE)),
-        ["telemetry.EMPTY", "telemetry.MIXED", "datalink.PING"]
+        [
+            "telemetry.PONG",
+            "telemetry.MIXED",
+            "telemetry.DATALINK_REPORT",
+            "telemetry.DL_VALUE",
+            "datalink.SETTING",
+            "datalink.PING",
+            "datalink.GET_SETTING"
+        ]
     );
 }
 
 #[test]
 fn by_class_name_or_id_and_by_message() {
+    let datalink = ["datalink.SETTING", "datalink.PING", "datalink.GET_SETTING"];
     assert_eq!(
         names(Generator::new(FIXTURE).classes(["datalink"])),
-        ["datalink.PING"]
+        datalink
     );
-    assert_eq!(
-        names(Generator::new(FIXTURE).classes(["2"])),
-        ["datalink.PING"]
-    );
+    assert_eq!(names(Generator::new(FIXTURE).classes(["2"])), datalink);
     assert_eq!(
         names(Generator::new(FIXTURE).messages(["MIXED", "datalink.PING"])),
         ["telemetry.MIXED", "datalink.PING"]
@@ -42,9 +48,14 @@ fn by_class_name_or_id_and_by_message() {
         names(
             Generator::new(FIXTURE)
                 .classes(["datalink"])
-                .messages(["telemetry.EMPTY"])
+                .messages(["telemetry.PONG"])
         ),
-        ["telemetry.EMPTY", "datalink.PING"]
+        [
+            "telemetry.PONG",
+            "datalink.SETTING",
+            "datalink.PING",
+            "datalink.GET_SETTING"
+        ]
     );
 }
 
@@ -63,7 +74,7 @@ fn generated_code_holds_only_the_selection() {
 #[test]
 fn default_priority_is_configurable() {
     let code = Generator::new(FIXTURE)
-        .messages(["MIXED", "EMPTY"])
+        .messages(["MIXED", "PONG"])
         .default_priority(7)
         .generate()
         .unwrap();
@@ -73,6 +84,6 @@ fn default_priority_is_configurable() {
     );
     assert!(
         code.contains("const PRIORITY: u8 = 192;"),
-        "EMPTY keeps its own"
+        "PONG keeps its own"
     );
 }

@@ -87,6 +87,34 @@ mod with_reference {
     }
 
     #[test]
+    fn set_roles_name_the_reference_messages() {
+        use pprz_messages::roles::{LinkReport, LinkReportSet, ServiceSet, SettingValue};
+        use pprz_reference_check::Set;
+        fn ids<M: Message>() -> (u8, u8, &'static str) {
+            (M::CLASS_ID, M::ID, M::NAME)
+        }
+        assert_eq!(ids::<<Set as ServiceSet>::Ping>(), (2, 8, "PING"));
+        assert_eq!(ids::<<Set as ServiceSet>::Pong>(), (1, 3, "PONG"));
+        assert_eq!(ids::<<Set as ServiceSet>::Setting>(), (2, 4, "SETTING"));
+        assert_eq!(
+            ids::<<Set as ServiceSet>::GetSetting>(),
+            (2, 16, "GET_SETTING")
+        );
+        assert_eq!(ids::<<Set as ServiceSet>::DlValue>(), (1, 31, "DL_VALUE"));
+        assert_eq!(
+            ids::<<Set as LinkReportSet>::DatalinkReport>(),
+            (1, 30, "DATALINK_REPORT")
+        );
+        let value = <<Set as ServiceSet>::DlValue as SettingValue>::new(2, 0.5);
+        assert_eq!((value.index, value.value), (2, 0.5));
+        let report = <Set as LinkReportSet>::DatalinkReport::from(LinkReport {
+            downlink_ovrn: 9,
+            ..LinkReport::default()
+        });
+        assert_eq!(report.downlink_ovrn, 9);
+    }
+
+    #[test]
     fn typed_struct_with_units_from_units_xml() {
         // ATTITUDE has unit rad, alt_unit deg and no coefficient in messages.xml: the
         // default comes from units.xml.
