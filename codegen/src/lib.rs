@@ -93,9 +93,12 @@
 //!
 //! The same generator reads a Paparazzi telemetry configuration (processes, modes, message
 //! periods and phases), resolves its message names against the message set above (class
-//! `telemetry` by default) and emits static schedule tables for the runtime scheduler
-//! (`pprz_telemetry::scheduler`), into a second file. See [`telemetry`] for the tick
-//! rounding and the automatic phase staggering.
+//! `telemetry` by default) and emits static schedule tables, into a second file. The
+//! tables are values of the plain data types of [`pprz_messages::schedule`] (`Schedule`,
+//! `Process`, `Mode`, `Periodic`), which the runtime's scheduler runs: like the message
+//! types, they need only the `pprz-messages` crate, found at the path given by
+//! [`runtime_crate`](Generator::runtime_crate). See [`telemetry`] for the tick rounding
+//! and the automatic phase staggering.
 //!
 //! ```no_run
 //! // build.rs (body of `fn main`), after generating the messages:
@@ -181,7 +184,6 @@ pub struct Generator {
     default_priority: u8,
     telemetry: Option<Source>,
     schedule: ScheduleOptions,
-    scheduler: String,
 }
 
 /// Generated schedule tables (see [`Generator::generate_telemetry`]).
@@ -217,7 +219,6 @@ impl Generator {
             default_priority: pprz_messages::priority::DEFAULT,
             telemetry: None,
             schedule: ScheduleOptions::default(),
-            scheduler: "::pprz_telemetry::scheduler".to_owned(),
         }
     }
 
@@ -242,8 +243,9 @@ impl Generator {
         self
     }
 
-    /// Path of the `pprz-messages` crate as seen from the generated code
-    /// (default `::pprz_messages`; e.g. `crate` inside that crate, or a re-export).
+    /// Path of the `pprz-messages` crate as seen from the generated code, for the message
+    /// types and the schedule tables alike (default `::pprz_messages`; e.g. `crate` inside
+    /// that crate, or a re-export such as `::my_runtime::pprz_messages`).
     pub fn runtime_crate(mut self, path: impl Into<String>) -> Self {
         self.runtime = path.into();
         self
@@ -376,13 +378,6 @@ impl Generator {
         self
     }
 
-    /// Path of the runtime's scheduler module as seen from the generated tables
-    /// (default `::pprz_telemetry::scheduler`; `crate::scheduler` inside that crate).
-    pub fn scheduler_crate(mut self, path: impl Into<String>) -> Self {
-        self.scheduler = path.into();
-        self
-    }
-
     /// Reads and validates the telemetry configuration and resolves it against the
     /// selected message set, without generating code.
     ///
@@ -415,7 +410,7 @@ impl Generator {
     pub fn generate_telemetry(&self) -> Result<GeneratedTelemetry, Error> {
         let schedule = self.schedule()?;
         Ok(GeneratedTelemetry {
-            code: telemetry::emit(&schedule, &self.scheduler),
+            code: telemetry::emit(&schedule, &self.runtime),
             warnings: schedule.warnings,
         })
     }

@@ -369,7 +369,8 @@ fn automatic_phases_are_staggered_and_never_equal_for_equal_periods() {
 fn tables_match_the_snapshot() {
     // After an intended change of the emitter, regenerate with
     // `UPDATE_SNAPSHOTS=1 cargo test -p pprz-codegen --test telemetry` and review the
-    // diff. The snapshot is compiled and run by pprz-telemetry's `tests/scheduler.rs`.
+    // diff. The snapshot is compiled here (`snapshot_tables_compile`) and run by the
+    // runtime's scheduler tests.
     let generated = Generator::new(MESSAGES)
         .telemetry(OK)
         .generate_telemetry()
@@ -385,11 +386,39 @@ fn tables_match_the_snapshot() {
     );
 }
 
+// The tables use only `pprz_messages::schedule`, so the snapshot compiles here.
+#[allow(dead_code)]
+mod snapshot {
+    include!("snapshots/periodic.rs");
+}
+
+#[test]
+fn snapshot_tables_compile() {
+    use pprz_messages::schedule::Schedule;
+    let schedule: &Schedule<'static> = &snapshot::SCHEDULE;
+    assert_eq!(schedule.frequency_hz, snapshot::FREQUENCY_HZ);
+    assert_eq!(schedule.processes.len(), snapshot::PROCESSES);
+    assert_eq!(schedule.processes[snapshot::logger::PROCESS].name, "Logger");
+    let main = &schedule.processes[snapshot::main::PROCESS];
+    assert_eq!(
+        main.modes[snapshot::main::MODE_RAW_SENSORS].name,
+        "raw_sensors"
+    );
+    assert_eq!(schedule.message_id("ENERGY"), Some((1, 12)));
+    let energy = main.modes[0]
+        .messages
+        .iter()
+        .find(|m| m.name == "ENERGY")
+        .unwrap();
+    assert_eq!((energy.period_ticks, energy.phase_ticks), (15, 6));
+    assert!(energy.is_due(6) && energy.is_due(21) && !energy.is_due(15));
+}
+
 #[test]
 fn tables_content() {
     let code = Generator::new(MESSAGES)
         .telemetry(OK)
-        .scheduler_crate("crate::scheduler")
+        .runtime_crate("crate::rt")
         .tick_frequency(100)
         .generate_telemetry()
         .unwrap()
@@ -397,12 +426,14 @@ fn tables_content() {
     for expected in [
         "pub const FREQUENCY_HZ: u32 = 100;",
         "pub const PROCESSES: usize = 2;",
-        "pub static SCHEDULE: crate::scheduler::Schedule<'static> = crate::scheduler::Schedule {",
+        "pub static SCHEDULE: crate::rt::schedule::Schedule<'static> = crate::rt::schedule::Schedule {",
+        "        crate::rt::schedule::Process {",
+        "                crate::rt::schedule::Mode {",
         "key_press: Some(\"d\"),",
         "// ENERGY: every 0.25 s, phase 0.1 s",
-        "crate::scheduler::Periodic { name: \"ENERGY\", class_id: 1, msg_id: 12, period_ticks: 25, phase_ticks: 10, period_s: 0.25 },",
+        "crate::rt::schedule::Periodic { name: \"ENERGY\", class_id: 1, msg_id: 12, period_ticks: 25, phase_ticks: 10, period_s: 0.25 },",
         "// ALIVE: every 2.1 s, automatic phase",
-        "crate::scheduler::Periodic { name: \"ALIVE\", class_id: 1, msg_id: 2, period_ticks: 210, phase_ticks: 0, period_s: 2.1 },",
+        "crate::rt::schedule::Periodic { name: \"ALIVE\", class_id: 1, msg_id: 2, period_ticks: 210, phase_ticks: 0, period_s: 2.1 },",
         "pub mod main {",
         "pub mod logger {",
         "    pub const PROCESS: usize = 1;",
@@ -485,6 +516,9 @@ fn cli_checks_lists_and_generates() {
     let (ok, _, stderr) = cli(&[MESSAGES, "--telemetry", OK, "--tick-frequency", "0"]);
     assert!(!ok);
     assert!(stderr.contains("--tick-frequency"), "{stderr}");
+    let (ok, stdout, stderr) = cli(&[MESSAGES, "--telemetry", OK, "--runtime-crate", "rt"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("pub static SCHEDULE: rt::schedule::Schedule<'static>"));
 }
 
 #[test]

@@ -24,7 +24,8 @@ struct Args {
     /// A units.xml giving default alt_unit coefficients.
     #[arg(long)]
     units: Option<PathBuf>,
-    /// Path of the pprz-messages crate in the generated code.
+    /// Path of the pprz-messages crate in the generated code (message types and, with
+    /// --telemetry, schedule tables).
     #[arg(long, default_value = "::pprz_messages")]
     runtime_crate: String,
     /// Priority of messages without a `priority` attribute.
@@ -57,13 +58,6 @@ struct Args {
     /// Interval between automatic phases, in seconds.
     #[arg(long, default_value_t = 0.1, requires = "telemetry")]
     stagger: f64,
-    /// Path of the runtime's scheduler module in the generated tables.
-    #[arg(
-        long,
-        default_value = "::pprz_telemetry::scheduler",
-        requires = "telemetry"
-    )]
-    scheduler_crate: String,
 }
 
 fn list_schedule(s: &Schedule) {
@@ -102,8 +96,7 @@ fn telemetry(args: &Args, generator: Generator) -> Result<(), pprz_codegen::Erro
         .skip_unknown_telemetry(args.skip_unknown_telemetry)
         .telemetry_class(args.telemetry_class.clone())
         .tick_frequency(args.tick_frequency)
-        .stagger_interval(args.stagger)
-        .scheduler_crate(args.scheduler_crate.clone());
+        .stagger_interval(args.stagger);
     let warnings = if args.check || args.list {
         let s = generator.schedule()?;
         if args.list {

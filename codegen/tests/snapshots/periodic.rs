@@ -10,43 +10,43 @@ pub const PROCESSES: usize = 2;
 ///
 /// Periods and phases are in ticks of 1/60 s; phases not given in the configuration
 /// are staggered (6 ticks apart, never equal for equal periods while possible).
-pub static SCHEDULE: ::pprz_telemetry::scheduler::Schedule<'static> = ::pprz_telemetry::scheduler::Schedule {
+pub static SCHEDULE: ::pprz_messages::schedule::Schedule<'static> = ::pprz_messages::schedule::Schedule {
     frequency_hz: 60,
     processes: &[
-        ::pprz_telemetry::scheduler::Process {
+        ::pprz_messages::schedule::Process {
             name: "Main",
             modes: &[
-                ::pprz_telemetry::scheduler::Mode {
+                ::pprz_messages::schedule::Mode {
                     name: "default",
                     key_press: Some("d"),
                     messages: &[
                         // ALIVE: every 2.1 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "ALIVE", class_id: 1, msg_id: 2, period_ticks: 126, phase_ticks: 0, period_s: 2.1 },
+                        ::pprz_messages::schedule::Periodic { name: "ALIVE", class_id: 1, msg_id: 2, period_ticks: 126, phase_ticks: 0, period_s: 2.1 },
                         // ATTITUDE: every 0.25 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "ATTITUDE", class_id: 1, msg_id: 6, period_ticks: 15, phase_ticks: 7, period_s: 0.25 },
+                        ::pprz_messages::schedule::Periodic { name: "ATTITUDE", class_id: 1, msg_id: 6, period_ticks: 15, phase_ticks: 7, period_s: 0.25 },
                         // GPS: every 0.25 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "GPS", class_id: 1, msg_id: 8, period_ticks: 15, phase_ticks: 12, period_s: 0.25 },
+                        ::pprz_messages::schedule::Periodic { name: "GPS", class_id: 1, msg_id: 8, period_ticks: 15, phase_ticks: 12, period_s: 0.25 },
                         // ENERGY: every 0.25 s, phase 0.1 s
-                        ::pprz_telemetry::scheduler::Periodic { name: "ENERGY", class_id: 1, msg_id: 12, period_ticks: 15, phase_ticks: 6, period_s: 0.25 },
+                        ::pprz_messages::schedule::Periodic { name: "ENERGY", class_id: 1, msg_id: 12, period_ticks: 15, phase_ticks: 6, period_s: 0.25 },
                         // DL_VALUE: every 1.1 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "DL_VALUE", class_id: 1, msg_id: 31, period_ticks: 66, phase_ticks: 18, period_s: 1.1 },
+                        ::pprz_messages::schedule::Periodic { name: "DL_VALUE", class_id: 1, msg_id: 31, period_ticks: 66, phase_ticks: 18, period_s: 1.1 },
                         // DATALINK_REPORT: every 5.1 s, phase 1.5 s
-                        ::pprz_telemetry::scheduler::Periodic { name: "DATALINK_REPORT", class_id: 1, msg_id: 30, period_ticks: 306, phase_ticks: 90, period_s: 5.1 },
+                        ::pprz_messages::schedule::Periodic { name: "DATALINK_REPORT", class_id: 1, msg_id: 30, period_ticks: 306, phase_ticks: 90, period_s: 5.1 },
                     ],
                 },
-                ::pprz_telemetry::scheduler::Mode {
+                ::pprz_messages::schedule::Mode {
                     name: "raw_sensors",
                     key_press: None,
                     messages: &[
                         // ALIVE: every 2.1 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "ALIVE", class_id: 1, msg_id: 2, period_ticks: 126, phase_ticks: 0, period_s: 2.1 },
+                        ::pprz_messages::schedule::Periodic { name: "ALIVE", class_id: 1, msg_id: 2, period_ticks: 126, phase_ticks: 0, period_s: 2.1 },
                         // IMU_GYRO_RAW: every 0.05 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "IMU_GYRO_RAW", class_id: 1, msg_id: 203, period_ticks: 3, phase_ticks: 0, period_s: 0.05 },
+                        ::pprz_messages::schedule::Periodic { name: "IMU_GYRO_RAW", class_id: 1, msg_id: 203, period_ticks: 3, phase_ticks: 0, period_s: 0.05 },
                         // IMU_ACCEL_RAW: every 0.05 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "IMU_ACCEL_RAW", class_id: 1, msg_id: 204, period_ticks: 3, phase_ticks: 1, period_s: 0.05 },
+                        ::pprz_messages::schedule::Periodic { name: "IMU_ACCEL_RAW", class_id: 1, msg_id: 204, period_ticks: 3, phase_ticks: 1, period_s: 0.05 },
                     ],
                 },
-                ::pprz_telemetry::scheduler::Mode {
+                ::pprz_messages::schedule::Mode {
                     name: "off",
                     key_press: None,
                     messages: &[
@@ -54,17 +54,17 @@ pub static SCHEDULE: ::pprz_telemetry::scheduler::Schedule<'static> = ::pprz_tel
                 },
             ],
         },
-        ::pprz_telemetry::scheduler::Process {
+        ::pprz_messages::schedule::Process {
             name: "Logger",
             modes: &[
-                ::pprz_telemetry::scheduler::Mode {
+                ::pprz_messages::schedule::Mode {
                     name: "all",
                     key_press: None,
                     messages: &[
                         // ATTITUDE: every 0.02 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "ATTITUDE", class_id: 1, msg_id: 6, period_ticks: 1, phase_ticks: 0, period_s: 0.02 },
+                        ::pprz_messages::schedule::Periodic { name: "ATTITUDE", class_id: 1, msg_id: 6, period_ticks: 1, phase_ticks: 0, period_s: 0.02 },
                         // IMU_GYRO_RAW: every 0.02 s, automatic phase
-                        ::pprz_telemetry::scheduler::Periodic { name: "IMU_GYRO_RAW", class_id: 1, msg_id: 203, period_ticks: 1, phase_ticks: 0, period_s: 0.02 },
+                        ::pprz_messages::schedule::Periodic { name: "IMU_GYRO_RAW", class_id: 1, msg_id: 203, period_ticks: 1, phase_ticks: 0, period_s: 0.02 },
                     ],
                 },
             ],
