@@ -5,6 +5,9 @@
 //! ```text
 //! pub static MESSAGES: MessageSet       every message's descriptor, sorted by (class, id)
 //! pub enum AnyMessage<'a>               one variant per class
+//! pub struct Set;                       the set, for the runtime: the roles it fills
+//! impl roles::Ping for datalink::Ping   each message that fits its role
+//! impl roles::ServiceSet for Set        each set role whose messages all fit
 //! pub mod telemetry {                   one module per class
 //!     pub const CLASS_ID, CLASS_NAME
 //!     pub struct Gps { .. }             one struct per message: Message + Decode
@@ -12,6 +15,29 @@
 //!     pub mod values { pub enum GpsMode { .. } }   enums from `values` attributes
 //! }
 //! ```
+//!
+//! # Why text, not `quote` + `prettyplease`
+//!
+//! The code is written as text (`writeln!` into a `String`), already laid out, rather
+//! than built as token trees with `quote` and formatted with `prettyplease`:
+//!
+//! - This crate is a build-dependency of every firmware that generates its own set:
+//!   `syn` (with its `full` feature, which `prettyplease` needs), `quote` and
+//!   `prettyplease` would be compiled for every clean firmware build, before its
+//!   `build.rs` can even run, to produce the same output. Today the generator needs only
+//!   `roxmltree` and `pprz-messages`.
+//! - The output is reviewed as snapshots (`tests/snapshots/`) and read by users (it is
+//!   their API): written text keeps the layout chosen for reading (a field descriptor per
+//!   line, one-line table rows), and a change of the emitter shows as the same change of
+//!   the snapshot. `prettyplease` would impose its own layout.
+//! - The safety token trees would bring is obtained otherwise: identifiers come from
+//!   validated names (`names`), free text from `messages.xml` is emitted through `{:?}`
+//!   string literals (`#[doc = "..."]`) or escaped, and the snapshot test compiles the
+//!   output.
+//!
+//! What is emitted more than once has one helper: both `AnyMessage` enums come from
+//! [`emit_any_enum`], parameterised by their variants, their `decode` dispatch and their
+//! methods.
 
 use std::collections::HashSet;
 use std::fmt::Write as _;
@@ -218,114 +244,83 @@ fn emit_message_table(out: &mut String, protocol: &Protocol, opts: &Options) {
     out!(out, "]);\n");
 }
 
+/// The set's `AnyMessage`: one variant per class.
 fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
-    let rt = &opts.runtime;
-    let any_lt = protocol.classes.iter().any(class_has_lifetime);
-    let l = lt(any_lt);
-    out!(out, "/// A decoded message of any class of this set.");
-    out!(out, "#[derive(Debug, Clone, Copy, PartialEq)]");
-    out!(out, "pub enum AnyMessage{l} {{");
-    for c in &protocol.classes {
-        out!(
-            out,
-            "    /// A message of class `{}` (id {}).",
-            c.name,
-            c.id
-        );
-        out!(
-            out,
-            "    {}({}::AnyMessage{}),",
-            names::camel_case(&c.name),
-            names::module_name(&c.name),
-            lt(class_has_lifetime(c))
-        );
-    }
-    out!(out, "}}\n");
-    let input = if any_lt { "&'a [u8]" } else { "&[u8]" };
-    out!(out, "impl{l} AnyMessage{l} {{");
-    out!(
-        out,
-        "    /// Decodes a payload (fields only) given its class and message id."
-    );
-    out!(out, "    ///");
-    out!(out, "    /// # Errors");
-    out!(
-        out,
-        "    /// Unknown class or message id, or a payload of the wrong length."
-    );
-    out!(
-        out,
-        "    pub fn decode(class_id: u8, msg_id: u8, payload: {input}) -> Result<Self, {rt}::DecodeError> {{"
-    );
-    out!(out, "        match class_id {{");
-    for c in &protocol.classes {
-        out!(
-            out,
-            "            {} => {m}::AnyMessage::decode(msg_id, payload).map(Self::{}),",
-            c.id,
-            names::camel_case(&c.name),
-            m = names::module_name(&c.name)
-        );
-    }
-    out!(
-        out,
-        "            _ => Err({rt}::DecodeError::UnknownMessage {{ class_id, msg_id }}),"
-    );
-    out!(out, "        }}");
-    out!(out, "    }}\n");
-    let delegate = |out: &mut String, doc: &str, sig: &str, call: &str| {
-        out!(out, "    /// {doc}");
-        out!(out, "    pub fn {sig} {{");
-        out!(out, "        match self {{");
-        for c in &protocol.classes {
-            out!(
-                out,
-                "            Self::{}(m) => m.{call},",
-                names::camel_case(&c.name)
-            );
-        }
-        out!(out, "        }}");
-        out!(out, "    }}\n");
+    let delegate = |doc: &'static str, sig: String, call: &'static str| AnyMethod {
+        doc: vec![doc],
+        sig,
+        bind: true,
+        arm: Box::new(move |_| format!("m.{call}")),
     };
-    out!(out, "    /// Class id of the message.");
-    out!(out, "    pub fn class_id(&self) -> u8 {{");
-    out!(out, "        match self {{");
-    for c in &protocol.classes {
-        out!(
-            out,
-            "            Self::{}(_) => {},",
-            names::camel_case(&c.name),
-            c.id
-        );
-    }
-    out!(out, "        }}");
-    out!(out, "    }}\n");
-    delegate(
+    emit_any_enum(
         out,
-        "Message id within the class.",
-        "id(&self) -> u8",
-        "id()",
+        &AnyEnum {
+            indent: "",
+            doc: "A decoded message of any class of this set.",
+            attrs: &[],
+            rt: &opts.runtime,
+            variants: protocol
+                .classes
+                .iter()
+                .map(|c| {
+                    let module = names::module_name(&c.name);
+                    let lifetime = class_has_lifetime(c);
+                    AnyVariant {
+                        name: names::camel_case(&c.name),
+                        ty: format!("{module}::AnyMessage{}", lt(lifetime)),
+                        lifetime,
+                        doc: format!("A message of class `{}` (id {}).", c.name, c.id),
+                        id: c.id,
+                        decode: format!("{module}::AnyMessage::decode(msg_id, payload)"),
+                    }
+                })
+                .collect(),
+            dispatch: Dispatch {
+                doc: "given its class and message id",
+                errors: "Unknown class or message id, or a payload of the wrong length.",
+                params: "class_id: u8, msg_id: u8",
+                on: "class_id",
+                unknown: "class_id, msg_id",
+            },
+            methods: vec![
+                AnyMethod {
+                    doc: vec!["Class id of the message."],
+                    sig: "class_id(&self) -> u8".to_owned(),
+                    bind: false,
+                    arm: Box::new(|v| v.id.to_string()),
+                },
+                delegate(
+                    "Message id within the class.",
+                    "id(&self) -> u8".into(),
+                    "id()",
+                ),
+                delegate(
+                    "Message name.",
+                    "name(&self) -> &'static str".into(),
+                    "name()",
+                ),
+                delegate(
+                    "Send priority.",
+                    "priority(&self) -> u8".into(),
+                    "priority()",
+                ),
+                delegate(
+                    "Length of the encoded fields.",
+                    "encoded_len(&self) -> usize".into(),
+                    "encoded_len()",
+                ),
+                delegate(
+                    "Encodes the fields into `buf`, returning the length written (errors as the message's encoder).",
+                    format!(
+                        "encode(&self, buf: &mut [u8]) -> Result<usize, {}::EncodeError>",
+                        opts.runtime
+                    ),
+                    "encode(buf)",
+                ),
+            ],
+            from_impls: false,
+        },
     );
-    delegate(
-        out,
-        "Message name.",
-        "name(&self) -> &'static str",
-        "name()",
-    );
-    delegate(out, "Send priority.", "priority(&self) -> u8", "priority()");
-    delegate(
-        out,
-        "Length of the encoded fields.",
-        "encoded_len(&self) -> usize",
-        "encoded_len()",
-    );
-    delegate(
-        out,
-        "Encodes the fields into `buf`, returning the length written (errors as the message's encoder).",
-        &format!("encode(&self, buf: &mut [u8]) -> Result<usize, {rt}::EncodeError>"),
-        "encode(buf)",
-    );
-    out!(out, "}}\n");
 }
 
 /// The `Set` type, and the traits of `roles` for what the set fills (see [`crate::roles`]).
@@ -696,113 +691,232 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     }
 }
 
+/// A class's `AnyMessage`: one variant per message.
 fn emit_class_any(out: &mut String, class: &Class) {
-    let life = class_has_lifetime(class);
+    // The variants are named after the message types, so `v.name` is the type.
+    // `const_ref`: "" for the constant's value, "&" for a reference to it.
+    let constant =
+        |doc: &'static str, sig: &str, const_ref: &'static str, name: &'static str| AnyMethod {
+            doc: vec![doc],
+            sig: sig.to_owned(),
+            bind: false,
+            arm: Box::new(move |v| format!("{const_ref}<{} as __rt::Message>::{name}", v.name)),
+        };
+    let call = |doc: Vec<&'static str>, sig: &str, expr: &'static str| AnyMethod {
+        doc,
+        sig: sig.to_owned(),
+        bind: true,
+        arm: Box::new(move |_| expr.to_owned()),
+    };
+    emit_any_enum(
+        out,
+        &AnyEnum {
+            indent: "    ",
+            doc: "A decoded message of this class.",
+            attrs: &["#[allow(clippy::large_enum_variant)]"],
+            rt: "__rt",
+            variants: class
+                .messages
+                .iter()
+                .map(|m| {
+                    let name = names::camel_case(&m.name);
+                    let lifetime = has_lifetime(m);
+                    let ty = format!("{name}{}", lt(lifetime));
+                    AnyVariant {
+                        decode: format!("<{ty} as __rt::Decode>::decode(payload)"),
+                        doc: format!("`{}` (id {}).", m.name, m.id),
+                        id: m.id,
+                        name,
+                        ty,
+                        lifetime,
+                    }
+                })
+                .collect(),
+            dispatch: Dispatch {
+                doc: "given its message id",
+                errors: "Unknown message id, or a payload of the wrong length.",
+                params: "msg_id: u8",
+                on: "msg_id",
+                unknown: "class_id: CLASS_ID, msg_id",
+            },
+            methods: vec![
+                constant("Message id.", "id(&self) -> u8", "", "ID"),
+                constant("Message name.", "name(&self) -> &'static str", "", "NAME"),
+                constant("Send priority.", "priority(&self) -> u8", "", "PRIORITY"),
+                constant(
+                    "Description of the message.",
+                    "descriptor(&self) -> &'static __rt::MessageDescriptor<'static>",
+                    "&",
+                    "DESCRIPTOR",
+                ),
+                call(
+                    vec!["Length of the encoded fields."],
+                    "encoded_len(&self) -> usize",
+                    "__rt::Message::encoded_len(m)",
+                ),
+                call(
+                    vec![
+                        "Encodes the fields into `buf`, returning the length written.",
+                        "",
+                        "# Errors",
+                        "See [`Message::encode`](__rt::Message::encode).",
+                    ],
+                    "encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError>",
+                    "__rt::Message::encode(m, buf)",
+                ),
+            ],
+            from_impls: true,
+        },
+    );
+}
+
+/// A variant of an `AnyMessage` enum.
+struct AnyVariant {
+    /// Variant name (`Telemetry`, `Gps`).
+    name: String,
+    /// The type it holds, with its lifetime if it has one (`telemetry::AnyMessage<'a>`).
+    ty: String,
+    /// Whether `ty` has the lifetime `'a`.
+    lifetime: bool,
+    /// Doc comment.
+    doc: String,
+    /// The id it is decoded from (class id, or message id).
+    id: u8,
+    /// Expression decoding `payload` into a `Result<ty, DecodeError>`.
+    decode: String,
+}
+
+/// How `decode` picks the variant.
+struct Dispatch {
+    /// What the payload is decoded by, in the doc comment (`given its message id`).
+    doc: &'static str,
+    /// The `# Errors` section of the doc comment.
+    errors: &'static str,
+    /// The id parameters (`msg_id: u8`); a `payload` parameter follows.
+    params: &'static str,
+    /// The parameter matched against the variants' ids.
+    on: &'static str,
+    /// Fields of `DecodeError::UnknownMessage` for an unknown id.
+    unknown: &'static str,
+}
+
+/// A method of an `AnyMessage` enum: one `match self` arm per variant.
+struct AnyMethod<'f> {
+    /// Doc comment lines.
+    doc: Vec<&'static str>,
+    /// Signature after `pub fn`.
+    sig: String,
+    /// Whether the arms bind the message as `m` (else `_`).
+    bind: bool,
+    /// Expression of a variant's arm.
+    arm: Box<dyn Fn(&AnyVariant) -> String + 'f>,
+}
+
+/// What differs between the set's `AnyMessage` and a class's.
+struct AnyEnum<'f> {
+    /// Indentation of the items (inside a class module or not).
+    indent: &'static str,
+    /// Doc comment of the enum.
+    doc: &'static str,
+    /// Attributes after the derives.
+    attrs: &'static [&'static str],
+    /// Path of the runtime crate as seen from the enum.
+    rt: &'f str,
+    variants: Vec<AnyVariant>,
+    dispatch: Dispatch,
+    /// Methods after `decode`.
+    methods: Vec<AnyMethod<'f>>,
+    /// Whether to emit `From<message>` for each variant.
+    from_impls: bool,
+}
+
+/// An `AnyMessage` enum, its `decode`, its methods and, if asked, its `From` impls.
+fn emit_any_enum(out: &mut String, e: &AnyEnum) {
+    let i = e.indent;
+    let rt = e.rt;
+    let life = e.variants.iter().any(|v| v.lifetime);
     let l = lt(life);
-    out!(out, "    /// A decoded message of this class.");
-    out!(out, "    #[derive(Debug, Clone, Copy, PartialEq)]");
-    out!(out, "    #[allow(clippy::large_enum_variant)]");
-    out!(out, "    pub enum AnyMessage{l} {{");
-    for m in &class.messages {
-        let ty = names::camel_case(&m.name);
-        out!(out, "        /// `{}` (id {}).", m.name, m.id);
-        out!(out, "        {ty}({ty}{}),", lt(has_lifetime(m)));
+    let docs = |out: &mut String, lines: &[&str]| {
+        for line in lines {
+            if line.is_empty() {
+                out!(out, "{i}    ///");
+            } else {
+                out!(out, "{i}    /// {line}");
+            }
+        }
+    };
+    out!(out, "{i}/// {}", e.doc);
+    out!(out, "{i}#[derive(Debug, Clone, Copy, PartialEq)]");
+    for attr in e.attrs {
+        out!(out, "{i}{attr}");
     }
-    out!(out, "    }}\n");
+    out!(out, "{i}pub enum AnyMessage{l} {{");
+    for v in &e.variants {
+        out!(out, "{i}    /// {}", v.doc);
+        out!(out, "{i}    {}({}),", v.name, v.ty);
+    }
+    out!(out, "{i}}}\n");
+
+    let d = &e.dispatch;
     let input = if life { "&'a [u8]" } else { "&[u8]" };
-    out!(out, "    impl{l} AnyMessage{l} {{");
+    out!(out, "{i}impl{l} AnyMessage{l} {{");
+    docs(
+        out,
+        &[
+            &format!("Decodes a payload (fields only) {}.", d.doc),
+            "",
+            "# Errors",
+            d.errors,
+        ],
+    );
     out!(
         out,
-        "        /// Decodes a payload (fields only) given its message id."
+        "{i}    pub fn decode({}, payload: {input}) -> Result<Self, {rt}::DecodeError> {{",
+        d.params
     );
-    out!(out, "        ///");
-    out!(out, "        /// # Errors");
-    out!(
-        out,
-        "        /// Unknown message id, or a payload of the wrong length."
-    );
-    out!(
-        out,
-        "        pub fn decode(msg_id: u8, payload: {input}) -> Result<Self, __rt::DecodeError> {{"
-    );
-    out!(out, "            match msg_id {{");
-    for m in &class.messages {
-        let ty = names::camel_case(&m.name);
-        let tl = lt(has_lifetime(m));
+    out!(out, "{i}        match {} {{", d.on);
+    for v in &e.variants {
         out!(
             out,
-            "                {} => <{ty}{tl} as __rt::Decode>::decode(payload).map(Self::{ty}),",
-            m.id
+            "{i}            {} => {}.map(Self::{}),",
+            v.id,
+            v.decode,
+            v.name
         );
     }
     out!(
         out,
-        "                _ => Err(__rt::DecodeError::UnknownMessage {{ class_id: CLASS_ID, msg_id }}),"
+        "{i}            _ => Err({rt}::DecodeError::UnknownMessage {{ {} }}),",
+        d.unknown
     );
-    out!(out, "            }}");
-    out!(out, "        }}\n");
-    // `bind`: whether the arm uses the message value (`m`) or only its type.
-    let arms =
-        |out: &mut String, doc: &str, sig: &str, bind: bool, body: &dyn Fn(&str) -> String| {
-            out!(out, "        /// {doc}");
-            out!(out, "        pub fn {sig} {{");
-            out!(out, "            match self {{");
-            for m in &class.messages {
-                let ty = names::camel_case(&m.name);
-                let pat = if bind { "m" } else { "_" };
-                out!(out, "                Self::{ty}({pat}) => {},", body(&ty));
-            }
-            out!(out, "            }}");
-            out!(out, "        }}\n");
-        };
-    arms(out, "Message id.", "id(&self) -> u8", false, &|ty| {
-        format!("<{ty} as __rt::Message>::ID")
-    });
-    arms(
-        out,
-        "Message name.",
-        "name(&self) -> &'static str",
-        false,
-        &|ty| format!("<{ty} as __rt::Message>::NAME"),
-    );
-    arms(
-        out,
-        "Send priority.",
-        "priority(&self) -> u8",
-        false,
-        &|ty| format!("<{ty} as __rt::Message>::PRIORITY"),
-    );
-    arms(
-        out,
-        "Description of the message.",
-        "descriptor(&self) -> &'static __rt::MessageDescriptor<'static>",
-        false,
-        &|ty| format!("&<{ty} as __rt::Message>::DESCRIPTOR"),
-    );
-    arms(
-        out,
-        "Length of the encoded fields.",
-        "encoded_len(&self) -> usize",
-        true,
-        &|_| "__rt::Message::encoded_len(m)".to_owned(),
-    );
-    arms(
-        out,
-        "Encodes the fields into `buf`, returning the length written.\n        ///\n        /// # Errors\n        /// See [`Message::encode`](__rt::Message::encode).",
-        "encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError>",
-        true,
-        &|_| "__rt::Message::encode(m, buf)".to_owned(),
-    );
-    out!(out, "    }}\n");
-    for m in &class.messages {
-        let ty = names::camel_case(&m.name);
-        let tl = lt(has_lifetime(m));
-        let il = if life { "<'a>" } else { "" };
-        out!(out, "    impl{il} From<{ty}{tl}> for AnyMessage{l} {{");
-        out!(out, "        fn from(m: {ty}{tl}) -> Self {{");
-        out!(out, "            Self::{ty}(m)");
-        out!(out, "        }}");
-        out!(out, "    }}\n");
+    out!(out, "{i}        }}");
+    out!(out, "{i}    }}\n");
+    for method in &e.methods {
+        docs(out, &method.doc);
+        out!(out, "{i}    pub fn {} {{", method.sig);
+        out!(out, "{i}        match self {{");
+        let pat = if method.bind { "m" } else { "_" };
+        for v in &e.variants {
+            out!(
+                out,
+                "{i}            Self::{}({pat}) => {},",
+                v.name,
+                (method.arm)(v)
+            );
+        }
+        out!(out, "{i}        }}");
+        out!(out, "{i}    }}\n");
+    }
+    out!(out, "{i}}}\n");
+
+    if e.from_impls {
+        for v in &e.variants {
+            out!(out, "{i}impl{l} From<{}> for AnyMessage{l} {{", v.ty);
+            out!(out, "{i}    fn from(m: {}) -> Self {{", v.ty);
+            out!(out, "{i}        Self::{}(m)", v.name);
+            out!(out, "{i}    }}");
+            out!(out, "{i}}}\n");
+        }
     }
 }
 
