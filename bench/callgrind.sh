@@ -15,11 +15,11 @@ cd "$(dirname "$0")/.."
 
 modes=("$@")
 if [ ${#modes[@]} -eq 0 ]; then
-    modes=(encode parse parse-buffered encode-proposed downlink arena-10 arena-50 arena-90)
+    modes=(encode parse parse-buffered downlink arena-10 arena-50 arena-90)
 fi
 
 command -v valgrind >/dev/null || { echo "valgrind is not installed" >&2; exit 1; }
-cargo build -q --release -p pprz-bench --bin workloads --bin proposals
+cargo build -q --release -p pprz-bench --bin workloads
 target_dir=$(cargo metadata -q --format-version 1 --no-deps |
     sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')
 out_dir=${CALLGRIND_DIR:-$target_dir/callgrind}
@@ -29,11 +29,7 @@ printf '%-24s %-34s %12s %8s  %s\n' mode function instructions count "per unit"
 for mode in "${modes[@]}"; do
     # The function that mode measures: workload_<mode>, dashes as underscores.
     function="workload_${mode//-/_}"
-    # The prototypes of the proposals have their own binary.
-    case "$mode" in
-    *-proposed) program=proposals ;;
-    *) program=workloads ;;
-    esac
+    program=workloads
     file="$out_dir/callgrind.out.$mode"
     log="$out_dir/workloads.$mode.txt"
     valgrind --tool=callgrind --callgrind-out-file="$file" \

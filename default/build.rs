@@ -15,7 +15,6 @@ fn main() {
     // Warnings (none expected) are printed as `cargo:warning=`.
     if let Err(e) = generator
         .telemetry(dir.join("telemetry.xml"))
-        .scheduler_crate("::pprz_messages::schedule")
         .write_telemetry_to_out_dir("periodic.rs")
     {
         eprintln!("{e}");

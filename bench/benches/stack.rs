@@ -49,10 +49,11 @@ fn parse_buffered(bencher: Bencher<'_, '_>) {
 fn downlink(bencher: Bencher<'_, '_>) {
     let arena = downlink::BenchArena::new();
     let dl = downlink::new_downlink(&arena);
+    let [mut port] = dl.ports().expect("a new downlink's ports");
     let mut sink = Sink::default();
     bencher
         .counter(ItemsCount::new(MESSAGES))
-        .bench_local(|| downlink::run_downlink(&dl, black_box(MESSAGES), &mut sink));
+        .bench_local(|| downlink::run_downlink(&dl, &mut port, black_box(MESSAGES), &mut sink));
 }
 
 /// Workload 5: allocation and release steps at 10, 50 and 90 % fill.

@@ -12,16 +12,16 @@
 //! arena's lock is a `CriticalSectionRawMutex`, which on the host is critical-section's
 //! `std` implementation (a process-wide `std::sync::Mutex` plus a thread-local flag);
 //! on a Cortex-M it is an interrupt mask of a few instructions, so the host figure
-//! overstates that part (see `BENCHMARKS.md`). The queue uses `NoopRawMutex`, as a
-//! firmware with a single executor may.
+//! overstates that part (see `BENCHMARKS.md`). The queue uses the same mutex (the
+//! downlink's ports and type-erased handles need a mutex that is `Sync`).
 
 use std::convert::Infallible;
 
 use embassy_futures::select::{Either, select};
 use embassy_futures::{block_on, yield_now};
-use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use pprz_telemetry::stats::DeviceStats;
-use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
+use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use pprz_transports::PprzV2;
 
 use crate::stream::{AC_ID, attitude, gps};
@@ -36,7 +36,7 @@ pub const BATCH: usize = 8;
 /// The arena of the workload.
 pub type BenchArena = FrameArena<CriticalSectionRawMutex, ARENA_BYTES>;
 /// The downlink of the workload: one PPRZ v2 device.
-pub type BenchDownlink<'a> = Downlink<'a, NoopRawMutex, 1, QUEUE>;
+pub type BenchDownlink<'a> = Downlink<'a, CriticalSectionRawMutex, 1, QUEUE>;
 
 /// A device that accepts every write at once, counting frames and bytes and folding the
 /// bytes into a digest (so the writes cannot be optimised away).
@@ -77,12 +77,15 @@ pub fn new_downlink(arena: &BenchArena) -> BenchDownlink<'_> {
     Downlink::new(arena, AC_ID, [DeviceConfig::new(PprzV2::new().into())])
 }
 
-/// Workload 3: sends `count` messages through `downlink` to `sink`; returns the device's
-/// statistics once every message has been written.
-///
-/// # Panics
-/// If the writer task stops (it only does for a bad device index).
-pub fn run_downlink(downlink: &BenchDownlink<'_>, count: usize, sink: &mut Sink) -> DeviceStats {
+/// Workload 3: sends `count` messages through `downlink` to `sink`, written through
+/// `port` (the downlink's port); returns the device's statistics once every message has
+/// been written.
+pub fn run_downlink(
+    downlink: &BenchDownlink<'_>,
+    port: &mut Port<'_>,
+    count: usize,
+    sink: &mut Sink,
+) -> DeviceStats {
     let producer = async {
         let mut i = 0;
         while i < count {
@@ -101,10 +104,10 @@ pub fn run_downlink(downlink: &BenchDownlink<'_>, count: usize, sink: &mut Sink)
             yield_now().await;
         }
     };
-    let writer = run_writer(downlink, 0, sink);
+    let writer = run_writer(port, sink);
     match block_on(select(producer, writer)) {
         Either::First(()) => {}
-        Either::Second(result) => panic!("the writer stopped: {result:?}"),
+        Either::Second(never) => never,
     }
     downlink.stats(0).unwrap_or_default()
 }

@@ -18,7 +18,6 @@
 //! the repository has the commands and the latest figures; footprint (workload 6) is
 //! measured by `bench/footprint.sh` on the `bench/footprint` firmware.
 //!
-//! [`proposals`] holds the prototype of an optimisation `BENCHMARKS.md` measured and did
 //! not apply (fixed-offset message encoders), run by the same workload (mode
 //! `encode-proposed`).
 
@@ -27,6 +26,5 @@
 pub mod arena;
 pub mod downlink;
 pub mod overload;
-pub mod proposals;
 pub mod rng;
 pub mod stream;

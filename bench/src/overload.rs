@@ -40,10 +40,10 @@ use std::pin::pin;
 use std::task::{Context, Poll, Waker};
 
 use embassy_futures::select::{Either, select};
-use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, MockDriver, Timer};
 use pprz_messages::{Chars, Message, VarArray, priority};
-use pprz_telemetry::messages::telemetry::{
+use pprz_default::messages::telemetry::{
     Alive, Attitude, AutopilotVersion, DatalinkReport, DlValue, Energy, GpsInt, Ins, Payload,
     RotorcraftFp, RotorcraftStatus,
 };
@@ -300,7 +300,7 @@ trait TxPath {
     async fn write_loop(&self, uart: &mut SimUart<'_>);
 }
 
-type StackDownlink<'a> = Downlink<'a, NoopRawMutex, 1, PRIO_QUEUE>;
+type StackDownlink<'a> = Downlink<'a, CriticalSectionRawMutex, 1, PRIO_QUEUE>;
 
 impl TxPath for StackDownlink<'_> {
     fn submit<M: Message>(&self, msg: &M, _frame: &[u8]) -> bool {
@@ -308,12 +308,14 @@ impl TxPath for StackDownlink<'_> {
     }
 
     fn backlog(&self) -> bool {
-        self.queue(0).is_some_and(|q| !q.is_empty())
+        self.stats(0).is_some_and(|s| s.waiting > 0)
     }
 
     async fn write_loop(&self, uart: &mut SimUart<'_>) {
-        let Err(e) = run_writer(self, 0, uart).await;
-        panic!("{e}");
+        match self.ports() {
+            Ok([mut port]) => run_writer(&mut port, uart).await,
+            Err(e) => panic!("{e}"),
+        }
     }
 }
 

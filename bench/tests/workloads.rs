@@ -38,8 +38,9 @@ fn the_encoded_stream_parses_back_to_the_same_messages() {
 fn the_downlink_workload_writes_every_frame_of_the_stream() {
     let memory = downlink::BenchArena::new();
     let dl = downlink::new_downlink(&memory);
+    let [mut port] = dl.ports().unwrap();
     let mut sink = Sink::default();
-    let stats = downlink::run_downlink(&dl, MESSAGES, &mut sink);
+    let stats = downlink::run_downlink(&dl, &mut port, MESSAGES, &mut sink);
     assert_eq!(stats.submitted as usize, MESSAGES);
     assert_eq!(stats.sent as usize, MESSAGES, "{stats:?}");
     assert_eq!(stats.lost(), 0);

@@ -7,7 +7,7 @@ use std::process::Command;
 use pprz_messages::{Message, VarArray};
 use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
 
-const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml");
+const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml");
 
 fn monitor(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"))
@@ -61,7 +61,7 @@ fn stream() -> Vec<u8> {
 /// Messages built with the generated types of the default set.
 mod pprz_ground_test_messages {
     use super::*;
-    use pprz_telemetry::messages::telemetry::{Alive, Gps};
+    use pprz_default::messages::telemetry::{Alive, Gps};
 
     pub fn gps() -> Gps {
         Gps {

@@ -37,7 +37,7 @@
 //!
 //! // At start-up: one port per device, each for the device's writer task.
 //! let [radio, log] = DOWNLINK.ports().unwrap();
-//! // spawner.spawn(radio_writer(radio, uart_tx)) with `run_writer(port, uart_tx).await`
+//! // spawner.spawn(radio_writer(radio, uart_tx)) with `run_writer(&mut port, uart_tx).await`
 //!
 //! // From any task: returns at once. `sender()` is a copyable handle without the
 //! // downlink's generic parameters.

@@ -183,11 +183,11 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
     /// Returns at once with [`PortsTaken`] if the link runs already (or ran before): a
     /// device has one writer.
     pub async fn run<W: Write, R: Read>(&'a self, tx: W, rx: R) -> Result<Infallible, PortsTaken> {
-        let [port] = self.downlink.ports()?;
+        let [mut port] = self.downlink.ports()?;
         let transport = port.device().config().transport;
         let mut reader: Reader<'a, R, AnyTransport> = Reader::new(rx, transport, port.device());
         let inbox = LinkInbox { link: self };
-        match select(run_writer(port, tx), reader.run(&inbox)).await {
+        match select(run_writer(&mut port, tx), reader.run(&inbox)).await {
             Either::First(never) | Either::Second(never) => never,
         }
     }

@@ -116,6 +116,7 @@ impl<'a, const Q: usize> State<'a, Q> {
         let n = self.entries.len() + usize::from(self.in_flight);
         self.stats.queued = u16::try_from(n).unwrap_or(u16::MAX);
         let waiting = u16::try_from(self.entries.len()).unwrap_or(u16::MAX);
+        self.stats.waiting = waiting;
         self.stats.queue_high_water = self.stats.queue_high_water.max(waiting);
     }
 }
@@ -159,6 +160,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                         arena_full: 0,
                     },
                     queued: 0,
+                    waiting: 0,
                     queue_high_water: 0,
                     levels: [crate::stats::LevelStats {
                         submitted: 0,

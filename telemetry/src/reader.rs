@@ -25,7 +25,7 @@
 //! let mut reader = Reader::<_, _>::new(uart, PprzV2::new(), radio.device());
 //! reader.feed(&[0x99, 0x08, 0x00, 0x07, 0x02, 0x08, 0x19, 0x49], &DATALINK);
 //! assert_eq!(DATALINK.stats().received, 1);
-//! // In a task: `reader.run(&DATALINK).await`, next to `run_writer(radio, uart_tx)`.
+//! // In a task: `reader.run(&DATALINK).await`, next to `run_writer(&mut radio, uart_tx)`.
 //! ```
 //!
 //! Reading the same device with a second transport does not compile:

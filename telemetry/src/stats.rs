@@ -126,6 +126,8 @@ pub struct DeviceStats {
     pub evicted: EvictCounts,
     /// Frames waiting in the queue or being written now.
     pub queued: u16,
+    /// Frames waiting in the queue (`queued` without the one being written).
+    pub waiting: u16,
     /// Largest number of frames ever waiting in the queue.
     pub queue_high_water: u16,
     /// The same accounting per priority level (high, normal, low; indexed by

@@ -12,8 +12,8 @@
 //!
 //! ```ignore
 //! #[embassy_executor::task]
-//! async fn radio_writer(port: Port<'static>, uart: BufferedUartTx<'static>) -> ! {
-//!     pprz_telemetry::run_writer(port, uart).await
+//! async fn radio_writer(mut port: Port<'static>, uart: BufferedUartTx<'static>) -> ! {
+//!     pprz_telemetry::run_writer(&mut port, uart).await
 //! }
 //! ```
 
@@ -21,8 +21,9 @@ use embedded_io_async::Write;
 
 use crate::downlink::Port;
 
-/// Runs the writer of `port`'s device forever, writing its frames to `io`.
-pub async fn run_writer<W: Write>(mut port: Port<'_>, mut io: W) -> ! {
+/// Runs the writer of `port`'s device forever, writing its frames to `io`. (The port is
+/// borrowed, so it outlives a cancelled writer and can be given to the next one.)
+pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
     let flush = port.device().config().flush;
     loop {
         let frame = port.next().await;

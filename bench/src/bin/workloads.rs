@@ -7,9 +7,6 @@
 //!     target/release/workloads --mode encode
 //! ```
 //!
-//! The prototypes of `pprz_bench::proposals` run in their own binary, `proposals`, so
-//! they cannot change how the code measured here is inlined.
-//!
 //! `bench/callgrind.sh` runs every mode that way and divides the totals. Each mode prints
 //! its results and one `units <function> <count> <unit>` line that says what to divide
 //! the function's instruction count by.
@@ -49,10 +46,11 @@ fn workload_parse_buffered(stream: &[u8]) -> ParseSummary {
 #[inline(never)]
 fn workload_downlink(
     downlink: &downlink::BenchDownlink<'_>,
+    port: &mut pprz_telemetry::Port<'_>,
     count: usize,
     sink: &mut Sink,
 ) -> DeviceStats {
-    downlink::run_downlink(downlink, count, sink)
+    downlink::run_downlink(downlink, port, count, sink)
 }
 
 /// Workload 5, measured: alloc/release steps at 10 % fill.
@@ -123,8 +121,9 @@ fn run_parse_buffered() {
 fn run_downlink() {
     let arena = downlink::BenchArena::new();
     let dl = downlink::new_downlink(&arena);
+    let [mut port] = dl.ports().expect("a new downlink's ports");
     let mut sink = Sink::default();
-    let stats = workload_downlink(&dl, black_box(MESSAGES), &mut sink);
+    let stats = workload_downlink(&dl, &mut port, black_box(MESSAGES), &mut sink);
     assert_eq!(stats.sent as usize, MESSAGES, "{stats:?}");
     assert_eq!(arena.stats().live, 0);
     println!(

@@ -22,8 +22,8 @@ use pprz_ground::monitor::{Event, Monitor};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_messages::{Decode, Message};
-use pprz_telemetry::messages::telemetry::{DlValue, GpsInt};
-use pprz_telemetry::periodic::SCHEDULE;
+use pprz_default::messages::telemetry::{DlValue, GpsInt};
+use pprz_default::periodic::SCHEDULE;
 use pprz_transports::{AnyTransport, Decoder, PprzV2};
 
 /// Guest time over which the periodic rates are measured, in ms (GPS_INT `tow`).
@@ -169,7 +169,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         .expect("socket timeout");
     let _ = stream.set_nodelay(true);
 
-    let set = RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../../messages.xml"))
+    let set = RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))
         .expect("messages.xml loads");
     let transport = AnyTransport::from(PprzV2::new());
     let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");

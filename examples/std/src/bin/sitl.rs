@@ -32,8 +32,10 @@ use pprz_ground::monitor::Monitor;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_telemetry::pprz_messages::priority;
-use pprz_telemetry::pprz_transports::PprzV2;
-use pprz_telemetry::{DeviceConfig, DeviceStats, Downlink, FrameArena, run_writer};
+use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
+use pprz_telemetry::{
+    Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Port, run_writer,
+};
 use static_cell::StaticCell;
 
 /// Simulate an aircraft on a 57600-baud radio and watch it with a live ground monitor.
@@ -65,7 +67,7 @@ struct Args {
     #[arg(long)]
     lines: bool,
     /// The messages.xml the monitor decodes with.
-    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../messages.xml"))]
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))]
     messages: PathBuf,
 }
 
@@ -75,18 +77,23 @@ const RADIO_RING: usize = 4096;
 type Dl = Downlink<'static, M, 1, 32>;
 
 static ARENA: FrameArena<M, 8192> = FrameArena::new();
-static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+static DOWNLINK: Dl = Downlink::new(
+    &ARENA,
+    AC_ID,
+    [DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()))],
+);
 static RADIO: StaticCell<SimLink<M, RADIO_RING>> = StaticCell::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 
 #[embassy_executor::task]
-async fn radio_writer(downlink: &'static Dl, mut tx: SimTx<'static, M, RADIO_RING>) {
-    let _ = run_writer(downlink, 0, &mut tx).await;
+async fn radio_writer(mut port: Port<'static>, tx: SimTx<'static, M, RADIO_RING>) {
+    run_writer(&mut port, tx).await
 }
 
 #[embassy_executor::task]
-async fn aircraft(downlink: &'static Dl, rx: SimRx<'static, M, RADIO_RING>, config: Config) {
-    pprz_example_app::run_aircraft(downlink, rx, 0, config).await
+async fn aircraft(radio: Device<'static>, rx: SimRx<'static, M, RADIO_RING>, config: Config) {
+    let Err(e) = pprz_example_app::run_aircraft(radio, rx, config).await;
+    panic!("the aircraft application cannot start: {e}");
 }
 
 /// The ground end of the radio, bridged to UDP both ways.
@@ -186,19 +193,23 @@ fn main() -> ExitCode {
             .overflow(Overflow::Wait)
             .seed(7),
     ));
-    let downlink: &'static Dl = DOWNLINK.init(Downlink::new(
-        &ARENA,
-        AC_ID,
-        [DeviceConfig::new(PprzV2::new().into())],
-    ));
+    let downlink: &'static Dl = &DOWNLINK;
+    let [radio_port] = match downlink.ports() {
+        Ok(ports) => ports,
+        Err(e) => {
+            eprintln!("sitl: {e}");
+            std::process::exit(1);
+        }
+    };
+    let radio_device = radio_port.device();
     let (air, ground) = radio.endpoints();
     let (air_rx, air_tx) = air.split();
     pace(args.speed);
     std::thread::spawn(move || {
         let executor = EXECUTOR.init(Executor::new());
         executor.run(|spawner| {
-            spawner.spawn(radio_writer(downlink, air_tx).unwrap());
-            spawner.spawn(aircraft(downlink, air_rx, config).unwrap());
+            spawner.spawn(radio_writer(radio_port, air_tx).unwrap());
+            spawner.spawn(aircraft(radio_device, air_rx, config).unwrap());
             spawner.spawn(ground_bridge(ground, udp).unwrap());
         })
     });

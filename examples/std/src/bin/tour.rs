@@ -4,8 +4,8 @@
 //!
 //! Run: `cargo run -p pprz-example-std --bin tour`
 
-use pprz_telemetry::messages::{MESSAGES, telemetry};
-use pprz_telemetry::pprz_messages::{Message, MessageDescriptor, VarArray, dynamic};
+use pprz_default::messages::{MESSAGES, telemetry};
+use pprz_messages::{Message, MessageDescriptor, VarArray, dynamic};
 use pprz_transports::{
     Decoder, EncodeError, Encoder, MAX_FRAME_LEN, MsgHeader, PprzV2, TxMeta, XBee24,
 };
@@ -138,7 +138,7 @@ fn main() {
     let mut buf = [0u8; MAX_FRAME_LEN];
     match frame(&PprzV2::new(), &alive, &mut buf) {
         Ok(len) => println!(
-            "ALIVE in a PPRZ v2 frame (PROTOCOLS.md example): {}",
+            "ALIVE in a PPRZ v2 frame (the worked example of docs/wire-formats.md): {}",
             hex(&buf[..len])
         ),
         Err(e) => println!("ALIVE: {e}"),

@@ -1,0 +1,93 @@
+//! The simulated rotorcraft: climbs to its altitude, then flies a circle around home,
+//! draining its battery.
+
+/// The simulated vehicle.
+#[derive(Debug, Clone, Copy)]
+pub struct Vehicle {
+    /// Seconds since start.
+    pub t: f32,
+    /// Position in metres east of the home point.
+    pub east: f32,
+    /// North of home (m).
+    pub north: f32,
+    /// Up from home (m).
+    pub up: f32,
+    /// Velocity east (m/s).
+    pub veast: f32,
+    /// Velocity north (m/s).
+    pub vnorth: f32,
+    /// Roll (rad).
+    pub phi: f32,
+    /// Pitch (rad).
+    pub theta: f32,
+    /// Heading (rad).
+    pub psi: f32,
+    /// Battery voltage (V).
+    pub voltage: f32,
+    /// Battery current (A).
+    pub current: f32,
+    /// Charge used (Ah).
+    pub charge_ah: f32,
+    /// Energy used (Wh).
+    pub energy_wh: f32,
+}
+
+/// Circle radius (m).
+pub const RADIUS: f32 = 80.0;
+/// Ground speed (m/s).
+pub const SPEED: f32 = 6.0;
+/// Altitude of the circle (m).
+pub const ALTITUDE: f32 = 40.0;
+/// Home: Toulouse (lat, lon in degrees; UTM zone 31).
+const HOME_LAT: f64 = 43.4622;
+const HOME_LON: f64 = 1.2731;
+
+impl Vehicle {
+    /// On the ground at the start of the circle, battery full.
+    pub const fn new() -> Self {
+        Self {
+            t: 0.0,
+            east: RADIUS,
+            north: 0.0,
+            up: 0.0,
+            veast: 0.0,
+            vnorth: SPEED,
+            phi: 0.0,
+            theta: 0.0,
+            psi: 0.0,
+            voltage: 16.8,
+            current: 0.0,
+            charge_ah: 0.0,
+            energy_wh: 0.0,
+        }
+    }
+
+    /// Advances the simulation by `dt` seconds: climb to altitude, then circle.
+    pub fn step(&mut self, dt: f32) {
+        self.t += dt;
+        let w = SPEED / RADIUS;
+        let a = w * self.t;
+        self.east = RADIUS * libm::cosf(a);
+        self.north = RADIUS * libm::sinf(a);
+        self.veast = -SPEED * libm::sinf(a);
+        self.vnorth = SPEED * libm::cosf(a);
+        self.up = (self.up + 2.0 * dt).min(ALTITUDE);
+        self.psi = libm::atan2f(self.veast, self.vnorth);
+        self.phi = libm::atanf(SPEED * w / 9.81);
+        self.theta = 0.02 * libm::sinf(3.0 * a);
+        self.current = 12.0 + 2.0 * libm::sinf(0.5 * self.t);
+        self.charge_ah += self.current * dt / 3600.0;
+        self.voltage = 16.8 - 0.6 * self.charge_ah;
+        self.energy_wh += self.voltage * self.current * dt / 3600.0;
+    }
+
+    /// Latitude and longitude in degrees.
+    pub fn lat_lon(&self) -> (f64, f64) {
+        const R: f64 = 6_371_000.0;
+        let lat = HOME_LAT + f64::from(self.north) / R * (180.0 / core::f64::consts::PI);
+        let cos_lat = libm::cos(HOME_LAT.to_radians());
+        let lon = HOME_LON + f64::from(self.east) / (R * cos_lat) * (180.0 / core::f64::consts::PI);
+        (lat, lon)
+    }
+}
+
