@@ -1,29 +1,22 @@
 //! Generates the full PPRZLINK reference message set (all classes), if present.
 //!
-//! Without the data (a user's clone has no `../shared`), the crate builds empty and its
+//! The reference data is located by `pprz_test_support::reference` (`PPRZLINK_DIR`, or a
+//! default location next to the workspace). Without it, the crate builds empty and its
 //! tests print why they are skipped; with `PPRZ_REQUIRE_REFERENCE` set (CI), missing data
 //! fails the build.
 
-use std::path::Path;
+use pprz_test_support::reference;
 
 fn main() {
     println!("cargo:rustc-check-cfg=cfg(pprz_reference)");
-    println!(
-        "cargo:rerun-if-env-changed={}",
-        pprz_codegen::reference::DIR_VAR
-    );
-    println!(
-        "cargo:rerun-if-env-changed={}",
-        pprz_codegen::reference::REQUIRE_VAR
-    );
-    let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
-    let default = Path::new(&manifest).join("../../../shared/pprzlink");
-    let dir = match pprz_codegen::reference::locate("pprz-reference-check", &default) {
+    println!("cargo:rerun-if-env-changed={}", reference::DIR_VAR);
+    println!("cargo:rerun-if-env-changed={}", reference::REQUIRE_VAR);
+    let dir = match reference::locate("pprz-reference-check") {
         Ok(Some(dir)) => dir,
         Ok(None) => {
             println!(
                 "cargo:warning=PPRZLINK reference data not found in {}: reference tests are skipped",
-                pprz_codegen::reference::dir(&default).display()
+                reference::dir().display()
             );
             return;
         }

@@ -155,7 +155,6 @@ mod emit;
 mod error;
 pub mod model;
 mod names;
-pub mod reference;
 mod roles;
 pub mod telemetry;
 mod xml;

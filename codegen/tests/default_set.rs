@@ -6,7 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
-use pprz_codegen::{Generator, Protocol, reference};
+use pprz_codegen::{Generator, Protocol};
+use pprz_test_support::reference;
 
 fn default_file() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../default/messages.xml")
@@ -52,10 +53,7 @@ fn required_messages_are_present() {
 
 #[test]
 fn wire_identical_to_the_reference() {
-    let default_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/pprzlink");
-    let Some(dir) = reference::locate("wire_identical_to_the_reference", default_dir)
-        .unwrap_or_else(|reason| panic!("{reason}"))
-    else {
+    let Some(dir) = reference::locate_for_test("wire_identical_to_the_reference") else {
         return;
     };
     let reference = Protocol::from_file(dir.join("messages.xml")).unwrap();

@@ -5,11 +5,11 @@
 //! reference `messages.xml`.
 
 use std::collections::HashMap;
-use std::path::Path;
 use std::process::Command;
 
 use pprz_codegen::telemetry::{Schedule, ScheduledMode};
-use pprz_codegen::{ErrorKind, Generator, reference};
+use pprz_codegen::{ErrorKind, Generator};
+use pprz_test_support::reference;
 use proptest::prelude::*;
 
 // Cargo runs integration tests from the package root: relative paths are stable.
@@ -549,10 +549,7 @@ fn cli_reports_unknown_messages_and_can_skip_them() {
 
 #[test]
 fn reference_default_rotorcraft() {
-    let default_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/pprzlink");
-    let Some(dir) = reference::locate("reference_default_rotorcraft", default_dir)
-        .unwrap_or_else(|reason| panic!("{reason}"))
-    else {
+    let Some(dir) = reference::locate_for_test("reference_default_rotorcraft") else {
         return;
     };
     let telemetry = dir.join("telemetry/default_rotorcraft.xml");

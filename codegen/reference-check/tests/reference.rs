@@ -12,8 +12,8 @@ fn reference_data_missing() {
     // The build script found no reference data (and was not told to require it).
     let _ = writeln!(
         std::io::stderr(),
-        "skipped: PPRZLINK reference data not found; set {} (see pprz_codegen::reference)",
-        pprz_codegen::reference::DIR_VAR
+        "skipped: PPRZLINK reference data not found; set {} (see pprz_test_support::reference)",
+        pprz_test_support::reference::DIR_VAR
     );
 }
 

@@ -1,0 +1,10 @@
+//! Test plumbing shared by the workspace's tests and build scripts. Not published: no
+//! library crate depends on it except as a dev- or build-dependency of tests.
+//!
+//! [`reference`](mod@reference) locates the PPRZLINK reference data (`messages.xml`, `units.xml`,
+//! telemetry configurations) that compatibility tests compare against, and decides
+//! whether its absence skips a test or fails it.
+
+#![forbid(unsafe_code)]
+
+pub mod reference;
