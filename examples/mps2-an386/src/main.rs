@@ -24,8 +24,8 @@ use cortex_m_rt::{entry, exception};
 use embassy_executor::raw::Executor;
 use panic_halt as _;
 use pprz_example_app::{AC_ID, Config, M};
-use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
-use pprz_transports::PprzV2;
+use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
+use pprz_transports::{AnyTransport, PprzV2};
 use static_cell::StaticCell;
 
 use crate::uart::{Instance, UartRx, UartTx};
@@ -67,7 +67,11 @@ type Dl = Downlink<'static, M, 1, 32>;
 static UART0: Uart0 = unsafe { Instance::new(UART0_BASE) };
 /// The frames waiting for the radio.
 static ARENA: FrameArena<M, 4096> = FrameArena::new();
-static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+static DOWNLINK: Dl = Downlink::new(
+    &ARENA,
+    AC_ID,
+    [DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()))],
+);
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// Set when a task was woken (by a task or an interrupt handler) and the executor has
 /// work; the idle loop sleeps only while it is clear.
@@ -105,14 +109,15 @@ fn run(executor: &'static Executor) -> ! {
 
 /// Sends the downlink's frames on UART0.
 #[embassy_executor::task]
-async fn radio_writer(downlink: &'static Dl, mut tx: UartTx<UART_RX_BUF, UART_TX_BUF>) {
-    let _ = run_writer(downlink, 0, &mut tx).await;
+async fn radio_writer(mut port: Port<'static>, tx: UartTx<UART_RX_BUF, UART_TX_BUF>) {
+    run_writer(&mut port, tx).await
 }
 
 /// The application, reading the uplink from UART0.
 #[embassy_executor::task]
-async fn aircraft(downlink: &'static Dl, rx: UartRx<UART_RX_BUF, UART_TX_BUF>) {
-    pprz_example_app::run_aircraft(downlink, rx, 0, Config::default()).await
+async fn aircraft(radio: Device<'static>, rx: UartRx<UART_RX_BUF, UART_TX_BUF>) {
+    let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+    panic!("the aircraft application cannot start: {e}");
 }
 
 #[entry]
@@ -131,15 +136,14 @@ fn main() -> ! {
         NVIC::unmask(Irq::Uart0Rx);
         NVIC::unmask(Irq::Uart0Tx);
     }
-    let downlink: &'static Dl = DOWNLINK.init(Downlink::new(
-        &ARENA,
-        AC_ID,
-        [DeviceConfig::new(PprzV2::new().into())],
-    ));
+    let Ok([radio]) = DOWNLINK.ports() else {
+        panic!("the downlink's ports are taken once, here");
+    };
+    let radio_device = radio.device();
     let executor: &'static Executor = EXECUTOR.init(Executor::new(core::ptr::null_mut()));
     let spawner = executor.spawner();
-    spawner.spawn(radio_writer(downlink, tx).expect("one radio writer"));
-    spawner.spawn(aircraft(downlink, rx).expect("one aircraft"));
+    spawner.spawn(radio_writer(radio, tx).expect("one radio writer"));
+    spawner.spawn(aircraft(radio_device, rx).expect("one aircraft"));
     run(executor)
 }
 

@@ -24,8 +24,8 @@ use panic_halt as _;
 use pprz_devices::stm32::{UartErrorCounters, UartRx, f405};
 use pprz_devices::usb::{CdcTx, UsbConfig, UsbCounters};
 use pprz_example_app::{AC_ID, Config};
-use pprz_telemetry::pprz_transports::PprzV2;
-use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
+use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
+use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use static_cell::StaticCell;
 
 bind_interrupts!(struct Irqs {
@@ -39,7 +39,14 @@ type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 
 /// Pending frames of both devices: about 2 s of a saturated 57600-baud radio.
 static ARENA: FrameArena<M, 8192> = FrameArena::new();
-static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+static DOWNLINK: Dl = Downlink::new(
+    &ARENA,
+    AC_ID,
+    [
+        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())).depth(16),
+    ],
+);
 static RADIO_ERRORS: UartErrorCounters = UartErrorCounters::new();
 static UART_BUFFERS: StaticCell<([u8; 256], [u8; 256])> = StaticCell::new();
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
@@ -54,13 +61,13 @@ static USB_BUFFERS: StaticCell<UsbBuffers> = StaticCell::new();
 static CDC_STATE: StaticCell<State> = StaticCell::new();
 
 #[embassy_executor::task]
-async fn radio_writer(downlink: &'static Dl, mut tx: BufferedUartTx<'static>) {
-    let _ = run_writer(downlink, 0, &mut tx).await;
+async fn radio_writer(mut port: Port<'static>, tx: BufferedUartTx<'static>) {
+    run_writer(&mut port, tx).await
 }
 
 #[embassy_executor::task]
-async fn usb_writer(downlink: &'static Dl, mut tx: CdcTx<'static, 'static, UsbDriver>) {
-    let _ = run_writer(downlink, 1, &mut tx).await;
+async fn usb_writer(mut port: Port<'static>, tx: CdcTx<'static, 'static, UsbDriver>) {
+    run_writer(&mut port, tx).await
 }
 
 #[embassy_executor::task]
@@ -69,8 +76,9 @@ async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
 }
 
 #[embassy_executor::task]
-async fn aircraft(downlink: &'static Dl, rx: UartRx<'static, BufferedUartRx<'static>>) {
-    pprz_example_app::run_aircraft(downlink, rx, 0, Config::default()).await
+async fn aircraft(radio: Device<'static>, rx: UartRx<'static, BufferedUartRx<'static>>) {
+    let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+    panic!("the aircraft application cannot start: {e}");
 }
 
 /// 168 MHz from the 16 MHz HSI, 48 MHz for USB.
@@ -98,10 +106,9 @@ async fn main(spawner: Spawner) {
 
     // Radio: USART1, interrupt driven, 256-byte buffers (44 ms of 57600 baud each way).
     let (tx_buf, rx_buf) = UART_BUFFERS.init(([0; 256], [0; 256]));
-    let Ok(uart) = f405::usart1_buffered(p.USART1, p.PB7, p.PB6, Irqs, tx_buf, rx_buf, 57_600)
-    else {
-        // The baud rate is reachable from the clocks above; nothing to do without a radio.
-        return;
+    let uart = match f405::usart1_buffered(p.USART1, p.PB7, p.PB6, Irqs, tx_buf, rx_buf, 57_600) {
+        Ok(uart) => uart,
+        Err(e) => panic!("radio UART: {e:?}"),
     };
     let (radio_tx, radio_rx) = uart.split();
     let radio_rx = UartRx::new(radio_rx, &RADIO_ERRORS);
@@ -127,22 +134,18 @@ async fn main(spawner: Spawner) {
     );
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
     let device = builder.build();
-    let Ok((_usb_rx, usb_tx)) =
-        pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default())
-    else {
-        return;
-    };
+    let (_usb_rx, usb_tx) =
+        match pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default()) {
+            Ok(halves) => halves,
+            Err(e) => panic!("USB CDC-ACM: {e:?}"),
+        };
 
-    let downlink: &'static Dl = DOWNLINK.init(Downlink::new(
-        &ARENA,
-        AC_ID,
-        [
-            DeviceConfig::new(PprzV2::new().into()),
-            DeviceConfig::new(PprzV2::new().into()).depth(16),
-        ],
-    ));
+    let Ok([radio, usb]) = DOWNLINK.ports() else {
+        panic!("the downlink's ports are taken once, here");
+    };
+    let radio_device = radio.device();
     spawner.spawn(usb_device(device).unwrap());
-    spawner.spawn(radio_writer(downlink, radio_tx).unwrap());
-    spawner.spawn(usb_writer(downlink, usb_tx).unwrap());
-    spawner.spawn(aircraft(downlink, radio_rx).unwrap());
+    spawner.spawn(radio_writer(radio, radio_tx).unwrap());
+    spawner.spawn(usb_writer(usb, usb_tx).unwrap());
+    spawner.spawn(aircraft(radio_device, radio_rx).unwrap());
 }

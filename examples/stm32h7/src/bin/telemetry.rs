@@ -22,8 +22,8 @@ use embassy_time::Instant;
 use panic_halt as _;
 use pprz_devices::stm32::{UartErrorCounters, UartRx};
 use pprz_example_app::{AC_ID, Config};
-use pprz_telemetry::pprz_transports::{PprzLog, PprzV2};
-use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
+use pprz_telemetry::pprz_transports::{AnyTransport, PprzLog, PprzV2};
+use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use static_cell::StaticCell;
 
 bind_interrupts!(struct Irqs {
@@ -35,18 +35,27 @@ bind_interrupts!(struct Irqs {
 type Dl = Downlink<'static, M, 2, 32>;
 
 static ARENA: FrameArena<M, 16384> = FrameArena::new();
-static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+static DOWNLINK: Dl = Downlink::new(
+    &ARENA,
+    AC_ID,
+    [
+        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+        DeviceConfig::new(AnyTransport::PprzLog(PprzLog::TELEMETRY)),
+    ],
+)
+.with_clock(log_clock);
 static RADIO_ERRORS: UartErrorCounters = UartErrorCounters::new();
 static BUFFERS: StaticCell<[[u8; 256]; 4]> = StaticCell::new();
 
 #[embassy_executor::task(pool_size = 2)]
-async fn writer(downlink: &'static Dl, device: usize, mut tx: BufferedUartTx<'static>) {
-    let _ = run_writer(downlink, device, &mut tx).await;
+async fn writer(mut port: Port<'static>, tx: BufferedUartTx<'static>) {
+    run_writer(&mut port, tx).await
 }
 
 #[embassy_executor::task]
-async fn aircraft(downlink: &'static Dl, rx: UartRx<'static, BufferedUartRx<'static>>) {
-    pprz_example_app::run_aircraft(downlink, rx, 0, Config::default()).await
+async fn aircraft(radio: Device<'static>, rx: UartRx<'static, BufferedUartRx<'static>>) {
+    let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+    panic!("the aircraft application cannot start: {e}");
 }
 
 /// PPRZLOG time stamps: 100 µs ticks since boot.
@@ -65,7 +74,7 @@ async fn main(spawner: Spawner) {
     // Default clocks (64 MHz HSI) are plenty for the UARTs.
     let p = embassy_stm32::init(embassy_stm32::Config::default());
     let [radio_tx_buf, radio_rx_buf, log_tx_buf, log_rx_buf] = BUFFERS.init([[0; 256]; 4]);
-    let Ok(radio) = BufferedUart::new(
+    let radio = match BufferedUart::new(
         p.USART2,
         p.PD6,
         p.PD5,
@@ -73,10 +82,11 @@ async fn main(spawner: Spawner) {
         radio_rx_buf,
         Irqs,
         uart_config(57_600),
-    ) else {
-        return;
+    ) {
+        Ok(uart) => uart,
+        Err(e) => panic!("radio UART: {e:?}"),
     };
-    let Ok(log) = BufferedUart::new(
+    let log = match BufferedUart::new(
         p.USART3,
         p.PD9,
         p.PD8,
@@ -84,23 +94,17 @@ async fn main(spawner: Spawner) {
         log_rx_buf,
         Irqs,
         uart_config(921_600),
-    ) else {
-        return;
+    ) {
+        Ok(uart) => uart,
+        Err(e) => panic!("log UART: {e:?}"),
     };
     let (radio_tx, radio_rx) = radio.split();
     let (log_tx, _log_rx) = log.split();
-    let downlink: &'static Dl = DOWNLINK.init(
-        Downlink::new(
-            &ARENA,
-            AC_ID,
-            [
-                DeviceConfig::new(PprzV2::new().into()),
-                DeviceConfig::new(PprzLog::TELEMETRY.into()),
-            ],
-        )
-        .with_clock(log_clock),
-    );
-    spawner.spawn(writer(downlink, 0, radio_tx).unwrap());
-    spawner.spawn(writer(downlink, 1, log_tx).unwrap());
-    spawner.spawn(aircraft(downlink, UartRx::new(radio_rx, &RADIO_ERRORS)).unwrap());
+    let Ok([radio_port, log_port]) = DOWNLINK.ports() else {
+        panic!("the downlink's ports are taken once, here");
+    };
+    let radio_device = radio_port.device();
+    spawner.spawn(writer(radio_port, radio_tx).unwrap());
+    spawner.spawn(writer(log_port, log_tx).unwrap());
+    spawner.spawn(aircraft(radio_device, UartRx::new(radio_rx, &RADIO_ERRORS)).unwrap());
 }

@@ -1,0 +1,56 @@
+//! The smallest firmware: telemetry over one UART radio (57600 baud, PPRZ v2), answering
+//! the ground's PING, SETTING and GET_SETTING, with the default message set. The one-link
+//! facade `Link` runs the writer, the reader and the services in one task; any task
+//! sends with `LINK.send(&msg)`, which never blocks.
+
+#![no_std]
+#![no_main]
+
+use embassy_executor::Spawner;
+use embassy_stm32::peripherals::USART1;
+use embassy_stm32::usart::{
+    self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx,
+};
+use embassy_time::{Duration, Ticker};
+use panic_halt as _;
+use pprz_default::messages::{Set, telemetry::Attitude};
+use pprz_telemetry::{FrameArena, Link, LinkMutex};
+use static_cell::ConstStaticCell;
+
+embassy_stm32::bind_interrupts!(struct Irqs { USART1 => BufferedInterruptHandler<USART1>; });
+
+static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
+static LINK: Link<'static, Set> = Link::new(&ARENA, 7); // aircraft 7
+static TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+static RX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+
+#[embassy_executor::task]
+async fn radio(tx: BufferedUartTx<'static>, rx: BufferedUartRx<'static>) {
+    let Err(e) = LINK.run(tx, rx).await; // writer + reader + services, forever
+    panic!("{e}");
+}
+
+#[embassy_executor::task]
+async fn attitude() {
+    let mut ticker = Ticker::every(Duration::from_millis(100));
+    loop {
+        ticker.next().await;
+        // A message that cannot be queued is counted in LINK.stats(), by reason.
+        let _ = LINK.send(&Attitude {
+            phi: 0.1,
+            psi: 0.0,
+            theta: 0.0,
+        });
+    }
+}
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let p = embassy_stm32::init(Default::default());
+    let mut cfg = usart::Config::default();
+    cfg.baudrate = 57_600;
+    let uart = BufferedUart::new(p.USART1, p.PB7, p.PB6, TX.take(), RX.take(), Irqs, cfg);
+    let (tx, rx) = uart.expect("radio UART").split();
+    spawner.spawn(radio(tx, rx).unwrap());
+    spawner.spawn(attitude().unwrap());
+}
