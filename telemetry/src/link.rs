@@ -30,6 +30,19 @@
 //! assert_eq!(LINK.stats().downlink.queued, 1);
 //! ```
 //!
+//! The message set must have the services' messages (PING, PONG, SETTING, GET_SETTING,
+//! DL_VALUE): with a set that lacks them, `run` does not compile.
+//!
+//! ```compile_fail,E0599
+//! use pprz_telemetry::{FrameArena, Link, LinkMutex};
+//! struct NoServices; // a set without the services' messages
+//! static ARENA: FrameArena<LinkMutex, 1024> = FrameArena::new();
+//! static LINK: Link<'static, NoServices> = Link::new(&ARENA, 7);
+//! async fn radio(tx: &mut [u8], rx: &[u8]) {
+//!     let _ = LINK.run(tx, rx).await;
+//! }
+//! ```
+//!
 //! Settings and subscribers are added at start-up, before or after `run` starts:
 //! `LINK.settings().add("gain", &get, &set)`, `LINK.subscribe(Filter::message::<Block>(),
 //! &on_block)`. Several devices, several transports per message or a log beside the
