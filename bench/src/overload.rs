@@ -1,6 +1,8 @@
 //! Workload 4: a 57 600-baud radio overloaded ten times by low-priority payload for 60
 //! simulated seconds, through the priority stack and through the reference firmware's
-//! FIFO that drops a message when its whole frame does not fit (PROTOCOLS.md section 8).
+//! FIFO that drops a message when its whole frame does not fit (how the reference
+//! firmware transmits: it checks the UART buffer for room for the whole frame, else counts an
+//! overrun).
 //!
 //! # Traffic (fixed)
 //! * **Status** (priority 128): the priority-128 messages of the `default` mode of
@@ -42,11 +44,11 @@ use std::task::{Context, Poll, Waker};
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, MockDriver, Timer};
-use pprz_messages::{Chars, Message, VarArray, priority};
 use pprz_default::messages::telemetry::{
     Alive, Attitude, AutopilotVersion, DatalinkReport, DlValue, Energy, GpsInt, Ins, Payload,
     RotorcraftFp, RotorcraftStatus,
 };
+use pprz_messages::{Chars, Message, VarArray, priority};
 use pprz_telemetry::stats::DeviceStats;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 use pprz_transports::PprzV2;
