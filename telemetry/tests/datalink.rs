@@ -1,6 +1,9 @@
 //! The uplink: readers, destination filtering, the subscriber registry, the PING /
 //! SETTING / GET_SETTING services with their replies byte for byte over a simulated
 //! link, and the DATALINK_REPORT.
+//!
+//! Every reader is built with the `Device` handle of a downlink device (from that
+//! device's port): the device its messages came in on, where replies go.
 
 mod common;
 
@@ -13,28 +16,26 @@ use embassy_futures::select::select;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Timer};
+use pprz_default::messages::Set;
+use pprz_default::messages::datalink::{Block, GetSetting, MoveWp, Ping, Setting};
+use pprz_default::messages::telemetry::{DatalinkReport, DlValue, Pong};
 use pprz_messages::Message;
-use pprz_telemetry::messages::datalink::{Block, GetSetting, MoveWp, Ping, Setting};
-use pprz_telemetry::messages::telemetry::{DlValue, Pong};
-use pprz_telemetry::pprz_transports::{Encoder, MsgHeader, PprzV1, PprzV2, TxMeta};
+use pprz_messages::roles::LinkReport;
+use pprz_telemetry::pprz_transports::{AnyTransport, Encoder, MsgHeader, PprzV1, PprzV2, TxMeta};
 use pprz_telemetry::reader::{Datalink, Reader};
-use pprz_telemetry::registry::{ChannelSubscriber, Filter, OwnedMessage, Received, Registry};
-use pprz_telemetry::services::{LinkReporter, Services, Settings};
+use pprz_telemetry::registry::{ChannelSubscriber, Filter, OwnedMessage, Received};
+use pprz_telemetry::services::{LinkReporter, Services};
 use pprz_telemetry::stats::DeviceStats;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 
+use common::frames::{PING_7, PONG_7, dl_value_frame, uplink_frame};
 use common::sim::{ScriptedRx, SimUart, byte_time_us, mock_time, run_with_mock_time};
 
 const AC_ID: u8 = 7;
 
-/// A PPRZ v2 frame from the ground (id 0) to `dest`.
-fn uplink_frame<Msg: Message>(msg: &Msg, dest: u8) -> Vec<u8> {
-    let mut fields = [0u8; 64];
-    let n = msg.encode(&mut fields).unwrap();
-    let mut out = [0u8; 80];
-    let meta = TxMeta::new(MsgHeader::new(0, dest, Msg::CLASS_ID, Msg::ID));
-    let len = PprzV2::new().encode(&meta, &fields[..n], &mut out).unwrap();
-    out[..len].to_vec()
+/// One PPRZ v2 device, for the readers' `Device` handles and the replies.
+fn v2() -> DeviceConfig {
+    DeviceConfig::new(PprzV2::new().into())
 }
 
 static SETTING_0: AtomicU32 = AtomicU32::new(0);
@@ -43,22 +44,25 @@ static SETTING_0: AtomicU32 = AtomicU32::new(0);
 fn ping_and_settings_round_trip_byte_for_byte() {
     let _clock = mock_time();
     static ARENA: FrameArena<M, 2048> = FrameArena::new();
-    let downlink: Downlink<'_, M, 1, 16> =
-        Downlink::new(&ARENA, AC_ID, [DeviceConfig::new(PprzV2::new().into())]);
+    let downlink: Downlink<'_, M, 1, 16> = Downlink::new(&ARENA, AC_ID, [v2()]);
+    let [mut port] = downlink.ports().unwrap();
     let get = || f32::from_bits(SETTING_0.load(Ordering::Relaxed));
     let set = |v: f32| SETTING_0.store(v.to_bits(), Ordering::Relaxed);
     let get_k = || 42.0;
     let set_k = |_v: f32| {};
-    let mut settings: Settings<'_, 4> = Settings::new();
-    assert_eq!(settings.add("gain", &get, &set), Ok(0));
-    assert_eq!(settings.add("constant", &get_k, &set_k), Ok(1));
-    let services: Services<'_, '_, M, 1, 16, 4> = Services::new(&downlink, settings);
-    let mut registry: Registry<'_, 8> = Registry::new();
-    services.subscribe(&mut registry).unwrap();
-    let datalink: Datalink<'_, M, 8> = Datalink::new(AC_ID, registry);
+    let services: Services<'_, Set, M, 4> = Services::new(AC_ID);
+    assert_eq!(services.settings().add("gain", &get, &set), Ok(0));
+    assert_eq!(services.settings().add("constant", &get_k, &set_k), Ok(1));
+    assert_eq!(services.settings().len(), 2);
+    let datalink: Datalink<'_, M, 8> = Datalink::new(AC_ID);
+    services.subscribe(datalink.registry()).unwrap();
+    assert_eq!(
+        datalink.registry().len(),
+        Services::<Set, M, 4>::SUBSCRIPTIONS
+    );
 
     // The ground's requests, as bytes on the radio, split across reads.
-    let ping = [0x99, 0x08, 0x00, 0x07, 0x02, 0x08, 0x19, 0x49];
+    let ping = PING_7;
     assert_eq!(uplink_frame(&Ping, AC_ID), ping, "hand-computed PING frame");
     let requests = [
         ping.to_vec(),
@@ -102,31 +106,26 @@ fn ping_and_settings_round_trip_byte_for_byte() {
         chunks.push_back((Duration::from_millis(1), b.to_vec()));
     }
     let log = RefCell::new(Vec::new());
-    let mut reader = Reader::<_, _>::new(ScriptedRx { chunks }, PprzV2::new(), 0);
+    let mut reader = Reader::<_, _>::new(ScriptedRx { chunks }, PprzV2::new(), port.device());
     let mut tx = SimUart {
         byte_us: byte_time_us(57_600),
         log: &log,
     };
     let run = select(
-        join(reader.run(&datalink), run_writer(&downlink, 0, &mut tx)),
+        join(reader.run(&datalink), run_writer(&mut port, &mut tx)),
         Timer::after(Duration::from_millis(500)),
     );
     run_with_mock_time(run, Duration::from_micros(50), 20_000);
 
     let replies: Vec<Vec<u8>> = log.into_inner().into_iter().map(|(_, _, b)| b).collect();
-    let pong = vec![0x99, 0x08, 0x07, 0x00, 0x01, 0x03, 0x13, 0x49];
-    let dl_value = |index: u8, value: f32| {
-        let mut v = vec![0x99, 0x0D, AC_ID, 0x00, 0x01, 31, index];
-        v.extend_from_slice(&value.to_le_bytes());
-        let (mut a, mut b) = (0u8, 0u8);
-        for byte in &v[1..] {
-            a = a.wrapping_add(*byte);
-            b = b.wrapping_add(a);
-        }
-        v.extend_from_slice(&[a, b]);
-        v
-    };
-    assert_eq!(replies, [pong, dl_value(0, 1.5), dl_value(1, 42.0)]);
+    assert_eq!(
+        replies,
+        [
+            PONG_7.to_vec(),
+            dl_value_frame(AC_ID, 0, 1.5),
+            dl_value_frame(AC_ID, 1, 42.0)
+        ]
+    );
     assert_eq!(f32::from_bits(SETTING_0.load(Ordering::Relaxed)), 1.5);
 
     let s = services.stats();
@@ -136,9 +135,19 @@ fn ping_and_settings_round_trip_byte_for_byte() {
     assert_eq!((up.received, up.not_for_us, up.unhandled), (5, 1, 0));
     assert!(up.last_received.is_some());
     assert_eq!(reader.decoder_stats().frames, 6);
-    // DL_VALUE goes out at high priority, PONG too.
+    // DL_VALUE goes out at high priority, PONG too (replies go at the reply message's
+    // priority, high for both in the default set).
     assert_eq!(DlValue::PRIORITY, pprz_messages::priority::HIGH);
     assert_eq!(Pong::PRIORITY, pprz_messages::priority::HIGH);
+    let down = downlink.stats(0).unwrap();
+    assert_eq!((down.submitted, down.sent, down.queued), (3, 3, 0));
+    let high = down.levels[pprz_messages::priority::level(pprz_messages::priority::HIGH)];
+    assert_eq!(
+        (high.submitted, high.sent),
+        (3, 3),
+        "replies at high priority"
+    );
+    assert!(down.is_balanced(), "{down:?}");
 }
 
 #[test]
@@ -148,36 +157,44 @@ fn registry_calls_every_matching_subscriber_and_reports_full() {
     static ALSO: AtomicU32 = AtomicU32::new(0);
     static CLASS: AtomicU32 = AtomicU32::new(0);
     static ALL: AtomicU32 = AtomicU32::new(0);
-    let on_block = |rx: &Received<'_>| {
+    let arena: FrameArena<M, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, M, 4, 4> = Downlink::new(&arena, AC_ID, [v2(), v2(), v2(), v2()]);
+    let [_, _, _, port3] = downlink.ports().unwrap();
+    let link3 = port3.device();
+    let on_block = |rx: &Received<'_, '_>| {
         let block = rx.decode::<Block>().unwrap();
         PER_MESSAGE.fetch_add(u32::from(block.block_id), Ordering::Relaxed);
     };
-    let also = |_: &Received<'_>| {
+    let also = |_: &Received<'_, '_>| {
         ALSO.fetch_add(1, Ordering::Relaxed);
     };
-    let class = |rx: &Received<'_>| {
+    let class = |rx: &Received<'_, '_>| {
         assert_eq!(rx.class_id(), 2);
         CLASS.fetch_add(1, Ordering::Relaxed);
     };
-    let all = |rx: &Received<'_>| {
-        assert_eq!(rx.link, 3);
+    let all = |rx: &Received<'_, '_>| {
+        assert_eq!(rx.device.index(), 3);
+        assert_eq!(rx.device, link3, "the reader's device");
         ALL.fetch_add(1, Ordering::Relaxed);
     };
-    let mut registry: Registry<'_, 4> = Registry::new();
-    registry
+    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID);
+    datalink
         .subscribe(Filter::message::<Block>(), &on_block)
         .unwrap();
-    registry
+    datalink
         .subscribe(Filter::message::<Block>(), &also)
         .unwrap();
-    registry.subscribe(Filter::Class(2), &class).unwrap();
-    registry.subscribe(Filter::All, &all).unwrap();
+    datalink
+        .registry()
+        .subscribe(Filter::Class(2), &class)
+        .unwrap();
+    datalink.subscribe(Filter::All, &all).unwrap();
     assert_eq!(
-        registry.subscribe(Filter::All, &all).unwrap_err().capacity,
+        datalink.subscribe(Filter::All, &all).unwrap_err().capacity,
         4
     );
-    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID, registry);
-    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), 3);
+    assert_eq!(datalink.registry().len(), 4);
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), link3);
     let mut bytes = uplink_frame(
         &Block {
             block_id: 5,
@@ -205,14 +222,20 @@ fn registry_calls_every_matching_subscriber_and_reports_full() {
 #[test]
 fn slow_async_subscriber_drops_are_counted() {
     let _clock = mock_time();
-    static INBOX: Channel<M, OwnedMessage, 2> = Channel::new();
+    static ARENA: FrameArena<M, 1024> = FrameArena::new();
+    static DOWNLINK: Downlink<'static, M, 1, 4> = Downlink::new(
+        &ARENA,
+        AC_ID,
+        [DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()))],
+    );
+    static INBOX: Channel<M, OwnedMessage<'static>, 2> = Channel::new();
     static NAV: ChannelSubscriber<'static, M, 2> = ChannelSubscriber::new(&INBOX);
-    let mut registry: Registry<'static, 2> = Registry::new();
-    registry
+    let [mut port] = DOWNLINK.ports().unwrap();
+    let datalink: Datalink<'static, M, 2> = Datalink::new(AC_ID);
+    datalink
         .subscribe(Filter::message::<MoveWp>(), &NAV)
         .unwrap();
-    let datalink: Datalink<'_, M, 2> = Datalink::new(AC_ID, registry);
-    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), 0);
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), port.device());
     for wp_id in 0..5 {
         let frame = uplink_frame(
             &MoveWp {
@@ -229,23 +252,32 @@ fn slow_async_subscriber_drops_are_counted() {
     assert_eq!(NAV.dropped(), 3, "the channel holds 2, the task never ran");
     let first = INBOX.try_receive().unwrap();
     assert_eq!(first.decode::<MoveWp>().unwrap().wp_id, 0);
-    assert_eq!(first.link, 0);
+    assert_eq!(first.device.index(), 0);
+    assert_eq!(first.device, port.device());
     assert_eq!(first.source, 0);
     assert_eq!(first.destination, Some(AC_ID));
+    // The task answers later, on the device the message came in on.
+    first.reply(&Pong).unwrap();
+    let frame = port.try_next().expect("the reply is queued on device 0");
+    assert_eq!(&frame[..], PONG_7);
+    frame.finish(true);
 }
 
 #[test]
 fn v1_frames_have_no_destination_and_are_accepted() {
     let _clock = mock_time();
     static SEEN: AtomicU32 = AtomicU32::new(0);
-    let seen = |rx: &Received<'_>| {
+    let arena: FrameArena<M, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, M, 1, 4> =
+        Downlink::new(&arena, AC_ID, [DeviceConfig::new(PprzV1::new(1).into())]);
+    let [port] = downlink.ports().unwrap();
+    let seen = |rx: &Received<'_, '_>| {
         assert_eq!(rx.frame.destination(), None);
         SEEN.fetch_add(1, Ordering::Relaxed);
     };
-    let mut registry: Registry<'_, 1> = Registry::new();
-    registry.subscribe(Filter::All, &seen).unwrap();
-    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID, registry);
-    let mut reader = Reader::<_, _>::new(&[][..], PprzV1::new(2), 0);
+    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID);
+    datalink.subscribe(Filter::All, &seen).unwrap();
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV1::new(2), port.device());
     let mut out = [0u8; 16];
     let len = PprzV1::new(2)
         .encode(
@@ -256,13 +288,17 @@ fn v1_frames_have_no_destination_and_are_accepted() {
         .unwrap();
     reader.feed(&out[..len], &datalink);
     assert_eq!(SEEN.load(Ordering::Relaxed), 1);
+    assert_eq!(datalink.stats().received, 1);
 }
 
 #[test]
 fn datalink_report_from_uplink_and_downlink_counters() {
     let _clock = mock_time();
-    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID, Registry::new());
-    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), 0);
+    let arena: FrameArena<M, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, M, 1, 4> = Downlink::new(&arena, AC_ID, [v2()]);
+    let [port] = downlink.ports().unwrap();
+    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID);
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), port.device());
     let mut reporter = LinkReporter::new();
     let t0 = Instant::now();
     let first = reporter.report(t0, &datalink.stats(), &DeviceStats::default());
@@ -286,28 +322,56 @@ fn datalink_report_from_uplink_and_downlink_counters() {
     assert_eq!(report.downlink_nb_msgs, 100);
     assert_eq!(report.downlink_rate, 500, "2500 bytes in 5 s");
     assert_eq!(report.downlink_ovrn, 0);
+    assert_eq!(
+        report,
+        LinkReport {
+            uplink_lost_time: 5,
+            uplink_nb_msgs: 10,
+            downlink_nb_msgs: 100,
+            downlink_rate: 500,
+            uplink_rate: 2,
+            downlink_ovrn: 0,
+        }
+    );
+    // The set's DATALINK_REPORT, field for field.
+    let msg: DatalinkReport = report.into();
+    assert_eq!(
+        (
+            msg.uplink_lost_time,
+            msg.uplink_nb_msgs,
+            msg.downlink_nb_msgs,
+            msg.downlink_rate,
+            msg.uplink_rate,
+            msg.downlink_ovrn
+        ),
+        (5, 10, 100, 500, 2, 0)
+    );
+    // Unanswered PINGs (no services here) are counted as unhandled.
+    assert_eq!(datalink.stats().unhandled, 10);
 }
 
 #[test]
 fn an_idle_line_flushes_frames_held_behind_a_false_start() {
     let _clock = mock_time();
     static PINGS: AtomicU32 = AtomicU32::new(0);
-    let on_ping = |_: &Received<'_>| {
+    let arena: FrameArena<M, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, M, 1, 4> = Downlink::new(&arena, AC_ID, [v2()]);
+    let [port] = downlink.ports().unwrap();
+    let on_ping = |_: &Received<'_, '_>| {
         PINGS.fetch_add(1, Ordering::Relaxed);
     };
-    let mut registry: Registry<'_, 1> = Registry::new();
-    registry
+    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID);
+    datalink
         .subscribe(Filter::message::<Ping>(), &on_ping)
         .unwrap();
-    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID, registry);
     // A false start announcing a 240-byte frame, then a PING, then silence.
     let mut bytes = vec![0x99, 0xF0];
     bytes.extend(uplink_frame(&Ping, AC_ID));
     for idle in [None, Some(Duration::from_millis(20))] {
         PINGS.store(0, Ordering::Relaxed);
         let chunks = VecDeque::from([(Duration::from_millis(1), bytes.clone())]);
-        let mut reader =
-            Reader::<_, _>::new(ScriptedRx { chunks }, PprzV2::new(), 0).idle_flush(idle);
+        let mut reader = Reader::<_, _>::new(ScriptedRx { chunks }, PprzV2::new(), port.device())
+            .idle_flush(idle);
         run_with_mock_time(
             select(
                 reader.run(&datalink),
@@ -327,30 +391,25 @@ fn an_idle_line_flushes_frames_held_behind_a_false_start() {
 
 #[test]
 fn a_setting_switches_the_telemetry_mode() {
-    use pprz_telemetry::periodic::{SCHEDULE, main};
-    use pprz_telemetry::scheduler::Scheduler;
+    use pprz_default::periodic::{PROCESSES, SCHEDULE, main};
+    use pprz_telemetry::scheduler::{Modes, Scheduler};
     let _clock = mock_time();
     static ARENA: FrameArena<M, 2048> = FrameArena::new();
-    let downlink: Downlink<'_, M, 1, 16> =
-        Downlink::new(&ARENA, AC_ID, [DeviceConfig::new(PprzV2::new().into())]);
-    let scheduler: Scheduler<'_, M, 1, 8> = Scheduler::new(&SCHEDULE);
-    let mode = scheduler.mode_setting(0).unwrap();
-    let get_mode = || mode.get();
-    let set_mode = |v: f32| {
-        // An invalid mode is refused; the acknowledgement then reports the mode in force.
-        let _ = mode.set(v);
-    };
-    let mut settings: Settings<'_, 4> = Settings::new();
-    let index = settings
-        .add("telemetry mode", &get_mode, &set_mode)
+    let downlink: Downlink<'_, M, 1, 16> = Downlink::new(&ARENA, AC_ID, [v2()]);
+    let [mut port] = downlink.ports().unwrap();
+    let modes: Modes<'_, PROCESSES> = Modes::new(&SCHEDULE);
+    let scheduler: Scheduler<'_, M, PROCESSES, 8> = Scheduler::new(&modes);
+    let services: Services<'_, Set, M, 4> = Services::new(AC_ID);
+    // An invalid mode is refused; the acknowledgement then reports the mode in force.
+    let index = services
+        .settings()
+        .add_mode("telemetry mode", modes.setting(main::PROCESS).unwrap())
         .unwrap();
-    let services: Services<'_, '_, M, 1, 16, 4> = Services::new(&downlink, settings);
-    let mut registry: Registry<'_, 4> = Registry::new();
-    services.subscribe(&mut registry).unwrap();
-    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID, registry);
-    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), 0);
+    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID);
+    services.subscribe(datalink.registry()).unwrap();
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), port.device());
 
-    assert_eq!(scheduler.mode(0), Some(main::MODE_DEFAULT));
+    assert_eq!(scheduler.modes().mode(0), Some(main::MODE_DEFAULT));
     let debug = main::MODE_DEBUG as f32;
     reader.feed(
         &uplink_frame(
@@ -363,7 +422,7 @@ fn a_setting_switches_the_telemetry_mode() {
         ),
         &datalink,
     );
-    assert_eq!(scheduler.mode(0), Some(main::MODE_DEBUG));
+    assert_eq!(scheduler.modes().mode(0), Some(main::MODE_DEBUG));
     reader.feed(
         &uplink_frame(
             &Setting {
@@ -376,17 +435,20 @@ fn a_setting_switches_the_telemetry_mode() {
         &datalink,
     );
     assert_eq!(
-        scheduler.mode(0),
+        scheduler.modes().mode(0),
         Some(main::MODE_DEBUG),
         "no such mode: unchanged"
     );
     // Both SETTINGs were acknowledged with the mode in force.
-    let q = downlink.queue(0).unwrap();
     for _ in 0..2 {
-        let frame = q.try_receive().unwrap();
+        let frame = port.try_next().unwrap();
         assert_eq!(frame[5], DlValue::ID);
         let mut expected = vec![index];
         expected.extend_from_slice(&debug.to_le_bytes());
         assert_eq!(&frame[6..11], &expected[..]);
+        frame.finish(true);
     }
+    assert!(port.try_next().is_none(), "one acknowledgement per SETTING");
+    let s = services.stats();
+    assert_eq!((s.settings, s.unknown_index), (2, 0));
 }

@@ -1,13 +1,20 @@
 //! The downlink without time: priority order (the thesis' Figure 27 trace), FIFO among
 //! equal priorities, the overflow policy for queue and arena, per-device accounting under
-//! random load, and no leaked arena memory.
+//! random load (frames written, failed and abandoned through the devices' ports), and no
+//! leaked arena memory.
+//!
+//! The queues are drained by hand through the devices' [`Port`]s (`try_next` and
+//! `Outgoing::finish`), as a writer task would. A downlink hands out ports only with a
+//! `Sync` mutex, hence `CriticalSectionRawMutex` throughout.
 
-use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
-use pprz_messages::{Decode, VarArray};
-use pprz_telemetry::messages::telemetry::{DlValue, Payload};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use pprz_default::messages::telemetry::{DlValue, Payload};
+use pprz_messages::{Decode, Message, VarArray};
 use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, PprzLog, PprzV1, PprzV2, XBee24};
-use pprz_telemetry::{DeviceConfig, DeviceStats, Downlink, DropReason, FrameArena, Targets};
+use pprz_telemetry::{DeviceConfig, DeviceStats, Downlink, DropReason, FrameArena, Port, Targets};
 use proptest::prelude::*;
+
+type M = CriticalSectionRawMutex;
 
 type Arena = FrameArena<CriticalSectionRawMutex, 8192>;
 
@@ -15,21 +22,16 @@ fn v2() -> DeviceConfig {
     DeviceConfig::new(PprzV2::new().into())
 }
 
-/// Takes every queued frame of `device` in send order and returns the DL_VALUE indices.
-fn drain_indices<const D: usize, const Q: usize>(
-    downlink: &Downlink<'_, NoopRawMutex, D, Q>,
-    device: usize,
-) -> Vec<u8> {
-    let queue = downlink.queue(device).unwrap();
+/// Takes every queued frame of the port's device in send order (reporting each as
+/// written) and returns the DL_VALUE indices.
+fn drain_indices(port: &mut Port<'_>) -> Vec<u8> {
     let mut order = Vec::new();
-    while let Some(frame) = queue.try_receive() {
+    while let Some(frame) = port.try_next() {
         let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
         let mut input = &frame[..];
         let f = decoder.feed(&mut input).expect("a complete PPRZ v2 frame");
         order.push(DlValue::decode(f.payload()).unwrap().index);
-        let len = frame.len();
-        drop(frame);
-        queue.complete(len, true);
+        frame.finish(true);
     }
     order
 }
@@ -38,19 +40,20 @@ fn drain_indices<const D: usize, const Q: usize>(
 fn thesis_figure_27_trace() {
     // Priorities 0, 1, 0, 1 arrive while the device is busy: sent 2nd, 4th, 1st, 3rd.
     let arena = Arena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 1, 8> = Downlink::new(&arena, 7, [v2()]);
+    let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2()]);
     for (index, priority) in [(1, 0), (2, 1), (3, 0), (4, 1)] {
         downlink
             .send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
             .unwrap();
     }
-    assert_eq!(drain_indices(&downlink, 0), [2, 4, 1, 3]);
+    let [mut port] = downlink.ports().unwrap();
+    assert_eq!(drain_indices(&mut port), [2, 4, 1, 3]);
 }
 
 #[test]
 fn many_levels_strictly_higher_first_fifo_among_equals() {
     let arena = Arena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 1, 64> = Downlink::new(&arena, 7, [v2()]);
+    let downlink: Downlink<'_, M, 1, 64> = Downlink::new(&arena, 7, [v2()]);
     let prios = [5u8, 255, 0, 5, 128, 255, 0, 128, 5, 1];
     for (i, p) in prios.iter().enumerate() {
         downlink
@@ -71,13 +74,14 @@ fn many_levels_strictly_higher_first_fifo_among_equals() {
         .collect();
     expected.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
     let expected: Vec<u8> = expected.into_iter().map(|(_, i)| i).collect();
-    assert_eq!(drain_indices(&downlink, 0), expected);
+    let [mut port] = downlink.ports().unwrap();
+    assert_eq!(drain_indices(&mut port), expected);
 }
 
 #[test]
 fn full_queue_evicts_oldest_of_least_important_never_equal() {
     let arena = Arena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 1, 8> = Downlink::new(&arena, 7, [v2().depth(3)]);
+    let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2().depth(3)]);
     let send = |index: u8, priority: u8| {
         downlink.send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
     };
@@ -99,7 +103,8 @@ fn full_queue_evicts_oldest_of_least_important_never_equal() {
     assert_eq!(stats.evicted.queue_full, 1);
     assert_eq!(stats.queue_high_water, 3);
     assert!(stats.is_balanced(), "{stats:?}");
-    assert_eq!(drain_indices(&downlink, 0), [1, 5, 3]);
+    let [mut port] = downlink.ports().unwrap();
+    assert_eq!(drain_indices(&mut port), [1, 5, 3]);
     let stats = downlink.stats(0).unwrap();
     assert_eq!((stats.submitted, stats.sent, stats.queued), (5, 3, 0));
     assert!(stats.is_balanced());
@@ -112,7 +117,7 @@ fn full_queue_evicts_oldest_of_least_important_never_equal() {
 fn full_arena_evicts_across_devices_least_important_first() {
     // A small arena shared by two devices.
     let arena: FrameArena<CriticalSectionRawMutex, 1024> = FrameArena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 2, 64> = Downlink::new(&arena, 7, [v2(), v2()]);
+    let downlink: Downlink<'_, M, 2, 64> = Downlink::new(&arena, 7, [v2(), v2()]);
     let bytes = [0xA5u8; 100];
     let payload = Payload {
         values: VarArray::new(&bytes),
@@ -151,22 +156,24 @@ fn full_arena_evicts_across_devices_least_important_first() {
     assert_eq!(s0.dropped.arena_full, 1);
     assert!(s0.is_balanced() && s1.is_balanced());
     // The high-priority frame is next on device 1.
-    assert_eq!(drain_indices_first(&downlink, 1), 31);
+    let [_, mut port1] = downlink.ports().unwrap();
+    assert_eq!(next_msg_id(&mut port1), DlValue::ID);
+    assert_eq!(DlValue::ID, 31);
 }
 
-/// Message id of the next frame of `device`.
-fn drain_indices_first<const D: usize, const Q: usize>(
-    downlink: &Downlink<'_, NoopRawMutex, D, Q>,
-    device: usize,
-) -> u8 {
-    let frame = downlink.queue(device).unwrap().try_receive().unwrap();
-    frame[5]
+/// Message id of the next frame of the port's device (a PPRZ v2 frame), reported as
+/// written.
+fn next_msg_id(port: &mut Port<'_>) -> u8 {
+    let frame = port.try_next().unwrap();
+    let id = frame[5];
+    frame.finish(true);
+    id
 }
 
 #[test]
 fn too_large_and_encode_errors_are_counted_per_device() {
     let arena = Arena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 2, 8> = Downlink::new(
+    let downlink: Downlink<'_, M, 2, 8> = Downlink::new(
         &arena,
         7,
         [v2(), DeviceConfig::new(XBee24::default().into())],
@@ -200,7 +207,7 @@ fn each_transport_frames_the_message_and_same_transports_share_the_encoding() {
         PprzLog::TELEMETRY.into(),
         PprzV2::new().into(),
     ];
-    let downlink: Downlink<'_, NoopRawMutex, 4, 8> =
+    let downlink: Downlink<'_, M, 4, 8> =
         Downlink::new(&arena, 7, transports.map(DeviceConfig::new));
     downlink
         .send(&DlValue {
@@ -208,8 +215,13 @@ fn each_transport_frames_the_message_and_same_transports_share_the_encoding() {
             value: 0.5,
         })
         .unwrap();
-    let frame = |d: usize| downlink.queue(d).unwrap().try_receive().unwrap();
-    let (f0, f1, f2, f3) = (frame(0), frame(1), frame(2), frame(3));
+    let [mut p0, mut p1, mut p2, mut p3] = downlink.ports().unwrap();
+    let (f0, f1, f2, f3) = (
+        p0.try_next().unwrap(),
+        p1.try_next().unwrap(),
+        p2.try_next().unwrap(),
+        p3.try_next().unwrap(),
+    );
     assert_eq!(&f0[..], &f3[..]);
     assert_eq!(&f0[..6], &[0x99, 13, 7, 0, 1, 31]);
     assert_eq!(&f1[..4], &[0x99, 11, 7, 31]);
@@ -219,12 +231,31 @@ fn each_transport_frames_the_message_and_same_transports_share_the_encoding() {
         4 + 5,
         "PPRZLOG LEN counts the v2 header and the fields"
     );
+    for f in [f0, f1, f2, f3] {
+        f.finish(true);
+    }
+    for d in 0..4 {
+        let s = downlink.stats(d).unwrap();
+        assert_eq!((s.submitted, s.sent, s.queued), (1, 1, 0));
+    }
+    assert_eq!(downlink.arena_stats().live, 0);
 }
 
 #[derive(Debug, Clone)]
 enum Op {
-    Send { size: u8, priority: u8, targets: u8 },
-    Write { device: u8, ok: bool },
+    Send {
+        size: u8,
+        priority: u8,
+        targets: u8,
+    },
+    Write {
+        device: u8,
+        ok: bool,
+    },
+    /// A frame taken and dropped unfinished (a writer cancelled mid-write).
+    Abandon {
+        device: u8,
+    },
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -235,6 +266,7 @@ fn op() -> impl Strategy<Value = Op> {
             targets
         }),
         1 => (0u8..3, prop::bool::weighted(0.9)).prop_map(|(device, ok)| Op::Write { device, ok }),
+        1 => (0u8..3).prop_map(|device| Op::Abandon { device }),
     ]
 }
 
@@ -244,11 +276,12 @@ proptest! {
     #[test]
     fn accounting_balances_under_random_load(ops in prop::collection::vec(op(), 1..400)) {
         let arena: FrameArena<CriticalSectionRawMutex, 2048> = FrameArena::new();
-        let downlink: Downlink<'_, NoopRawMutex, 3, 16> = Downlink::new(
+        let downlink: Downlink<'_, M, 3, 16> = Downlink::new(
             &arena,
             7,
             [v2(), DeviceConfig::new(XBee24::default().into()).depth(4), DeviceConfig::new(PprzLog::TELEMETRY.into())],
         );
+        let mut ports = downlink.ports().unwrap();
         let bytes = [0x5Au8; 255];
         for op in ops {
             match op {
@@ -257,11 +290,16 @@ proptest! {
                     let _ = downlink.send_to(&msg, Targets::from_bits(u32::from(targets)), priority);
                 }
                 Op::Write { device, ok } => {
-                    let q = downlink.queue(usize::from(device)).unwrap();
-                    if let Some(frame) = q.try_receive() {
-                        let len = frame.len();
+                    if let Some(frame) = ports[usize::from(device)].try_next() {
+                        frame.finish(ok);
+                    }
+                }
+                Op::Abandon { device } => {
+                    let before = downlink.stats(usize::from(device)).unwrap().dropped.write_error;
+                    if let Some(frame) = ports[usize::from(device)].try_next() {
                         drop(frame);
-                        q.complete(len, ok);
+                        let after = downlink.stats(usize::from(device)).unwrap().dropped.write_error;
+                        prop_assert_eq!(after, before + 1, "an abandoned frame is a failed write");
                     }
                 }
             }
@@ -278,12 +316,9 @@ proptest! {
             prop_assert_eq!(downlink.arena_stats().live as u32, queued, "arena frames = queued frames");
         }
         // Drain: everything ends sent or counted, and the arena is empty again.
-        for d in 0..3 {
-            let q = downlink.queue(d).unwrap();
-            while let Some(frame) = q.try_receive() {
-                let len = frame.len();
-                drop(frame);
-                q.complete(len, true);
+        for (d, port) in ports.iter_mut().enumerate() {
+            while let Some(frame) = port.try_next() {
+                frame.finish(true);
             }
             let s = downlink.stats(d).unwrap();
             prop_assert!(s.is_balanced());

@@ -1,5 +1,5 @@
-//! The downlink as a firmware wires it (statics, `StaticCell`, one writer task per
-//! device), running on the Embassy std executor with embassy-time's mock driver: a busy
+//! The downlink as a firmware wires it (`const` statics, one writer task per device
+//! taking the device's port), running on the Embassy std executor with embassy-time's mock driver: a busy
 //! radio and an SD log, the thesis trace on the radio, and the log flushed per frame.
 //!
 //! The mock clock is advanced by a task of its own, so the run is deterministic. The test
@@ -14,16 +14,25 @@ use embassy_executor::{Executor, Spawner};
 use embassy_futures::yield_now;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_time::{Duration, MockDriver, Timer};
+use pprz_default::messages::telemetry::DlValue;
 use pprz_messages::Decode;
-use pprz_telemetry::messages::telemetry::DlValue;
-use pprz_telemetry::pprz_transports::{Decoder, PprzLog, PprzLogDecoder, PprzV2};
-use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Targets, run_writer};
+use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, PprzLog, PprzLogDecoder, PprzV2};
+use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, Targets, run_writer};
 use static_cell::StaticCell;
 
 type Dl = Downlink<'static, M, 2, 16>;
 
 static ARENA: FrameArena<M, 2048> = FrameArena::new();
-static DOWNLINK: StaticCell<Dl> = StaticCell::new();
+/// A radio and an SD log flushed after every frame: a plain `static` (`Downlink::new` is
+/// a `const fn`).
+static DOWNLINK: Dl = Downlink::new(
+    &ARENA,
+    7,
+    [
+        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+        DeviceConfig::new(AnyTransport::PprzLog(PprzLog::TELEMETRY)).flush(true),
+    ],
+);
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// What reached the devices: frames of the radio, frames of the log, flushes.
 struct Wire(Vec<Vec<u8>>, Vec<Vec<u8>>, u32);
@@ -60,9 +69,12 @@ impl embedded_io_async::Write for SlowDevice {
 }
 
 #[embassy_executor::task(pool_size = 2)]
-async fn writer(downlink: &'static Dl, index: usize, byte_us: u64) {
-    let mut device = SlowDevice { index, byte_us };
-    let _ = run_writer(downlink, index, &mut device).await;
+async fn writer(mut port: Port<'static>, byte_us: u64) {
+    let mut device = SlowDevice {
+        index: port.device().index(),
+        byte_us,
+    };
+    run_writer(&mut port, &mut device).await
 }
 
 #[embassy_executor::task]
@@ -76,17 +88,21 @@ async fn clock() {
 #[embassy_executor::task]
 async fn app(spawner: Spawner, downlink: &'static Dl, done: mpsc::Sender<()>) {
     // The radio is busy with a first frame while four more arrive: priorities 0, 1, 0, 1.
+    let mut ports = Some(downlink.ports().unwrap());
+    // Sent through the copyable, type-erased handle, as application tasks would.
+    let sender = downlink.sender();
     for (index, priority) in [(0u8, 9u8), (1, 0), (2, 1), (3, 0), (4, 1)] {
-        downlink
+        sender
             .send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
             .unwrap();
-        if index == 0 {
-            spawner.spawn(writer(downlink, 0, 173).unwrap());
-            spawner.spawn(writer(downlink, 1, 10).unwrap());
+        if let Some([radio, log]) = ports.take() {
+            assert_eq!((radio.device().index(), log.device().index()), (0, 1));
+            spawner.spawn(writer(radio, 173).unwrap());
+            spawner.spawn(writer(log, 10).unwrap());
             yield_now().await; // let the writers take the first frame
         }
     }
-    while downlink.stats(0).unwrap().sent < 5 || downlink.stats(1).unwrap().sent < 5 {
+    while sender.stats(0).unwrap().sent < 5 || sender.stats(1).unwrap().sent < 5 {
         Timer::after(Duration::from_millis(1)).await;
     }
     let _ = done.send(());
@@ -96,18 +112,10 @@ async fn app(spawner: Spawner, downlink: &'static Dl, done: mpsc::Sender<()>) {
 fn firmware_style_wiring_on_the_std_executor() {
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
-        let downlink: &'static Dl = DOWNLINK.init(Downlink::new(
-            &ARENA,
-            7,
-            [
-                DeviceConfig::new(PprzV2::new().into()),
-                DeviceConfig::new(PprzLog::TELEMETRY.into()).flush(true),
-            ],
-        ));
         let executor = EXECUTOR.init(Executor::new());
         executor.run(|spawner| {
             spawner.spawn(clock().unwrap());
-            spawner.spawn(app(spawner, downlink, tx).unwrap());
+            spawner.spawn(app(spawner, &DOWNLINK, tx).unwrap());
         })
     });
     rx.recv_timeout(std::time::Duration::from_secs(60))
@@ -141,4 +149,9 @@ fn firmware_style_wiring_on_the_std_executor() {
     assert_eq!(log.len(), 5);
     assert_eq!(wire.2, 5, "the log is flushed after every frame");
     assert_eq!(ARENA.stats().live, 0, "every frame's memory came back");
+    for d in 0..2 {
+        let s = DOWNLINK.stats(d).unwrap();
+        assert_eq!((s.submitted, s.sent, s.queued), (5, 5, 0), "device {d}");
+        assert!(s.is_balanced(), "{s:?}");
+    }
 }

@@ -11,10 +11,10 @@ use std::cell::RefCell;
 use std::convert::Infallible;
 
 use embassy_futures::select::{Either, select};
-use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
+use pprz_default::messages::telemetry::{Attitude, DlValue, Payload};
 use pprz_messages::{Message, VarArray, priority};
-use pprz_telemetry::messages::telemetry::{Attitude, DlValue, Payload};
 use pprz_telemetry::pprz_transports::{Decoder, PprzV2};
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 
@@ -30,8 +30,9 @@ fn acknowledgements_survive_a_10x_overloaded_link() {
     const SECONDS: u64 = 6;
     let _serial = mock_time();
     let arena: FrameArena<CriticalSectionRawMutex, 4096> = FrameArena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 1, 32> =
+    let downlink: Downlink<'_, CriticalSectionRawMutex, 1, 32> =
         Downlink::new(&arena, 7, [DeviceConfig::new(PprzV2::new().into())]);
+    let [mut port] = downlink.ports().unwrap();
     let log = RefCell::new(Vec::new());
     let acks_sent = RefCell::new(Vec::new());
     let payload_bytes = [0x5Au8; 120];
@@ -71,7 +72,7 @@ fn acknowledgements_survive_a_10x_overloaded_link() {
             byte_us: BYTE_TIME_US,
             log: &log,
         };
-        run_writer(&downlink, 0, &mut uart).await
+        run_writer(&mut port, &mut uart).await
     };
     let done = run_with_mock_time(
         select(producer, writer),
@@ -194,7 +195,7 @@ impl embedded_io_async::Write for Flaky {
 fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
     let _serial = mock_time();
     let arena: FrameArena<CriticalSectionRawMutex, 8192> = FrameArena::new();
-    let downlink: Downlink<'_, NoopRawMutex, 3, 8> = Downlink::new(
+    let downlink: Downlink<'_, CriticalSectionRawMutex, 3, 8> = Downlink::new(
         &arena,
         7,
         [
@@ -203,6 +204,7 @@ fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
             DeviceConfig::new(PprzV2::new().into()),
         ],
     );
+    let [mut good_port, mut stalled_port, mut flaky_port] = downlink.ports().unwrap();
     let log = RefCell::new(Vec::new());
     let producer = async {
         for index in 0..50u8 {
@@ -218,9 +220,9 @@ fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
         };
         let mut flaky = Flaky { writes: 0 };
         let _ = embassy_futures::join::join3(
-            run_writer(&downlink, 0, &mut good),
-            run_writer(&downlink, 1, &mut Stalled),
-            run_writer(&downlink, 2, &mut flaky),
+            run_writer(&mut good_port, &mut good),
+            run_writer(&mut stalled_port, &mut Stalled),
+            run_writer(&mut flaky_port, &mut flaky),
         )
         .await;
     };
@@ -235,8 +237,8 @@ fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
     assert_eq!(log.borrow().len(), 50);
     let stalled = downlink.stats(1).unwrap();
     assert_eq!(stalled.sent, 0);
-    // A full queue of 8; the frame stuck in the writer was reported as a failed write
-    // when the writer was dropped at the end of the run.
+    // A full queue of 8; the frame stuck in the writer (its `Outgoing`) was reported as a
+    // failed write when the writer was dropped at the end of the run.
     assert_eq!(stalled.queued, 8);
     assert_eq!(stalled.dropped.write_error, 1);
     assert_eq!(
@@ -254,4 +256,25 @@ fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
         8,
         "only the stalled device's queue holds frames"
     );
+
+    // The port outlived its cancelled writer: a new writer on a working device drains the
+    // 8 frames left behind.
+    let relog = RefCell::new(Vec::new());
+    let mut replacement = SimUart {
+        byte_us: BYTE_TIME_US,
+        log: &relog,
+    };
+    run_with_mock_time(
+        select(
+            run_writer(&mut stalled_port, &mut replacement),
+            Timer::after(Duration::from_millis(100)),
+        ),
+        Duration::from_micros(100),
+        10_000,
+    );
+    assert_eq!(relog.borrow().len(), 8);
+    let stalled = downlink.stats(1).unwrap();
+    assert_eq!((stalled.sent, stalled.queued), (8, 0));
+    assert!(stalled.is_balanced(), "{stalled:?}");
+    assert_eq!(arena.stats().live, 0, "every frame's memory came back");
 }

@@ -4,6 +4,9 @@
 //! staggering of the generated schedules, several callbacks per message, per-process
 //! callbacks, and callbacks sending on a real downlink.
 //!
+//! The active modes live in a `Modes` the scheduler reads (and the ground writes through
+//! the settings table); each test builds one next to its scheduler.
+//!
 //! No wall-clock timing: `run` is polled by hand while the mock clock is advanced.
 
 use std::future::Future;
@@ -14,12 +17,12 @@ use std::task::{Context, Waker};
 
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, NoopRawMutex};
 use embassy_time::{Duration, Instant, MockDriver};
-use pprz_telemetry::messages::telemetry::{Alive, Attitude, Pong};
-use pprz_telemetry::periodic::{self, main};
+use pprz_default::messages::telemetry::{Alive, Attitude, Pong};
+use pprz_default::periodic::{self, main};
 use pprz_telemetry::pprz_messages::Message;
 use pprz_telemetry::pprz_transports::PprzV2;
 use pprz_telemetry::scheduler::{
-    ModeError, Periodic, Process, Registered, Schedule, Scheduler, SchedulerFull,
+    ModeError, Modes, Periodic, Process, Registered, Schedule, Scheduler, SchedulerFull,
 };
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
 
@@ -119,7 +122,8 @@ fn assert_combo_counts(counters: &[AtomicU32; 12]) {
 fn exact_counts_over_a_minute_per_period_and_phase() {
     let counters: [AtomicU32; 12] = Default::default();
     let callbacks = counters_and_callbacks(&counters);
-    let scheduler: Scheduler<'_, NoopRawMutex, 1, 16> = Scheduler::new(&COMBO_SCHEDULE);
+    let modes = Modes::new(&COMBO_SCHEDULE);
+    let scheduler: Scheduler<'_, NoopRawMutex, 1, 16> = Scheduler::new(&modes);
     count_combos(&scheduler, &callbacks);
     for t in 0..3600 {
         let report = scheduler.tick();
@@ -159,7 +163,8 @@ fn run_task_under_mock_time_fires_exactly_per_simulated_minute() {
     MockDriver::get().reset();
     let counters: [AtomicU32; 12] = Default::default();
     let callbacks = counters_and_callbacks(&counters);
-    let scheduler: Scheduler<'_, NoopRawMutex, 1, 16> = Scheduler::new(&COMBO_SCHEDULE);
+    let modes = Modes::new(&COMBO_SCHEDULE);
+    let scheduler: Scheduler<'_, NoopRawMutex, 1, 16> = Scheduler::new(&modes);
     count_combos(&scheduler, &callbacks);
     let start = Instant::now();
     let run = async {
@@ -209,7 +214,8 @@ fn run_task_does_not_drift_and_catches_up() {
     let count = || {
         seconds.fetch_add(1, Ordering::Relaxed);
     };
-    let scheduler: Scheduler<'_, NoopRawMutex, 1, 4> = Scheduler::new(&SCHEDULE);
+    let modes = Modes::new(&SCHEDULE);
+    let scheduler: Scheduler<'_, NoopRawMutex, 1, 4> = Scheduler::new(&modes);
     assert!(scheduler.register("SECOND", &count).unwrap().is_scheduled());
     let run = async {
         scheduler.run().await;
@@ -291,12 +297,14 @@ fn mode_switching_is_immediate_and_keeps_shared_cadence() {
             Box::new(move || log.push(id)) as Box<dyn Fn() + Sync>
         })
         .collect();
-    let scheduler: Scheduler<'_, CriticalSectionRawMutex, 1, 8> = Scheduler::new(&MODES_SCHEDULE);
+    let modes: Modes<'_, 1> = Modes::new(&MODES_SCHEDULE);
+    let scheduler: Scheduler<'_, CriticalSectionRawMutex, 1, 8> = Scheduler::new(&modes);
+    assert!(std::ptr::eq(scheduler.modes(), &modes));
     for (i, cb) in cbs.iter().enumerate() {
         let r = scheduler.register((1, i as u8 + 1), &**cb).unwrap();
         assert_eq!(r.modes, if i == 0 { 2 } else { 1 });
     }
-    assert_eq!(scheduler.mode(0), Some(0));
+    assert_eq!(modes.mode(0), Some(0));
     let run = |from: u32, to: u32| {
         for t in from..to {
             log.scheduler_tick.store(t, Ordering::Relaxed);
@@ -305,12 +313,12 @@ fn mode_switching_is_immediate_and_keeps_shared_cadence() {
     };
     run(0, 1000);
     // From the ground: the mode setting of process 0 (what SETTING writes).
-    let setting = scheduler.mode_setting(0).unwrap();
+    let setting = modes.setting(0).unwrap();
     assert_eq!((setting.get(), setting.modes()), (0.0, 2));
     setting.set(1.0).unwrap();
-    assert_eq!((scheduler.mode(0), setting.get()), (Some(1), 1.0));
+    assert_eq!((modes.mode(0), setting.get()), (Some(1), 1.0));
     run(1000, 2000);
-    scheduler.set_mode_by_name("Main", "a").unwrap();
+    modes.set_mode_by_name("Main", "a").unwrap();
     run(2000, 3600);
 
     // X is in both modes with the same period and phase: an unbroken cadence.
@@ -328,26 +336,23 @@ fn mode_switching_is_immediate_and_keeps_shared_cadence() {
     assert_eq!(log.ticks_of(4).len(), 1000 + 1600);
 
     // Invalid changes are refused and change nothing.
-    assert_eq!(scheduler.set_mode(0, 2), Err(ModeError::UnknownMode));
-    assert_eq!(scheduler.set_mode(1, 0), Err(ModeError::UnknownProcess));
+    assert_eq!(modes.set_mode(0, 2), Err(ModeError::UnknownMode));
+    assert_eq!(modes.set_mode(1, 0), Err(ModeError::UnknownProcess));
     assert_eq!(
-        scheduler.set_mode_by_name("Main", "c"),
+        modes.set_mode_by_name("Main", "c"),
         Err(ModeError::UnknownMode)
     );
     assert_eq!(
-        scheduler.set_mode_by_name("Ap", "a"),
+        modes.set_mode_by_name("Ap", "a"),
         Err(ModeError::UnknownProcess)
     );
     for bad in [1.5, -1.0, f32::NAN, f32::INFINITY] {
         assert_eq!(setting.set(bad), Err(ModeError::NotAnIndex), "{bad}");
     }
     assert_eq!(setting.set(2.0), Err(ModeError::UnknownMode));
-    assert_eq!(scheduler.mode(0), Some(0));
-    assert_eq!(scheduler.mode(1), None);
-    assert_eq!(
-        scheduler.mode_setting(1).unwrap_err(),
-        ModeError::UnknownProcess
-    );
+    assert_eq!(modes.mode(0), Some(0));
+    assert_eq!(modes.mode(1), None);
+    assert_eq!(modes.setting(1).unwrap_err(), ModeError::UnknownProcess);
     // A setting is a small Copy value: the settings table can wrap it in closures.
     let (get, set) = (move || setting.get(), move |v| setting.set(v));
     set(1.0).unwrap();
@@ -357,10 +362,11 @@ fn mode_switching_is_immediate_and_keeps_shared_cadence() {
 #[test]
 fn a_switch_from_a_callback_applies_from_the_next_tick() {
     let log = Log::new();
-    let scheduler: Scheduler<'_, CriticalSectionRawMutex, 1, 8> = Scheduler::new(&MODES_SCHEDULE);
+    let modes: Modes<'_, 1> = Modes::new(&MODES_SCHEDULE);
+    let scheduler: Scheduler<'_, CriticalSectionRawMutex, 1, 8> = Scheduler::new(&modes);
     let to_b = || {
         log.push(1);
-        scheduler.set_mode(0, 1).unwrap();
+        scheduler.modes().set_mode(0, 1).unwrap();
     };
     let w = || log.push(4);
     let z = || log.push(3);
@@ -400,11 +406,12 @@ fn firings_per_mode<const C: usize>(
         .collect();
     let mut per_mode = Vec::new();
     for (m, mode) in p.modes.iter().enumerate() {
-        let scheduler: Scheduler<'_, NoopRawMutex, 4, C> = Scheduler::new(schedule);
+        let modes: Modes<'_, 4> = Modes::new(schedule);
+        let scheduler: Scheduler<'_, NoopRawMutex, 4, C> = Scheduler::new(&modes);
         for (&id, cb) in ids.iter().zip(&callbacks) {
             let _ = scheduler.register_in(process, id, &**cb).unwrap();
         }
-        scheduler.set_mode(process, m).unwrap();
+        modes.set_mode(process, m).unwrap();
         let mut ticks_fired = Vec::new();
         for _ in 0..ticks {
             scheduler.tick();
@@ -525,7 +532,8 @@ fn several_callbacks_per_message_in_registration_order() {
         || calls.lock().unwrap().push("c"),
         || calls.lock().unwrap().push("d"),
     );
-    let scheduler: Scheduler<'_, NoopRawMutex, 1, 4> = Scheduler::new(&periodic::SCHEDULE);
+    let modes = Modes::new(&periodic::SCHEDULE);
+    let scheduler: Scheduler<'_, NoopRawMutex, 1, 4> = Scheduler::new(&modes);
     // By name, by (class, id) and by type; ALIVE is in all three modes.
     assert_eq!(scheduler.register("ALIVE", &a), Ok(Registered { modes: 3 }));
     assert_eq!(
@@ -574,8 +582,8 @@ fn callbacks_registered_for_one_process() {
     let on_logger = || {
         logger_calls.fetch_add(1, Ordering::Relaxed);
     };
-    let scheduler: Scheduler<'_, NoopRawMutex, { snapshot::PROCESSES }, 4> =
-        Scheduler::new(&snapshot::SCHEDULE);
+    let modes: Modes<'_, { snapshot::PROCESSES }> = Modes::new(&snapshot::SCHEDULE);
+    let scheduler: Scheduler<'_, NoopRawMutex, { snapshot::PROCESSES }, 4> = Scheduler::new(&modes);
     // ATTITUDE: every 15 ticks (phase 7) in Main's default mode, every tick in Logger's.
     assert_eq!(
         scheduler.register_in(snap_main::PROCESS, "ATTITUDE", &on_main),
@@ -598,12 +606,10 @@ fn callbacks_registered_for_one_process() {
     }
     assert_eq!(main_calls.load(Ordering::Relaxed), 240);
     assert_eq!(logger_calls.load(Ordering::Relaxed), 3600);
-    scheduler
+    modes
         .set_mode(snap_main::PROCESS, snap_main::MODE_OFF)
         .unwrap();
-    scheduler
-        .set_mode(logger::PROCESS, logger::MODE_ALL)
-        .unwrap();
+    modes.set_mode(logger::PROCESS, logger::MODE_ALL).unwrap();
     for _ in 0..60 {
         scheduler.tick();
     }
@@ -626,8 +632,9 @@ fn callbacks_send_on_the_downlink() {
             theta: 0.3,
         });
     };
+    let modes: Modes<'_, { periodic::PROCESSES }> = Modes::new(&periodic::SCHEDULE);
     let scheduler: Scheduler<'_, CriticalSectionRawMutex, { periodic::PROCESSES }, 8> =
-        Scheduler::new(&periodic::SCHEDULE);
+        Scheduler::new(&modes);
     let _ = scheduler.register_message::<Alive>(&send_alive).unwrap();
     let _ = scheduler
         .register_message::<Attitude>(&send_attitude)
@@ -638,7 +645,7 @@ fn callbacks_send_on_the_downlink() {
     }
     assert_eq!(downlink.stats(0).unwrap().submitted, 5);
     // Debug mode: ATTITUDE every 0.1 s.
-    scheduler.set_mode(main::PROCESS, main::MODE_DEBUG).unwrap();
+    modes.set_mode(main::PROCESS, main::MODE_DEBUG).unwrap();
     for _ in 0..60 {
         scheduler.tick();
     }

@@ -1,5 +1,6 @@
 //! Property checks shared by the tests of every generated message set (the default set
-//! in `pprz-telemetry`, the full reference set in `pprz-reference-check`).
+//! in `pprz-default`, the full reference set in `pprz-reference-check`; both include this
+//! file by path).
 
 use pprz_messages::{DecodeError, MessageSet, dynamic};
 use proptest::prelude::*;
