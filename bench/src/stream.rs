@@ -17,9 +17,9 @@
 
 use core::fmt;
 
-use pprz_messages::Message;
 use pprz_default::messages::AnyMessage;
 use pprz_default::messages::telemetry::{self, Attitude, Gps};
+use pprz_messages::Message;
 use pprz_transports::{Encoder, Frame, GROUND_ID, MsgHeader, PprzV2, PprzV2Decoder, TxMeta};
 
 /// Messages of the encode and parse workloads.

@@ -5,8 +5,8 @@
 #[path = "../../telemetry/tests/common/roundtrip.rs"]
 mod roundtrip;
 
-use pprz_messages::{Decode, DecodeError, EncodeError, Message, VarArray, priority};
 use pprz_default::messages::{AnyMessage, MESSAGES, datalink, telemetry};
+use pprz_messages::{Decode, DecodeError, EncodeError, Message, VarArray, priority};
 
 #[test]
 fn gps_golden_bytes() {

@@ -119,4 +119,3 @@ impl Process<'_> {
         self.modes.iter().position(|m| m.name == name)
     }
 }
-

@@ -737,10 +737,12 @@ impl<'d> Port<'d> {
     /// Waits for the most important frame; as [`try_next`](Self::try_next).
     pub async fn next(&mut self) -> Outgoing<'_> {
         let device = self.device;
-        let frame = poll_fn(|cx| match device.core.try_receive(device.index(), Some(cx)) {
-            Some(frame) => Poll::Ready(frame),
-            None => Poll::Pending,
-        })
+        let frame = poll_fn(
+            |cx| match device.core.try_receive(device.index(), Some(cx)) {
+                Some(frame) => Poll::Ready(frame),
+                None => Poll::Pending,
+            },
+        )
         .await;
         Outgoing {
             frame,

@@ -146,7 +146,11 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
     ///
     /// # Errors
     /// As [`send`](Self::send).
-    pub fn send_with_priority<Msg: Message>(&self, msg: &Msg, priority: u8) -> Result<(), SendError> {
+    pub fn send_with_priority<Msg: Message>(
+        &self,
+        msg: &Msg,
+        priority: u8,
+    ) -> Result<(), SendError> {
         self.downlink.send_to(msg, crate::Targets::ALL, priority)
     }
 
@@ -212,8 +216,8 @@ struct LinkInbox<'l, 'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRI
     link: &'l Link<'a, S, Q, SETTINGS, SUBSCRIBERS>,
 }
 
-impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
-    Inbox<'a> for LinkInbox<'_, 'a, S, Q, SETTINGS, SUBSCRIBERS>
+impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize> Inbox<'a>
+    for LinkInbox<'_, 'a, S, Q, SETTINGS, SUBSCRIBERS>
 {
     fn deliver(&self, rx: &Received<'_, 'a>) {
         self.link

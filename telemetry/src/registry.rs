@@ -199,10 +199,7 @@ impl<'a, M: RawMutex, const N: usize> Registry<'a, M, N> {
         self.inner.lock(|s| {
             let mut s = s.borrow_mut();
             let len = s.len;
-            let slot = s
-                .entries
-                .get_mut(len)
-                .ok_or(RegistryFull { capacity: N })?;
+            let slot = s.entries.get_mut(len).ok_or(RegistryFull { capacity: N })?;
             *slot = Some((filter, subscriber));
             s.len = len + 1;
             Ok(())

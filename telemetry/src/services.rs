@@ -147,10 +147,7 @@ impl<'a, M: RawMutex, const N: usize> Settings<'a, M, N> {
             let mut t = t.borrow_mut();
             let len = t.len;
             let index = u8::try_from(len).map_err(|_| SettingsFull { capacity: N })?;
-            let slot = t
-                .entries
-                .get_mut(len)
-                .ok_or(SettingsFull { capacity: N })?;
+            let slot = t.entries.get_mut(len).ok_or(SettingsFull { capacity: N })?;
             *slot = Some(entry);
             t.len = len + 1;
             Ok(index)
@@ -334,9 +331,7 @@ impl<'a, S: ServiceSet, M: RawMutex + Sync, const N: usize> Services<'a, S, M, N
     }
 }
 
-impl<'d, S: ServiceSet, M: RawMutex + Sync, const N: usize> Handler<'d>
-    for Services<'_, S, M, N>
-{
+impl<'d, S: ServiceSet, M: RawMutex + Sync, const N: usize> Handler<'d> for Services<'_, S, M, N> {
     fn handle(&self, rx: &Received<'_, 'd>) -> bool {
         let id = (rx.class_id(), rx.msg_id());
         if id == (S::Ping::CLASS_ID, S::Ping::ID) {

@@ -90,4 +90,3 @@ impl Vehicle {
         (lat, lon)
     }
 }
-

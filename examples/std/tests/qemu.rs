@@ -17,13 +17,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use pprz_default::messages::telemetry::{DlValue, GpsInt};
+use pprz_default::periodic::SCHEDULE;
 use pprz_example_app::AC_ID;
 use pprz_ground::monitor::{Event, Monitor};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_messages::{Decode, Message};
-use pprz_default::messages::telemetry::{DlValue, GpsInt};
-use pprz_default::periodic::SCHEDULE;
 use pprz_transports::{AnyTransport, Decoder, PprzV2};
 
 /// Guest time over which the periodic rates are measured, in ms (GPS_INT `tow`).
@@ -169,8 +169,11 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         .expect("socket timeout");
     let _ = stream.set_nodelay(true);
 
-    let set = RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))
-        .expect("messages.xml loads");
+    let set = RuntimeSet::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../default/messages.xml"
+    ))
+    .expect("messages.xml loads");
     let transport = AnyTransport::from(PprzV2::new());
     let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");
     let setting = uplink::frame(

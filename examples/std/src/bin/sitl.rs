@@ -33,9 +33,7 @@ use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_telemetry::pprz_messages::priority;
 use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
-use pprz_telemetry::{
-    Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Port, run_writer,
-};
+use pprz_telemetry::{Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Port, run_writer};
 use static_cell::StaticCell;
 
 /// Simulate an aircraft on a 57600-baud radio and watch it with a live ground monitor.
