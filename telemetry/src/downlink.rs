@@ -256,7 +256,9 @@ impl fmt::Display for PortsTaken {
 
 impl core::error::Error for PortsTaken {}
 
-impl<'a, M: RawMutex, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
+/// The mutex must be `Sync` (`CriticalSectionRawMutex`, or `ThreadModeRawMutex` within one
+/// executor): the downlink's ports and handles are shared between tasks.
+impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
     const VALID: () = assert!(D > 0 && D <= 32, "a downlink has 1..=32 devices");
 
     /// A downlink for aircraft `ac_id` over `devices`, frames allocated in `arena`.

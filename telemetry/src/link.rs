@@ -49,9 +49,11 @@
 //! radio: use [`Downlink`] and its [`Port`](crate::Port)s directly; this facade is built
 //! on them.
 
+use core::cell::Cell;
 use core::convert::Infallible;
 
 use embassy_futures::select::{Either, select};
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embedded_io_async::{Read, Write};
 use pprz_messages::Message;
@@ -59,7 +61,7 @@ use pprz_messages::roles::ServiceSet;
 use pprz_transports::{AnyTransport, PprzV2};
 
 use crate::arena::ArenaStats;
-use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, PortsTaken, SendError, Sender};
+use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, Port, PortsTaken, SendError, Sender};
 use crate::reader::{Datalink, Inbox, Reader, UplinkStats};
 use crate::registry::{Filter, Received, RegistryFull, Subscriber};
 use crate::services::{ServiceStats, Services, Settings};
@@ -87,6 +89,8 @@ pub struct Link<
     downlink: Downlink<'a, LinkMutex, 1, Q>,
     datalink: Datalink<'a, LinkMutex, SUBSCRIBERS>,
     services: Services<'a, S, LinkMutex, SETTINGS>,
+    /// The device's port between two runs (a cancelled `run` puts it back here).
+    port: Mutex<LinkMutex, Cell<Option<Port<'a>>>>,
 }
 
 /// Counters of a [`Link`].
@@ -125,6 +129,7 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
             downlink: Downlink::new(arena, ac_id, [config]),
             datalink: Datalink::new(ac_id),
             services: Services::new(ac_id),
+            port: Mutex::new(Cell::new(None)),
         }
     }
 
@@ -196,17 +201,46 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
     /// reads `rx`, answers PING, SETTING and GET_SETTING on it and hands every other
     /// message for us to the subscribers.
     ///
+    /// If the `run` future is dropped (e.g. its task ended on a USB disconnect), the frame
+    /// being written counts as a write error and the link can run again.
+    ///
     /// # Errors
-    /// Returns at once with [`PortsTaken`] if the link runs already (or ran before): a
-    /// device has one writer.
+    /// Returns at once with [`PortsTaken`] if the link is running already: a device has
+    /// one writer.
     pub async fn run<W: Write, R: Read>(&'a self, tx: W, rx: R) -> Result<Infallible, PortsTaken> {
-        let [mut port] = self.downlink.ports()?;
+        let port = match self.port.lock(Cell::take) {
+            Some(port) => port,
+            None => {
+                let [port] = self.downlink.ports()?;
+                port
+            }
+        };
+        let mut guard = PortGuard {
+            slot: &self.port,
+            port: Some(port),
+        };
+        let Some(port) = guard.port.as_mut() else {
+            return Err(PortsTaken);
+        };
         let transport = port.device().config().transport;
         let mut reader: Reader<'a, R, AnyTransport> = Reader::new(rx, transport, port.device());
         let inbox = LinkInbox { link: self };
-        match select(run_writer(&mut port, tx), reader.run(&inbox)).await {
+        match select(run_writer(port, tx), reader.run(&inbox)).await {
             Either::First(never) | Either::Second(never) => never,
         }
+    }
+}
+
+/// Gives the port back to its link when `run` ends (it only ends by being dropped).
+struct PortGuard<'l, 'a> {
+    slot: &'l Mutex<LinkMutex, Cell<Option<Port<'a>>>>,
+    port: Option<Port<'a>>,
+}
+
+impl Drop for PortGuard<'_, '_> {
+    fn drop(&mut self) {
+        let port = self.port.take();
+        self.slot.lock(|slot| slot.set(port));
     }
 }
 

@@ -315,6 +315,9 @@ impl<'d> OwnedMessage<'d> {
 /// Feeds an async subscriber task through a [`Channel`] of capacity `K`: the reader
 /// never waits; when the channel is full the message is dropped and counted.
 ///
+/// The messages carry the handle of the device they came in on, for replies, so the
+/// channel's lifetime is the devices' (a `static` channel needs a `static` downlink).
+///
 /// ```
 /// use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 /// use embassy_sync::channel::Channel;

@@ -216,17 +216,33 @@ fn the_link_answers_the_ground_and_feeds_subscribers_over_a_simulated_radio() {
     assert_eq!(stats.arena.live, 0, "every frame's memory came back");
     assert_eq!(LINK.sender().stats(0), Some(down));
 
-    // The device has one writer: a second run returns at once (one poll, no time).
+    // The first run was cancelled (its task ended): its port came back, so the link runs
+    // again and writes what was queued meanwhile. While it runs, the device has one
+    // writer: a second run is refused at once and changes nothing.
+    LINK.send(&attitude).unwrap();
+    let log2 = RefCell::new(Vec::new());
     let mut again = SimUart {
+        byte_us: byte_time_us(57_600),
+        log: &log2,
+    };
+    let mut other = SimUart {
         byte_us: 1,
         log: &RefCell::new(Vec::new()),
     };
-    let second = run_with_mock_time(LINK.run(&mut again, &[][..]), Duration::from_ticks(0), 1);
-    assert_eq!(second.unwrap_err(), PortsTaken);
-    assert_eq!(LINK.stats(), stats, "the refused run changed nothing");
-    // The link still sends (the frame waits for a writer that no longer runs).
-    LINK.send(&attitude).unwrap();
-    assert_eq!(LINK.stats().downlink.queued, 1);
+    let restarted = select(LINK.run(&mut again, &[][..]), async {
+        // Polled after the restarted run, which holds the port by now.
+        let refused = LINK.run(&mut other, &[][..]).await;
+        Timer::after(Duration::from_millis(100)).await;
+        refused
+    });
+    match run_with_mock_time(restarted, Duration::from_micros(50), 10_000) {
+        Either::First(result) => panic!("the restarted link stopped: {result:?}"),
+        Either::Second(refused) => assert_eq!(refused.unwrap_err(), PortsTaken),
+    }
+    assert_eq!(wire(log2), [v2_frame(&attitude, AC_ID, 0)]);
+    let down = LINK.stats().downlink;
+    assert_eq!((down.submitted, down.sent, down.queued), (5, 5, 0));
+    assert!(down.is_balanced(), "{down:?}");
 }
 
 #[test]

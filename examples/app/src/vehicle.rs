@@ -90,3 +90,9 @@ impl Vehicle {
         (lat, lon)
     }
 }
+
+impl Default for Vehicle {
+    fn default() -> Self {
+        Self::new()
+    }
+}
