@@ -46,7 +46,7 @@
 //! Settings and subscribers are added at start-up, before or after `run` starts:
 //! `LINK.settings().add("gain", &get, &set)`, `LINK.subscribe(Filter::message::<Block>(),
 //! &on_block)`. Several devices, several transports per message or a log beside the
-//! radio: use [`Downlink`] and its [`Port`](crate::Port)s directly; this facade is built
+//! radio: use [`Downlink`] and its [`Port`]s directly; this facade is built
 //! on them.
 
 use core::cell::Cell;
