@@ -160,6 +160,20 @@ fn own_message_set_answers_the_ground() {
             value: 5.0
         }
     );
+    // A careless or hostile value: NaN is refused, the acknowledgement says what holds.
+    let nan = Setting {
+        index: 0,
+        ac_id: AC_ID,
+        value: f32::NAN,
+    };
+    let frames = exchange(&uplink(&nan), 4);
+    assert_eq!(
+        decode::<DlValue>(&frames[3]),
+        DlValue {
+            index: 0,
+            value: 5.0
+        }
+    );
 
     // GET_SETTING -> DL_VALUE; an unknown index and another aircraft get no answer.
     let ignored = [
@@ -178,9 +192,9 @@ fn own_message_set_answers_the_ground() {
         }),
     ]
     .concat();
-    let frames = exchange(&ignored, 4);
+    let frames = exchange(&ignored, 5);
     assert_eq!(
-        decode::<DlValue>(&frames[3]),
+        decode::<DlValue>(&frames[4]),
         DlValue {
             index: 0,
             value: 5.0
@@ -193,8 +207,8 @@ fn own_message_set_answers_the_ground() {
         mode: values::LightsMode::Strobe.raw(),
     };
     let ping = uplink(&Ping);
-    let frames = exchange(&[uplink(&lights), ping].concat(), 5);
-    let _: Pong = decode(&frames[4]);
+    let frames = exchange(&[uplink(&lights), ping].concat(), 6);
+    let _: Pong = decode(&frames[5]);
     assert_eq!(LIGHTS.load(Ordering::Relaxed), 2);
 
     // Its own telemetry goes out through the same link.
@@ -204,9 +218,9 @@ fn own_message_set_answers_the_ground() {
         confidence: 90,
     })
     .unwrap();
-    let frames = exchange(&[], 6);
+    let frames = exchange(&[], 7);
     assert_eq!(
-        decode::<WindEstimate>(&frames[5]),
+        decode::<WindEstimate>(&frames[6]),
         WindEstimate {
             east: 1.5,
             north: 0.5,
@@ -215,14 +229,14 @@ fn own_message_set_answers_the_ground() {
     );
 
     let stats = LINK.stats();
-    assert_eq!((stats.services.pings, stats.services.settings), (2, 2));
+    assert_eq!((stats.services.pings, stats.services.settings), (2, 3));
     assert_eq!(stats.services.get_settings, 1);
     assert_eq!(
         (stats.services.unknown_index, stats.services.wrong_ac_id),
         (1, 1)
     );
-    assert_eq!(stats.uplink.received, 8);
+    assert_eq!(stats.uplink.received, 9);
     assert_eq!(stats.uplink.unhandled, 0);
-    assert_eq!(stats.downlink.sent, 6);
+    assert_eq!(stats.downlink.sent, 7);
     assert!(stats.downlink.is_balanced(), "{:?}", stats.downlink);
 }
