@@ -17,7 +17,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Timer};
 use pprz_default::messages::Set;
-use pprz_default::messages::datalink::{Block, GetSetting, MoveWp, Ping, Setting};
+use pprz_default::messages::datalink::{Block, MoveWp, Ping, Setting};
 use pprz_default::messages::telemetry::{DatalinkReport, DlValue, Pong};
 use pprz_messages::Message;
 use pprz_messages::roles::LinkReport;
@@ -28,7 +28,7 @@ use pprz_telemetry::services::{LinkReporter, Services};
 use pprz_telemetry::stats::DeviceStats;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 
-use common::frames::{PING_7, PONG_7, dl_value_frame, uplink_frame};
+use common::frames::{PING_7, PONG_7, dl_value_frame, service_requests, uplink_frame};
 use common::sim::{ScriptedRx, SimUart, byte_time_us, mock_time, run_with_mock_time};
 
 const AC_ID: u8 = 7;
@@ -64,41 +64,8 @@ fn ping_and_settings_round_trip_byte_for_byte() {
     // The ground's requests, as bytes on the radio, split across reads.
     let ping = PING_7;
     assert_eq!(uplink_frame(&Ping, AC_ID), ping, "hand-computed PING frame");
-    let requests = [
-        ping.to_vec(),
-        uplink_frame(
-            &Setting {
-                index: 0,
-                ac_id: AC_ID,
-                value: 1.5,
-            },
-            AC_ID,
-        ),
-        uplink_frame(
-            &GetSetting {
-                index: 1,
-                ac_id: AC_ID,
-            },
-            0xFF,
-        ), // broadcast
-        uplink_frame(
-            &Setting {
-                index: 0,
-                ac_id: 9,
-                value: 9.0,
-            },
-            AC_ID,
-        ), // other aircraft id
-        uplink_frame(
-            &Setting {
-                index: 5,
-                ac_id: AC_ID,
-                value: 9.0,
-            },
-            AC_ID,
-        ), // no such setting
-        uplink_frame(&Ping, 9), // addressed to aircraft 9
-    ];
+    let requests = service_requests();
+    assert_eq!(requests[0], ping);
     let mut chunks = VecDeque::new();
     for frame in &requests {
         let (a, b) = frame.split_at(3);

@@ -28,7 +28,7 @@ use pprz_telemetry::scheduler::{ModeError, Modes, Scheduler};
 use pprz_telemetry::services::Services;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Link, LinkMutex, PortsTaken, Targets};
 
-use common::frames::{PING_7, PONG_7, dl_value_frame, uplink_frame, v2_frame};
+use common::frames::{PING_7, PONG_7, dl_value_frame, service_requests, uplink_frame, v2_frame};
 use common::sim::{ScriptedRx, SimUart, byte_time_us, mock_time, run_with_mock_time};
 
 const AC_ID: u8 = 7;
@@ -105,40 +105,8 @@ fn the_link_answers_the_ground_and_feeds_subscribers_over_a_simulated_radio() {
     };
     LINK.send(&attitude).unwrap();
 
-    let requests = [
-        PING_7.to_vec(),
-        uplink_frame(
-            &Setting {
-                index: 0,
-                ac_id: AC_ID,
-                value: 1.5,
-            },
-            AC_ID,
-        ),
-        uplink_frame(
-            &GetSetting {
-                index: 1,
-                ac_id: AC_ID,
-            },
-            0xFF,
-        ), // broadcast
-        uplink_frame(
-            &Setting {
-                index: 0,
-                ac_id: 9,
-                value: 9.0,
-            },
-            AC_ID,
-        ), // other aircraft id
-        uplink_frame(
-            &Setting {
-                index: 5,
-                ac_id: AC_ID,
-                value: 9.0,
-            },
-            AC_ID,
-        ), // no such setting
-        uplink_frame(&Ping, 9), // addressed to aircraft 9
+    let mut requests = service_requests();
+    requests.extend([
         uplink_frame(
             &Block {
                 block_id: 5,
@@ -163,7 +131,7 @@ fn the_link_answers_the_ground_and_feeds_subscribers_over_a_simulated_radio() {
             },
             AC_ID,
         ), // nobody subscribed
-    ];
+    ]);
     let log = RefCell::new(Vec::new());
     let mut tx = SimUart {
         byte_us: byte_time_us(57_600),

@@ -40,3 +40,46 @@ pub fn dl_value_frame(ac_id: u8, index: u8, value: f32) -> Vec<u8> {
     v.extend_from_slice(&[a, b]);
     v
 }
+
+/// The ground's service requests to aircraft 7 that the datalink and `Link` tests send, in
+/// order: PING; SETTING(0, 1.5); GET_SETTING(1) broadcast; SETTING for aircraft 9;
+/// SETTING of index 5 (no such setting); PING addressed to aircraft 9.
+pub fn service_requests() -> Vec<Vec<u8>> {
+    use pprz_default::messages::datalink::{GetSetting, Ping, Setting};
+    const AC_ID: u8 = 7;
+    vec![
+        PING_7.to_vec(),
+        uplink_frame(
+            &Setting {
+                index: 0,
+                ac_id: AC_ID,
+                value: 1.5,
+            },
+            AC_ID,
+        ),
+        uplink_frame(
+            &GetSetting {
+                index: 1,
+                ac_id: AC_ID,
+            },
+            0xFF,
+        ), // broadcast
+        uplink_frame(
+            &Setting {
+                index: 0,
+                ac_id: 9,
+                value: 9.0,
+            },
+            AC_ID,
+        ), // other aircraft id
+        uplink_frame(
+            &Setting {
+                index: 5,
+                ac_id: AC_ID,
+                value: 9.0,
+            },
+            AC_ID,
+        ), // no such setting
+        uplink_frame(&Ping, 9), // addressed to aircraft 9
+    ]
+}
