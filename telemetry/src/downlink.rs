@@ -416,12 +416,22 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             .iter()
             .find(|(d, _)| self.devices[*d].transport == transport)
         {
-            frame.copy_from_slice(same);
+            // Same transport, same length: the earlier frame was checked against
+            // `payload_len` below. Never a panic, whatever the lengths.
+            let dest = frame.get_mut(..same.len()).ok_or(DropReason::Encode)?;
+            dest.copy_from_slice(same);
+            frame.truncate(same.len());
             return Ok(frame);
         }
         let n = msg
             .encode_fields(transport.payload_area(&mut frame))
             .ok_or(DropReason::Encode)?;
+        // A `Message` impl whose `encode` disagrees with its `encoded_len` (a hand-written
+        // one, say) is dropped as unencodable rather than sent with a length the receiver
+        // did not expect.
+        if n != payload_len {
+            return Err(DropReason::Encode);
+        }
         let len = transport
             .finish_frame(meta, &mut frame, n)
             .map_err(|_| DropReason::Encode)?;

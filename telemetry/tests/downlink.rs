@@ -327,3 +327,70 @@ proptest! {
         prop_assert_eq!(downlink.arena_stats().live, 0);
     }
 }
+
+/// A hand-written `Message` whose `encode` writes `writes` bytes while `encoded_len`
+/// claims `claims`: a user's impl may be wrong, the send path must not panic on it.
+struct Lying {
+    claims: usize,
+    writes: usize,
+}
+
+impl Message for Lying {
+    const CLASS_ID: u8 = 1;
+    const ID: u8 = 200;
+    const NAME: &'static str = "LYING";
+    const PRIORITY: u8 = 100;
+    const MIN_LEN: usize = 0;
+    const MAX_LEN: usize = 255;
+    const DESCRIPTOR: pprz_messages::MessageDescriptor<'static> =
+        pprz_messages::MessageDescriptor {
+            class_id: 1,
+            class_name: "telemetry",
+            id: 200,
+            name: "LYING",
+            priority: 100,
+            fields: &[],
+        };
+
+    fn encoded_len(&self) -> usize {
+        self.claims
+    }
+
+    fn encode(&self, buf: &mut [u8]) -> Result<usize, pprz_messages::EncodeError> {
+        let n = self.writes.min(buf.len());
+        buf[..n].fill(0xA5);
+        Ok(self.writes)
+    }
+}
+
+#[test]
+fn a_message_whose_encode_disagrees_with_its_length_is_dropped_not_panicking() {
+    let arena = Arena::new();
+    // Two devices with the same transport (the copy path) and one with another.
+    let downlink: Downlink<'_, M, 3, 8> = Downlink::new(
+        &arena,
+        7,
+        [v2(), v2(), DeviceConfig::new(PprzV1::new(1).into())],
+    );
+    for (claims, writes) in [(10, 4), (4, 10), (0, 1), (1, 0), (300, 2)] {
+        let err = downlink.send(&Lying { claims, writes }).unwrap_err();
+        assert!(
+            matches!(err.reason, DropReason::Encode | DropReason::TooLarge),
+            "{claims}/{writes}: {err:?}"
+        );
+    }
+    // An honest one of the same shape goes out to all three.
+    downlink
+        .send(&Lying {
+            claims: 6,
+            writes: 6,
+        })
+        .unwrap();
+    for d in 0..3 {
+        let s = downlink.stats(d).unwrap();
+        assert!(s.is_balanced(), "{s:?}");
+        assert_eq!((s.submitted, s.queued), (6, 1), "device {d}");
+        assert_eq!(s.dropped.encode + s.dropped.too_large, 5, "device {d}");
+    }
+    assert_eq!(downlink.arena_stats().live, 3);
+}
