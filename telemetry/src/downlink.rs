@@ -106,12 +106,14 @@ impl<Msg: Message> EncodeFields for Msg {
     }
 }
 
-/// Class, id and priority of a send, passed as one word to the shared send path.
+/// Class, id and priority of a send, and whether it answers a request (subject to the
+/// devices' [`ReplyLimit`]), passed as one word to the shared send path.
 #[derive(Clone, Copy)]
 struct Route {
     class: u8,
     msg_id: u8,
     priority: u8,
+    reply: bool,
 }
 
 impl Route {
@@ -121,7 +123,58 @@ impl Route {
             class: Msg::CLASS_ID,
             msg_id: Msg::ID,
             priority,
+            reply: false,
         }
+    }
+
+    #[inline]
+    fn reply<Msg: Message>() -> Self {
+        Self {
+            reply: true,
+            ..Self::of::<Msg>(Msg::PRIORITY)
+        }
+    }
+}
+
+/// The most replies (answers to requests received on the device: PONG, DL_VALUE, and
+/// whatever [`Device::reply`] sends) a device sends: `per_second` on average, up to
+/// `burst` at once. Replies are acknowledgements, high in priority, so without a bound a
+/// request flood from the ground (or an attacker) would evict the device's telemetry;
+/// replies over the limit are refused and counted as [`DropReason::RateLimited`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ReplyLimit {
+    /// Average replies per second (0: the device sends no replies).
+    pub per_second: u16,
+    /// Replies that may go out back to back (at least 1 is used).
+    pub burst: u16,
+}
+
+impl ReplyLimit {
+    /// The default of every device: 20 replies per second, 10 at once (a ground station
+    /// pings once a second and reads a page of settings at a time).
+    pub const DEFAULT: Self = Self::new(20, 10);
+
+    /// `per_second` replies per second on average, `burst` at once.
+    pub const fn new(per_second: u16, burst: u16) -> Self {
+        Self { per_second, burst }
+    }
+
+    /// Generic cell rate algorithm: `tat` is the theoretical arrival time of the next
+    /// reply (in embassy-time ticks); returns whether a reply at `now` conforms, and
+    /// advances `tat` if so.
+    fn admit(&self, tat: &Cell<u64>, now: u64) -> bool {
+        if self.per_second == 0 {
+            return false;
+        }
+        let interval = embassy_time::TICK_HZ / u64::from(self.per_second);
+        let tolerance = interval.saturating_mul(u64::from(self.burst.max(1) - 1));
+        let next = tat.get().max(now);
+        if next - now > tolerance {
+            return false;
+        }
+        tat.set(next.saturating_add(interval));
+        true
     }
 }
 
@@ -135,16 +188,26 @@ pub struct DeviceConfig {
     /// Whether the writer flushes the device after every frame (for devices that
     /// buffer, such as a log file; a UART needs none).
     pub flush: bool,
+    /// The most replies the device sends (`None`: no limit).
+    pub replies: Option<ReplyLimit>,
 }
 
 impl DeviceConfig {
-    /// A device with this transport, the full queue capacity, no flush.
+    /// A device with this transport, the full queue capacity, no flush, replies limited
+    /// to [`ReplyLimit::DEFAULT`].
     pub const fn new(transport: AnyTransport) -> Self {
         Self {
             transport,
             depth: 0,
             flush: false,
+            replies: Some(ReplyLimit::DEFAULT),
         }
+    }
+
+    /// With this reply rate limit (`None`: replies unlimited).
+    pub const fn replies(mut self, limit: Option<ReplyLimit>) -> Self {
+        self.replies = limit;
+        self
     }
 
     /// With a queue depth limit.
@@ -202,11 +265,13 @@ impl Targets {
 }
 
 /// A message did not reach (at least) one of its target devices. The drop is counted in
-/// that device's statistics.
+/// that device's statistics (or, for [`DropReason::NoDevice`], in the downlink's
+/// [`undeliverable`](Downlink::undeliverable) counter).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SendError {
-    /// The device (the last one that failed, if several did).
+    /// The device (the last one that failed, if several did; for
+    /// [`DropReason::NoDevice`], the number of devices).
     pub device: usize,
     /// Why.
     pub reason: DropReason,
@@ -235,6 +300,10 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     seq: Mutex<M, Cell<u32>>,
     /// Whether [`ports`](Self::ports) handed the ports out already.
     ports_taken: Mutex<M, Cell<bool>>,
+    /// Sends whose targets named no device.
+    undeliverable: Mutex<M, Cell<u32>>,
+    /// Per device, the reply rate limit's state (see [`ReplyLimit::admit`]).
+    reply_tat: [Mutex<M, Cell<u64>>; D],
     /// PPRZLOG time stamps, in 100 µs ticks.
     clock: fn() -> u32,
 }
@@ -276,6 +345,8 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             ac_id,
             seq: Mutex::new(Cell::new(0)),
             ports_taken: Mutex::new(Cell::new(false)),
+            undeliverable: Mutex::new(Cell::new(0)),
+            reply_tat: [const { Mutex::new(Cell::new(0)) }; D],
             clock: no_clock,
         }
     }
@@ -312,6 +383,13 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         self.arena.arena_stats()
     }
 
+    /// Sends that named no device of this downlink (an empty [`Targets`] set, or only
+    /// indices past the last device): refused with [`DropReason::NoDevice`], counted
+    /// here since no device's statistics can hold them.
+    pub fn undeliverable(&self) -> u32 {
+        self.undeliverable.lock(Cell::get)
+    }
+
     /// Sends `msg` to every device at the message's own priority. Never blocks.
     ///
     /// # Errors
@@ -327,7 +405,9 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     /// into arena memory; devices sharing a transport get a copy of those bytes.
     ///
     /// # Errors
-    /// The message was dropped for at least one device (counted there).
+    /// The message was dropped for at least one device (counted there), or `targets`
+    /// named no device at all ([`DropReason::NoDevice`], counted in
+    /// [`undeliverable`](Self::undeliverable)).
     #[inline]
     pub fn send_to<Msg: Message>(
         &self,
@@ -352,7 +432,15 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             class,
             msg_id,
             priority,
+            reply,
         } = route;
+        if (0..D).all(|d| !targets.contains(d)) {
+            self.undeliverable.lock(|n| n.set(n.get().wrapping_add(1)));
+            return Err(SendError {
+                device: D,
+                reason: DropReason::NoDevice,
+            });
+        }
         let header = MsgHeader::new(self.ac_id, GROUND_ID, class, msg_id);
         let meta = TxMeta::new(header).at((self.clock)());
         let payload_len = msg.fields_len();
@@ -362,6 +450,14 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         // earlier target with the same transport.
         let mut frames: heapless::Vec<(usize, FrameBuf<'a>), D> = heapless::Vec::new();
         for device in (0..D).filter(|&d| targets.contains(d)) {
+            if reply && !self.admit_reply(device) {
+                self.queues[device].count_dropped(DropReason::RateLimited, priority);
+                error = Some(SendError {
+                    device,
+                    reason: DropReason::RateLimited,
+                });
+                continue;
+            }
             let transport = self.devices[device].transport;
             let built = self.build(msg, &meta, payload_len, transport, priority, &frames);
             match built {
@@ -388,6 +484,17 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             }
         }
         error.map_or(Ok(()), Err)
+    }
+
+    /// Whether device `device`'s reply rate limit lets one more reply out now.
+    fn admit_reply(&self, device: usize) -> bool {
+        match self.devices[device].replies {
+            None => true,
+            Some(limit) => {
+                let now = embassy_time::Instant::now().as_ticks();
+                self.reply_tat[device].lock(|tat| limit.admit(tat, now))
+            }
+        }
     }
 
     fn next_seq(&self) -> u32 {
@@ -523,6 +630,7 @@ trait Core: Sync {
         targets: Targets,
     ) -> Result<(), SendError>;
     fn stats(&self, device: usize) -> Option<DeviceStats>;
+    fn undeliverable(&self) -> u32;
     fn arena_stats(&self) -> ArenaStats;
     fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>>;
     fn complete(&self, device: usize, len: usize, written: bool);
@@ -552,6 +660,10 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
 
     fn stats(&self, device: usize) -> Option<DeviceStats> {
         Downlink::stats(self, device)
+    }
+
+    fn undeliverable(&self) -> u32 {
+        Downlink::undeliverable(self)
     }
 
     fn arena_stats(&self) -> ArenaStats {
@@ -626,6 +738,11 @@ impl<'d> Sender<'d> {
         self.core.stats(index)
     }
 
+    /// Sends that named no device; see [`Downlink::undeliverable`].
+    pub fn undeliverable(&self) -> u32 {
+        self.core.undeliverable()
+    }
+
     /// Statistics of the shared arena.
     pub fn arena_stats(&self) -> ArenaStats {
         self.core.arena_stats()
@@ -687,6 +804,18 @@ impl<'d> Device<'d> {
             .send_fields(msg, Route::of::<Msg>(priority), Targets::from(*self))
     }
 
+    /// Sends `msg`, an answer to a request received on this device, to this device at
+    /// the message's own priority, within the device's [`ReplyLimit`].
+    ///
+    /// # Errors
+    /// The reply was dropped, [`DropReason::RateLimited`] among the reasons (counted in
+    /// this device's statistics).
+    #[inline]
+    pub fn reply<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.core
+            .send_fields(msg, Route::reply::<Msg>(), Targets::from(*self))
+    }
+
     /// Statistics of this device.
     pub fn stats(&self) -> DeviceStats {
         self.core.stats(self.index()).unwrap_or_default()
@@ -716,7 +845,38 @@ impl From<Device<'_>> for Targets {
 
 /// The consumer side of one device's queue, handed out once per device by
 /// [`Downlink::ports`]: for the device's writer task ([`run_writer`](crate::run_writer)),
-/// or for code that drains the queue itself. Not copyable, so a device has one writer.
+/// or for code that drains the queue itself. Not copyable, so a device has one writer,
+/// and a port has one frame out at a time: the per-level counters of a queue cannot be
+/// corrupted by a second consumer.
+///
+/// A second port of the same device cannot be made, by copy or by clone:
+///
+/// ```compile_fail,E0382
+/// # use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+/// # use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
+/// # use pprz_telemetry::pprz_transports::PprzV2;
+/// # static ARENA: FrameArena<M, 1024> = FrameArena::new();
+/// # static DOWNLINK: Downlink<'static, M, 1, 8> =
+/// #     Downlink::new(&ARENA, 7, [DeviceConfig::new(PprzV2::new().into())]);
+/// let [port] = DOWNLINK.ports().unwrap();
+/// let writer_a = port;
+/// let writer_b = port; // moved already
+/// ```
+///
+/// nor can a second frame be taken before the first is finished:
+///
+/// ```compile_fail,E0499
+/// # use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+/// # use pprz_telemetry::{DeviceConfig, Downlink, FrameArena};
+/// # use pprz_telemetry::pprz_transports::PprzV2;
+/// # static ARENA: FrameArena<M, 1024> = FrameArena::new();
+/// # static DOWNLINK: Downlink<'static, M, 1, 8> =
+/// #     Downlink::new(&ARENA, 7, [DeviceConfig::new(PprzV2::new().into())]);
+/// let [mut port] = DOWNLINK.ports().unwrap();
+/// let first = port.try_next();
+/// let second = port.try_next();
+/// drop((first, second));
+/// ```
 pub struct Port<'d> {
     device: Device<'d>,
 }
@@ -842,6 +1002,32 @@ mod tests {
             priority: 1,
             seq: 2
         }));
+    }
+
+    #[test]
+    fn reply_limit_is_a_token_bucket() {
+        let tick = embassy_time::TICK_HZ;
+        let limit = ReplyLimit::new(10, 3);
+        let tat = Cell::new(0);
+        // A burst of 3 at t = 0, then one every 100 ms.
+        let at = |t: u64| limit.admit(&tat, t);
+        assert_eq!([at(0), at(0), at(0), at(0)], [true, true, true, false]);
+        assert!(!at(tick / 20));
+        assert!(at(tick / 10));
+        assert!(!at(tick / 10));
+        // After a long silence the full burst again, no more.
+        let later = 100 * tick;
+        assert_eq!(
+            [at(later), at(later), at(later), at(later)],
+            [true, true, true, false]
+        );
+        // 0 per second: no replies; a burst of 0 counts as 1.
+        assert!(!ReplyLimit::new(0, 5).admit(&Cell::new(0), 0));
+        let one = Cell::new(0);
+        assert!(ReplyLimit::new(1, 0).admit(&one, 0));
+        assert!(!ReplyLimit::new(1, 0).admit(&one, 0));
+        // Near the end of time, no overflow.
+        assert!(ReplyLimit::new(u16::MAX, u16::MAX).admit(&Cell::new(0), u64::MAX));
     }
 
     #[test]

@@ -154,6 +154,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                         queue_full: 0,
                         arena_full: 0,
                         write_error: 0,
+                        rate_limited: 0,
                     },
                     evicted: crate::stats::EvictCounts {
                         queue_full: 0,

@@ -77,13 +77,13 @@ impl<'f, 'd> Received<'f, 'd> {
         M::decode(self.payload())
     }
 
-    /// Sends `msg` on the device the message came in on, at `msg`'s priority; never
-    /// blocks.
+    /// Sends `msg` on the device the message came in on, at `msg`'s priority, within that
+    /// device's reply rate limit ([`Device::reply`]); never blocks.
     ///
     /// # Errors
     /// The reply was dropped (counted in that device's statistics).
     pub fn reply<M: Message>(&self, msg: &M) -> Result<(), SendError> {
-        self.device.send(msg)
+        self.device.reply(msg)
     }
 }
 
@@ -308,7 +308,7 @@ impl<'d> OwnedMessage<'d> {
     /// # Errors
     /// The reply was dropped (counted in that device's statistics).
     pub fn reply<M: Message>(&self, msg: &M) -> Result<(), SendError> {
-        self.device.send(msg)
+        self.device.reply(msg)
     }
 }
 

@@ -80,9 +80,14 @@ impl SettingEntry<'_> {
         }
     }
 
-    /// Sets the value (a value the setting refuses, such as an unknown telemetry mode,
-    /// leaves it unchanged) and returns the value read back.
+    /// Sets the value and returns the value read back. A value the setting refuses
+    /// leaves it unchanged: a non-finite one (NaN, infinities: never a setting's value,
+    /// and `clamp` lets NaN through) for every setting, an unknown telemetry mode for a
+    /// mode setting.
     pub fn set(&self, value: f32) -> f32 {
+        if !value.is_finite() {
+            return self.get();
+        }
         match self.access {
             Access::Fns(_, set) => set(value),
             Access::Mode(mode) => {
@@ -198,7 +203,8 @@ impl<'a, M: RawMutex, const N: usize> Settings<'a, M, N> {
         self.entry(index).map(|e| e.get())
     }
 
-    /// Sets setting `index`, returning the value read back (what the ground is told).
+    /// Sets setting `index`, returning the value read back (what the ground is told);
+    /// see [`SettingEntry::set`] for the values refused.
     pub fn set(&self, index: u8, value: f32) -> Option<f32> {
         self.entry(index).map(|e| e.set(value))
     }
@@ -228,6 +234,9 @@ pub struct ServiceStats {
     pub pings: u32,
     /// SETTINGs applied and acknowledged.
     pub settings: u32,
+    /// SETTINGs with a non-finite value (NaN, infinities): not applied, acknowledged with
+    /// the value in force.
+    pub non_finite: u32,
     /// GET_SETTINGs answered.
     pub get_settings: u32,
     /// Requests for another aircraft id (no action).
@@ -262,6 +271,7 @@ impl<'a, S, M: RawMutex, const N: usize> Services<'a, S, M, N> {
             stats: Mutex::new(RefCell::new(ServiceStats {
                 pings: 0,
                 settings: 0,
+                non_finite: 0,
                 get_settings: 0,
                 wrong_ac_id: 0,
                 unknown_index: 0,
@@ -349,7 +359,11 @@ impl<'d, S: ServiceSet, M: RawMutex + Sync, const N: usize> Handler<'d> for Serv
                         .then(|| self.settings.set(req.index(), req.value()))
                         .flatten();
                     if self.value_reply(rx, req.index(), req.ac_id(), value) {
-                        self.count(|s| s.settings = s.settings.wrapping_add(1));
+                        if req.value().is_finite() {
+                            self.count(|s| s.settings = s.settings.wrapping_add(1));
+                        } else {
+                            self.count(|s| s.non_finite = s.non_finite.wrapping_add(1));
+                        }
                     }
                 }
                 Err(_) => self.malformed(),

@@ -29,6 +29,15 @@ pub enum DropReason {
     ArenaFull,
     /// The device reported an error while writing the frame.
     WriteError,
+    /// No device of the downlink was among the targets (an empty [`Targets`] set, or
+    /// only indices past the last device). Counted once per send in the downlink's
+    /// [`undeliverable`](crate::Downlink::undeliverable) counter, not per device.
+    ///
+    /// [`Targets`]: crate::Targets
+    NoDevice,
+    /// The device's reply rate limit ([`ReplyLimit`](crate::ReplyLimit)) refused a reply
+    /// (a request flood must not starve the device's telemetry).
+    RateLimited,
 }
 
 impl fmt::Display for DropReason {
@@ -39,6 +48,8 @@ impl fmt::Display for DropReason {
             Self::QueueFull => "device queue full of more important messages",
             Self::ArenaFull => "frame arena full of more important messages",
             Self::WriteError => "device write error",
+            Self::NoDevice => "no device of the downlink among the targets",
+            Self::RateLimited => "reply refused by the device's reply rate limit",
         })
     }
 }
@@ -57,6 +68,8 @@ pub struct DropCounts {
     pub arena_full: u32,
     /// [`DropReason::WriteError`]
     pub write_error: u32,
+    /// [`DropReason::RateLimited`]: replies refused by the device's reply rate limit.
+    pub rate_limited: u32,
 }
 
 impl DropCounts {
@@ -67,6 +80,7 @@ impl DropCounts {
             .wrapping_add(self.queue_full)
             .wrapping_add(self.arena_full)
             .wrapping_add(self.write_error)
+            .wrapping_add(self.rate_limited)
     }
 
     pub(crate) fn count(&mut self, reason: DropReason) {
@@ -76,6 +90,9 @@ impl DropCounts {
             DropReason::QueueFull => &mut self.queue_full,
             DropReason::ArenaFull => &mut self.arena_full,
             DropReason::WriteError => &mut self.write_error,
+            DropReason::RateLimited => &mut self.rate_limited,
+            // Not a device's drop: counted by the downlink (`undeliverable`).
+            DropReason::NoDevice => return,
         };
         *c = c.wrapping_add(1);
     }

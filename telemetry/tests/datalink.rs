@@ -419,3 +419,109 @@ fn a_setting_switches_the_telemetry_mode() {
     let s = services.stats();
     assert_eq!((s.settings, s.unknown_index), (2, 0));
 }
+
+/// A 10 kHz PING flood (an attacker, or a ground tool gone wrong) on a radio that writes
+/// one frame every 2 ms: the device's reply rate limit keeps the PONGs to its budget and
+/// counts the rest, so the aircraft's telemetry (ATTITUDE at 4 Hz, normal priority) all
+/// goes out. Without the limit the high-priority PONGs fill the queue and ATTITUDE is shed.
+#[test]
+fn ping_flood_is_rate_limited_and_telemetry_keeps_flowing() {
+    use embassy_time::MockDriver;
+    use pprz_default::messages::telemetry::Attitude;
+    use pprz_telemetry::ReplyLimit;
+    let _clock = mock_time();
+    static ARENA: FrameArena<M, 2048> = FrameArena::new();
+    let limit = ReplyLimit::new(10, 5);
+    let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&ARENA, AC_ID, [v2().replies(Some(limit))]);
+    let [mut port] = downlink.ports().unwrap();
+    let services: Services<'_, Set, M, 1> = Services::new(AC_ID);
+    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID);
+    services.subscribe(datalink.registry()).unwrap();
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), port.device());
+
+    let (mut pongs, mut attitudes, mut pings) = (0u32, 0u32, 0u32);
+    for ms in 0..3_000u32 {
+        for _ in 0..10 {
+            reader.feed(&PING_7, &datalink);
+            pings += 1;
+        }
+        if ms % 250 == 0 {
+            downlink
+                .send(&Attitude {
+                    phi: 0.0,
+                    psi: 0.0,
+                    theta: 0.0,
+                })
+                .unwrap();
+        }
+        if ms % 2 == 0
+            && let Some(frame) = port.try_next()
+        {
+            match frame[5] {
+                id if id == Pong::ID => pongs += 1,
+                id if id == Attitude::ID => attitudes += 1,
+                id => panic!("unexpected message {id}"),
+            }
+            frame.finish(true);
+        }
+        MockDriver::get().advance(Duration::from_millis(1));
+    }
+    while let Some(frame) = port.try_next() {
+        if frame[5] == Pong::ID {
+            pongs += 1;
+        } else {
+            attitudes += 1;
+        }
+        frame.finish(true);
+    }
+    let stats = downlink.stats(0).unwrap();
+    assert_eq!(attitudes, 12, "every ATTITUDE sent: {stats:?}");
+    assert_eq!(stats.lost(), stats.dropped.rate_limited, "{stats:?}");
+    // The burst, then 10 per second for 3 s (the first of each interval conforms).
+    assert!((30..=5 + 31).contains(&pongs), "{pongs} PONGs");
+    assert_eq!(stats.dropped.rate_limited, pings - pongs);
+    assert_eq!(services.stats().replies_dropped, pings - pongs);
+    assert_eq!(services.stats().pings, pings);
+    assert!(stats.is_balanced());
+}
+
+/// SETTING with NaN or an infinity (which `clamp` in a setter would let through, or
+/// store): refused by the services before the setter runs, acknowledged with the value
+/// in force, counted.
+#[test]
+fn non_finite_setting_values_are_not_applied() {
+    let _clock = mock_time();
+    static STORED: AtomicU32 = AtomicU32::new(0);
+    let arena: FrameArena<M, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, AC_ID, [v2()]);
+    let [mut port] = downlink.ports().unwrap();
+    let get = || f32::from_bits(STORED.load(Ordering::Relaxed));
+    let set = |v: f32| STORED.store(v.clamp(0.0, 10.0).to_bits(), Ordering::Relaxed);
+    let services: Services<'_, Set, M, 1> = Services::new(AC_ID);
+    services.settings().add("gain", &get, &set).unwrap();
+    let datalink: Datalink<'_, M, 4> = Datalink::new(AC_ID);
+    services.subscribe(datalink.registry()).unwrap();
+    let mut reader = Reader::<_, _>::new(&[][..], PprzV2::new(), port.device());
+    let setting = |value: f32| {
+        uplink_frame(
+            &Setting {
+                index: 0,
+                ac_id: AC_ID,
+                value,
+            },
+            AC_ID,
+        )
+    };
+    reader.feed(&setting(2.5), &datalink);
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        reader.feed(&setting(bad), &datalink);
+    }
+    for _ in 0..4 {
+        let frame = port.try_next().expect("one acknowledgement per SETTING");
+        assert_eq!(&frame[..], dl_value_frame(AC_ID, 0, 2.5));
+        frame.finish(true);
+    }
+    assert_eq!(get(), 2.5);
+    let stats = services.stats();
+    assert_eq!((stats.settings, stats.non_finite), (1, 3));
+}

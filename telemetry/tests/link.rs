@@ -26,7 +26,9 @@ use pprz_telemetry::reader::{Datalink, Reader};
 use pprz_telemetry::registry::{Filter, Received};
 use pprz_telemetry::scheduler::{ModeError, Modes, Scheduler};
 use pprz_telemetry::services::Services;
-use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Link, LinkMutex, PortsTaken, Targets};
+use pprz_telemetry::{
+    DeviceConfig, Downlink, DropReason, FrameArena, Link, LinkMutex, PortsTaken, Targets,
+};
 
 use common::frames::{PING_7, PONG_7, dl_value_frame, service_requests, uplink_frame, v2_frame};
 use common::sim::{ScriptedRx, SimUart, byte_time_us, mock_time, run_with_mock_time};
@@ -270,7 +272,12 @@ fn device_handles_and_the_type_erased_sender() {
     d0.send(&value(2)).unwrap(); // at DL_VALUE's own priority (high)
     d1.send_with_priority(&value(3), priority::NORMAL).unwrap();
     sender.send(&value(4)).unwrap(); // every device, high
-    d0.sender().send_to(&value(5), Targets::NONE, 0).unwrap(); // nowhere
+    // Nowhere: refused and counted, never accepted silently.
+    for nowhere in [Targets::NONE, Targets::only(2), Targets::only(31).with(5)] {
+        let err = d0.sender().send_to(&value(5), nowhere, 0).unwrap_err();
+        assert_eq!((err.device, err.reason), (2, DropReason::NoDevice));
+    }
+    assert_eq!((sender.undeliverable(), downlink.undeliverable()), (3, 3));
     assert_eq!((d0.stats().queued, d1.stats().queued), (2, 3));
     assert_eq!(sender.stats(1), Some(d1.stats()));
     assert_eq!(sender.stats(2), None);

@@ -99,12 +99,9 @@ pub async fn run_aircraft<R: Read>(
     let get_flood = || f32::from(u8::from(flood_on.lock(Cell::get)));
     let set_flood = |x: f32| flood_on.lock(|c| c.set(x >= 0.5));
     let get_gain = || gain.lock(Cell::get);
-    // NaN and infinities are refused; the acknowledgement reports the gain in force.
-    let set_gain = |x: f32| {
-        if x.is_finite() {
-            gain.lock(|c| c.set(x.clamp(0.0, 10.0)));
-        }
-    };
+    // Out-of-range values are clamped (the services refuse NaN and infinities before a
+    // setter sees them; the acknowledgement reports the gain in force).
+    let set_gain = |x: f32| gain.lock(|c| c.set(x.clamp(0.0, 10.0)));
     let services: Services<'_, Set, M, 4> = Services::new(AC_ID);
     let datalink: Datalink<'_, M, { Services::<Set, M, 4>::SUBSCRIPTIONS }> = Datalink::new(AC_ID);
     let settings = services.settings();

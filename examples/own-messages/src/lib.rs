@@ -46,11 +46,9 @@ fn get_gain() -> f32 {
 }
 
 fn set_gain(value: f32) {
-    // Out-of-range values are clamped, NaN and infinities refused; the DL_VALUE
-    // acknowledgement reports the value in force.
-    if value.is_finite() {
-        GAIN.store(value.clamp(0.0, 5.0).to_bits(), Ordering::Relaxed);
-    }
+    // Out-of-range values are clamped (the link refuses NaN and infinities before a
+    // setter sees them); the DL_VALUE acknowledgement reports the value in force.
+    GAIN.store(value.clamp(0.0, 5.0).to_bits(), Ordering::Relaxed);
 }
 
 fn on_lights(rx: &Received<'_, '_>) {
