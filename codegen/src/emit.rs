@@ -48,6 +48,19 @@ use crate::model::{Class, FieldDef, MessageDef, Protocol};
 use crate::names;
 use crate::roles::{self, RoleMessage, Roles, SetRole};
 
+/// Paths of the standard items the generated code uses, from `::core` so that no item
+/// of the generated code (a message type named `Result`, `Option`, `Some`, `Default`...)
+/// and no item where the code is included can shadow them.
+const RESULT: &str = "::core::result::Result";
+const OK: &str = "::core::result::Result::Ok";
+const ERR: &str = "::core::result::Result::Err";
+const OPTION: &str = "::core::option::Option";
+const SOME: &str = "::core::option::Option::Some";
+const NONE: &str = "::core::option::Option::None";
+const DEFAULT: &str = "::core::default::Default";
+const FROM: &str = "::core::convert::From";
+const TRY_FROM: &str = "::core::convert::TryFrom";
+
 /// What the emitter needs besides the model.
 #[derive(Debug, Clone)]
 pub(crate) struct Options {
@@ -101,8 +114,8 @@ fn field_type_expr(ty: FieldType) -> String {
 
 fn opt_str(v: &Option<String>) -> String {
     match v {
-        Some(s) => format!("Some({s:?})"),
-        None => "None".to_owned(),
+        Some(s) => format!("{SOME}({s:?})"),
+        None => NONE.to_owned(),
     }
 }
 
@@ -312,7 +325,7 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
                 delegate(
                     "Encodes the fields into `buf`, returning the length written (errors as the message's encoder).",
                     format!(
-                        "encode(&self, buf: &mut [u8]) -> Result<usize, {}::EncodeError>",
+                        "encode(&self, buf: &mut [u8]) -> {RESULT}<usize, {}::EncodeError>",
                         opts.runtime
                     ),
                     "encode(buf)",
@@ -420,7 +433,7 @@ fn emit_message_role(out: &mut String, rt: &str, m: RoleMessage, path: &str) {
             out!(out, "}}\n");
         }
         RoleMessage::DatalinkReport => {
-            out!(out, "impl From<{rt}::roles::LinkReport> for {path} {{");
+            out!(out, "impl {FROM}<{rt}::roles::LinkReport> for {path} {{");
             out!(out, "    fn from(r: {rt}::roles::LinkReport) -> Self {{");
             out!(out, "        Self {{");
             for (name, _) in fields {
@@ -504,13 +517,13 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         out!(out, "    }}\n");
     }
     if !derivable_default {
-        out!(out, "    impl{l} Default for {ty}{l} {{");
+        out!(out, "    impl{l} {DEFAULT} for {ty}{l} {{");
         out!(out, "        fn default() -> Self {{");
         out!(out, "            Self {{");
         for f in &m.fields {
             let v = match f.ty {
-                FieldType::Array(_, n) => format!("[Default::default(); {n}]"),
-                FieldType::Scalar(_) | FieldType::Vector(_) => "Default::default()".to_owned(),
+                FieldType::Array(_, n) => format!("[{DEFAULT}::default(); {n}]"),
+                FieldType::Scalar(_) | FieldType::Vector(_) => format!("{DEFAULT}::default()"),
             };
             out!(out, "                {}: {v},", names::snake_case(&f.name));
         }
@@ -568,8 +581,8 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
             opt_str(&f.unit),
             opt_str(&f.alt_unit),
             match f.alt_unit_coef {
-                Some(c) => format!("Some({c:?})"),
-                None => "None".to_owned(),
+                Some(c) => format!("{SOME}({c:?})"),
+                None => NONE.to_owned(),
             },
             opt_str(&f.format)
         );
@@ -600,7 +613,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "        #[inline]");
     out!(
         out,
-        "        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {{"
+        "        fn encode(&self, buf: &mut [u8]) -> {RESULT}<usize, __rt::EncodeError> {{"
     );
     let mutw = if m.fields.is_empty() { "" } else { "mut " };
     out!(
@@ -617,7 +630,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         };
         out!(out, "            w.{call}?;");
     }
-    out!(out, "            Ok(w.finish())");
+    out!(out, "            {OK}(w.finish())");
     out!(out, "        }}");
     out!(out, "    }}\n");
 
@@ -626,7 +639,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "        #[inline]");
     out!(
         out,
-        "        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {{"
+        "        fn decode(payload: &'a [u8]) -> {RESULT}<Self, __rt::DecodeError> {{"
     );
     let mutr = if m.fields.is_empty() { "" } else { "mut " };
     if m.is_fixed_size() {
@@ -660,7 +673,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         out!(out, "            }};");
     }
     out!(out, "            r.finish()?;");
-    out!(out, "            Ok(msg)");
+    out!(out, "            {OK}(msg)");
     out!(out, "        }}");
     out!(out, "    }}\n");
 
@@ -682,7 +695,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
             );
             out!(
                 out,
-                "        pub fn {getter}(&self) -> Option<values::{e}> {{"
+                "        pub fn {getter}(&self) -> {OPTION}<values::{e}> {{"
             );
             out!(out, "            values::{e}::from_raw(self.{name})");
             out!(out, "        }}");
@@ -761,7 +774,7 @@ fn emit_class_any(out: &mut String, class: &Class) {
                         "# Errors",
                         "See [`Message::encode`](__rt::Message::encode).",
                     ],
-                    "encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError>",
+                    &format!("encode(&self, buf: &mut [u8]) -> {RESULT}<usize, __rt::EncodeError>"),
                     "__rt::Message::encode(m, buf)",
                 ),
             ],
@@ -871,7 +884,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     );
     out!(
         out,
-        "{i}    pub fn decode({}, payload: {input}) -> Result<Self, {rt}::DecodeError> {{",
+        "{i}    pub fn decode({}, payload: {input}) -> {RESULT}<Self, {rt}::DecodeError> {{",
         d.params
     );
     out!(out, "{i}        match {} {{", d.on);
@@ -886,7 +899,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     }
     out!(
         out,
-        "{i}            _ => Err({rt}::DecodeError::UnknownMessage {{ {} }}),",
+        "{i}            _ => {ERR}({rt}::DecodeError::UnknownMessage {{ {} }}),",
         d.unknown
     );
     out!(out, "{i}        }}");
@@ -911,7 +924,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
 
     if e.from_impls {
         for v in &e.variants {
-            out!(out, "{i}impl{l} From<{}> for AnyMessage{l} {{", v.ty);
+            out!(out, "{i}impl{l} {FROM}<{}> for AnyMessage{l} {{", v.ty);
             out!(out, "{i}    fn from(m: {}) -> Self {{", v.ty);
             out!(out, "{i}        Self::{}(m)", v.name);
             out!(out, "{i}    }}");
@@ -979,13 +992,13 @@ fn emit_values(out: &mut String, class: &Class) {
         out!(out, "            /// The value for a raw field value.");
         out!(
             out,
-            "            pub const fn from_raw(raw: {repr}) -> Option<Self> {{"
+            "            pub const fn from_raw(raw: {repr}) -> {OPTION}<Self> {{"
         );
         out!(out, "                match raw {{");
         for (i, v) in vs.iter().enumerate() {
-            out!(out, "                    {i} => Some(Self::{v}),");
+            out!(out, "                    {i} => {SOME}(Self::{v}),");
         }
-        out!(out, "                    _ => None,");
+        out!(out, "                    _ => {NONE},");
         out!(out, "                }}");
         out!(out, "            }}");
         out!(out, "            /// The raw field value.");
@@ -1004,16 +1017,16 @@ fn emit_values(out: &mut String, class: &Class) {
         out!(out, "                }}");
         out!(out, "            }}");
         out!(out, "        }}\n");
-        out!(out, "        impl TryFrom<{repr}> for {e} {{");
+        out!(out, "        impl {TRY_FROM}<{repr}> for {e} {{");
         out!(out, "            type Error = {repr};");
         out!(
             out,
-            "            fn try_from(raw: {repr}) -> Result<Self, {repr}> {{"
+            "            fn try_from(raw: {repr}) -> {RESULT}<Self, {repr}> {{"
         );
         out!(out, "                Self::from_raw(raw).ok_or(raw)");
         out!(out, "            }}");
         out!(out, "        }}\n");
-        out!(out, "        impl From<{e}> for {repr} {{");
+        out!(out, "        impl {FROM}<{e}> for {repr} {{");
         out!(out, "            fn from(v: {e}) -> {repr} {{");
         out!(out, "                v.raw()");
         out!(out, "            }}");

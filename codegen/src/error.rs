@@ -26,6 +26,45 @@ pub struct Diagnostic {
 pub enum ErrorKind {
     /// The file could not be read.
     Io(String),
+    /// The output file could not be written (the diagnostic's file is the output path).
+    Write(String),
+    /// The input is larger than the generator reads (see [`crate::limits`]).
+    InputTooLarge {
+        /// Size of the input, in bytes.
+        size: u64,
+        /// Largest input accepted, in bytes.
+        max: u64,
+    },
+    /// The document has more XML nodes than the generator builds (see [`crate::limits`]).
+    TooManyNodes {
+        /// Largest number of nodes accepted.
+        max: u32,
+    },
+    /// An entity of the document type definition refers to another entity: nested
+    /// entities are refused (they are how a small file expands exponentially).
+    NestedEntity {
+        /// The entity declared.
+        name: String,
+        /// The entity its value refers to.
+        referenced: String,
+    },
+    /// The document type definition declares more entities than accepted (see
+    /// [`crate::limits`]).
+    TooManyEntities {
+        /// Largest number of entity declarations accepted.
+        max: usize,
+    },
+    /// The document refers to entities more often than accepted (see [`crate::limits`]).
+    TooManyEntityReferences {
+        /// Largest number of entity references accepted.
+        max: usize,
+    },
+    /// The entity references of the document expand to more text than accepted (see
+    /// [`crate::limits`]).
+    EntityExpansionTooLarge {
+        /// Largest total size of the expanded entities, in bytes.
+        max: usize,
+    },
     /// The file is not well-formed XML.
     Xml(String),
     /// The root element or a child element is not what the format allows.
@@ -83,6 +122,31 @@ pub enum ErrorKind {
         /// The field's type.
         ty: String,
     },
+    /// A name that is a valid identifier, but whose Rust form cannot be used in the
+    /// generated code (a keyword such as `Self`, no letter or digit left, a leading
+    /// digit, or the name of an item the generator emits next to it).
+    UnusableName {
+        /// What is named: `class`, `message`, `field`, `process`.
+        what: &'static str,
+        /// The name as written.
+        name: String,
+        /// Why it cannot be used.
+        reason: String,
+    },
+    /// A class id that does not fit the 4 bits a PPRZ v2 frame has for it.
+    ClassIdOutOfRange {
+        /// The id found.
+        id: u8,
+        /// Largest class id a PPRZ v2 frame carries.
+        max: u8,
+    },
+    /// An element appears more than once where only one is allowed.
+    DuplicateElement {
+        /// The element (`description`).
+        element: &'static str,
+        /// Line of the first occurrence.
+        first_line: u32,
+    },
     /// A class or message named in the selection does not exist.
     UnknownSelection(String),
     /// Something else in a telemetry configuration.
@@ -93,6 +157,32 @@ impl fmt::Display for ErrorKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Io(e) => write!(f, "cannot read file: {e}"),
+            Self::Write(e) => write!(f, "cannot write output file: {e}"),
+            Self::InputTooLarge { size, max } => write!(
+                f,
+                "input of {size} bytes is too large: at most {max} bytes are read"
+            ),
+            Self::TooManyNodes { max } => write!(
+                f,
+                "too many XML nodes: at most {max} elements, text runs and comments are read"
+            ),
+            Self::NestedEntity { name, referenced } => write!(
+                f,
+                "entity `{name}` refers to entity `{referenced}`: nested entities are refused"
+            ),
+            Self::TooManyEntities { max } => {
+                write!(
+                    f,
+                    "too many entity declarations: at most {max} are accepted"
+                )
+            }
+            Self::TooManyEntityReferences { max } => {
+                write!(f, "too many entity references: at most {max} are accepted")
+            }
+            Self::EntityExpansionTooLarge { max } => write!(
+                f,
+                "entity references expand to more than {max} bytes: refused"
+            ),
             Self::Xml(e) => write!(f, "malformed XML: {e}"),
             Self::UnexpectedElement { found, expected } => {
                 write!(f, "unexpected element <{found}>, expected {expected}")
@@ -141,6 +231,20 @@ impl fmt::Display for ErrorKind {
             Self::TooManyValues { count, ty } => {
                 write!(f, "{count} `values` labels cannot all be indexed by a {ty}")
             }
+            Self::UnusableName { what, name, reason } => {
+                write!(f, "{what} name `{name}` cannot be used: {reason}")
+            }
+            Self::ClassIdOutOfRange { id, max } => write!(
+                f,
+                "class id {id} does not fit a PPRZ v2 frame: class ids are 4 bits (0..={max})"
+            ),
+            Self::DuplicateElement {
+                element,
+                first_line,
+            } => write!(
+                f,
+                "duplicate <{element}> (first defined on line {first_line}): only one is allowed"
+            ),
             Self::UnknownSelection(n) => write!(f, "selected `{n}` does not exist in the input"),
             Self::Telemetry(e) => f.write_str(e),
         }

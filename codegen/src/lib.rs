@@ -153,6 +153,7 @@
 
 mod emit;
 mod error;
+pub mod limits;
 pub mod model;
 mod names;
 mod roles;
@@ -164,6 +165,15 @@ use std::path::{Path, PathBuf};
 pub use error::{Diagnostic, Error, ErrorKind};
 pub use model::{Class, FieldDef, MessageDef, Protocol, Units};
 pub use telemetry::{Schedule, ScheduleOptions, TelemetryConfig};
+
+/// Writes generated `code` to `path`.
+///
+/// # Errors
+/// The file cannot be written: [`ErrorKind::Write`] naming `path`, with the OS error.
+fn write_output(path: &Path, code: &str) -> Result<(), Error> {
+    std::fs::write(path, code)
+        .map_err(|e| Error::single(&path.display().to_string(), ErrorKind::Write(e.to_string())))
+}
 
 /// Where the messages come from.
 #[derive(Debug, Clone)]
@@ -296,8 +306,7 @@ impl Generator {
     pub fn write_to(&self, path: impl AsRef<Path>) -> Result<(), Error> {
         let path = path.as_ref();
         let code = self.generate()?;
-        std::fs::write(path, code)
-            .map_err(|e| Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string())))
+        write_output(path, &code)
     }
 
     /// `$OUT_DIR/<file_name>`, after telling Cargo to rerun the build script when an
@@ -317,7 +326,7 @@ impl Generator {
         let out_dir = std::env::var_os("OUT_DIR").ok_or_else(|| {
             Error::single(
                 file_name,
-                ErrorKind::Io("OUT_DIR is not set: call this from a build script".into()),
+                ErrorKind::Write("OUT_DIR is not set: call this from a build script".into()),
             )
         })?;
         Ok(PathBuf::from(out_dir).join(file_name))
@@ -421,9 +430,7 @@ impl Generator {
     pub fn write_telemetry_to(&self, path: impl AsRef<Path>) -> Result<Vec<Diagnostic>, Error> {
         let path = path.as_ref();
         let generated = self.generate_telemetry()?;
-        std::fs::write(path, generated.code).map_err(|e| {
-            Error::single(&path.display().to_string(), ErrorKind::Io(e.to_string()))
-        })?;
+        write_output(path, &generated.code)?;
         Ok(generated.warnings)
     }
 

@@ -17,6 +17,13 @@ use crate::xml::{self, Ctx, Seen};
 /// bytes and the 4-byte v2 header).
 pub const MAX_PAYLOAD: usize = 247;
 
+/// Largest class id: a PPRZ v2 frame carries the class in the low 4 bits of the byte it
+/// shares with the component id (`component << 4 | class`).
+pub const MAX_CLASS_ID: u8 = 0x0F;
+
+/// The `AnyMessage` enum every class module has, next to its message types.
+const ANY_MESSAGE: &str = "AnyMessage";
+
 /// What a coefficient must be (in diagnostics).
 const FINITE: &str = "a finite number";
 
@@ -370,6 +377,8 @@ fn parse_protocol(p: &mut xml::Parser<'_, '_>) -> Protocol {
             seen.check(p, node, &ctx, "class id", class.id.to_string(), line);
             let module = names::module_name(&class.name);
             seen.check(p, node, &ctx, "module name of class", module, line);
+            let variant = names::camel_case(&class.name);
+            seen.check(p, node, &ctx, "Rust variant name of class", variant, line);
             Some(class)
         }),
     };
@@ -383,9 +392,26 @@ fn parse_protocol(p: &mut xml::Parser<'_, '_>) -> Protocol {
 fn parse_class(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Class> {
     let ctx = Ctx::default();
     let name = p.name(node, "msg_class", &ctx);
+    if let Some(name) = &name {
+        // The module (snake case) and the variant of the set's `AnyMessage` (camel case).
+        let problem = names::snake_name_problem(name).or_else(|| names::type_name_problem(name));
+        p.unusable(node, &ctx, "class", name, problem);
+    }
     let id = p
         .required(node, "msg_class", "id", &ctx)
         .and_then(|v| parse_id(p, node, v, &ctx));
+    if let Some(id) = id
+        && id > MAX_CLASS_ID
+    {
+        p.report(
+            node,
+            &ctx,
+            ErrorKind::ClassIdOutOfRange {
+                id,
+                max: MAX_CLASS_ID,
+            },
+        );
+    }
     let mut seen = Seen::default();
     let messages = p.children(node, "message", &ctx, "<message>", |p, child| {
         let m = parse_message(p, child)?;
@@ -419,6 +445,14 @@ fn parse_message(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Mess
     let mut ctx = Ctx::default();
     let name = p.name(node, "message", &ctx);
     ctx.message = name.clone();
+    if let Some(name) = &name {
+        let problem = names::type_name_problem(name).or_else(|| {
+            (names::camel_case(name) == ANY_MESSAGE).then(|| {
+                format!("its Rust type name `{ANY_MESSAGE}` is that of the enum of the messages of its class")
+            })
+        });
+        p.unusable(node, &ctx, "message", name, problem);
+    }
     let id = p
         .required(node, "message", "id", &ctx)
         .and_then(|v| parse_id(p, node, v, &ctx));
@@ -433,11 +467,25 @@ fn parse_message(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Mess
         },
     };
     let mut description = None;
+    let mut description_line = None;
     let mut fields = Vec::new();
     let mut seen = Seen::default();
     for child in node.children().filter(Node::is_element) {
         match child.tag_name().name() {
-            "description" => description = text(child),
+            "description" => match description_line {
+                Some(first_line) => p.report(
+                    child,
+                    &ctx,
+                    ErrorKind::DuplicateElement {
+                        element: "description",
+                        first_line,
+                    },
+                ),
+                None => {
+                    description_line = Some(p.line_col(child).0);
+                    description = text(child);
+                }
+            },
             "field" => {
                 if let Some(f) = parse_field(p, child, &ctx) {
                     let fctx = Ctx {
@@ -491,6 +539,12 @@ fn parse_field(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>, message: &Ctx) -
     };
     let name = p.name(node, "field", &ctx);
     ctx.field = name.clone();
+    if let Some(name) = &name {
+        p.unusable(node, &ctx, "field", name, names::snake_name_problem(name));
+    }
+    for child in node.children().filter(Node::is_element) {
+        p.unexpected(child, &ctx, "only text inside <field>");
+    }
     let xml_type = p.required(node, "field", "type", &ctx);
     let ty = xml_type.and_then(|t| match parse_type(t) {
         Ok(ty) => Some(ty),

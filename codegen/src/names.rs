@@ -9,6 +9,17 @@ const KEYWORDS: &[&str] = &[
     "union", "unsafe", "unsized", "use", "virtual", "where", "while", "yield",
 ];
 
+/// Primitive types: an item of this name (a class module) would shadow the type in the
+/// generated code around it.
+const PRIMITIVES: &[&str] = &[
+    "bool", "char", "str", "u8", "u16", "u32", "u64", "u128", "usize", "i8", "i16", "i32", "i64",
+    "i128", "isize", "f32", "f64",
+];
+
+/// Crates named by a bare path (`core::...`): a module of this name would shadow them for
+/// code next to the generated items.
+const CRATES: &[&str] = &["core", "std", "alloc"];
+
 /// Whether `name` is `[A-Za-z_][A-Za-z0-9_]*`.
 pub fn is_identifier(name: &str) -> bool {
     let mut chars = name.chars();
@@ -68,9 +79,41 @@ pub fn snake_case(name: &str) -> String {
     escape_keyword(ident)
 }
 
-/// `telemetry` -> `telemetry`; a module name from a class name.
+/// `telemetry` -> `telemetry`; a module name from a class (or process) name: as
+/// [`snake_case`], and a primitive type or crate name gets a trailing `_` (`u8` -> `u8_`,
+/// `core` -> `core_`) so the module does not shadow it.
 pub fn module_name(name: &str) -> String {
-    snake_case(name)
+    let ident = snake_case(name);
+    if PRIMITIVES.contains(&ident.as_str()) || CRATES.contains(&ident.as_str()) {
+        ident + "_"
+    } else {
+        ident
+    }
+}
+
+/// Why the Rust type (or enum variant) name made from `name` by [`camel_case`] cannot be
+/// used, if it cannot: nothing left, a leading digit, or the keyword `Self`.
+pub fn type_name_problem(name: &str) -> Option<String> {
+    let ty = camel_case(name);
+    if ty.is_empty() {
+        Some("it has no letter or digit to make a Rust name from".to_owned())
+    } else if ty.starts_with(|c: char| c.is_ascii_digit()) {
+        Some(format!(
+            "its Rust name `{ty}` would start with a digit (the `_` before it is dropped)"
+        ))
+    } else if ty == "Self" {
+        Some("its Rust name `Self` is a keyword".to_owned())
+    } else {
+        None
+    }
+}
+
+/// Why the Rust field or module name made from `name` by [`snake_case`] cannot be used,
+/// if it cannot: nothing left (`_`, `__`). Keywords and leading digits are escaped.
+pub fn snake_name_problem(name: &str) -> Option<String> {
+    words(name)
+        .is_empty()
+        .then(|| "it has no letter or digit to make a Rust name from".to_owned())
 }
 
 /// An enum variant from a `values` label: `NO_FIX` -> `NoFix`, `2D` -> `V2D`,
@@ -130,5 +173,25 @@ mod tests {
         assert_eq!(variant_name(""), None);
         assert!(is_identifier("GPS_INT") && is_identifier("_x"));
         assert!(!is_identifier("1GPS") && !is_identifier("GPS INT") && !is_identifier(""));
+    }
+
+    #[test]
+    fn escapes_or_refuses_unusable_names() {
+        assert_eq!(module_name("u8"), "u8_");
+        assert_eq!(module_name("core"), "core_");
+        assert_eq!(module_name("crate"), "crate_");
+        assert_eq!(module_name("SELF"), "self_");
+        assert_eq!(module_name("telemetry"), "telemetry");
+        assert_eq!(snake_case("u8"), "u8");
+        assert_eq!(snake_case("_1st"), "_1st");
+        for bad in ["_", "__", "SELF", "self", "Self", "_1ST", "_2"] {
+            assert!(type_name_problem(bad).is_some(), "{bad}");
+        }
+        for ok in ["RESULT", "OPTION", "ANY_MESSAGE", "Set", "X_1"] {
+            assert_eq!(type_name_problem(ok), None, "{ok}");
+        }
+        assert!(snake_name_problem("_").is_some() && snake_name_problem("___").is_some());
+        assert_eq!(snake_name_problem("_1"), None);
+        assert_eq!(snake_name_problem("self"), None);
     }
 }

@@ -7,12 +7,98 @@
 //! the one for the root element and turns what was collected into a `Result`.
 
 use std::collections::HashMap;
+use std::io::Read as _;
 use std::path::Path;
 
 use roxmltree::{Document, Node, ParsingOptions};
 
 use crate::error::{Diagnostic, Error, ErrorKind};
-use crate::names;
+use crate::{limits, names};
+
+/// Bytes between two checkpoints of [`Positions`]: the most a position lookup scans.
+const BLOCK: usize = 512;
+
+#[cfg(test)]
+thread_local! {
+    /// Bytes of text scanned to compute positions on this thread (for tests).
+    pub(crate) static SCANNED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// Counts `n` bytes scanned for positions (tests only).
+fn scanned(n: usize) {
+    #[cfg(test)]
+    SCANNED.with(|s| s.set(s.get() + n));
+    #[cfg(not(test))]
+    let _ = n;
+}
+
+/// Line and column (1-based, the column counted in characters, as the XML parser
+/// counts them) of byte offsets of a text, in time bounded by [`BLOCK`] per lookup after
+/// one pass over the text: the text is scanned once for checkpoints every [`BLOCK`]
+/// bytes, and a lookup scans from the checkpoint before the offset.
+pub(crate) struct Positions<'t> {
+    text: &'t [u8],
+    /// At byte `k * BLOCK`: lines ended before it, characters before it, and characters
+    /// before the start of its line.
+    checkpoints: Vec<Checkpoint>,
+}
+
+/// The state of a [`Positions`] scan at some byte offset.
+#[derive(Debug, Clone, Copy, Default)]
+struct Checkpoint {
+    /// `\n` before the offset.
+    lines: u32,
+    /// Characters before the offset.
+    chars: u32,
+    /// Characters before the start of the line of the offset.
+    line_start: u32,
+}
+
+impl Checkpoint {
+    /// The state after `bytes`.
+    fn advance(mut self, bytes: &[u8]) -> Self {
+        for &b in bytes {
+            // Count characters at their first byte (not a UTF-8 continuation byte).
+            if b & 0xC0 != 0x80 {
+                self.chars = self.chars.wrapping_add(1);
+            }
+            if b == b'\n' {
+                self.lines = self.lines.wrapping_add(1);
+                self.line_start = self.chars;
+            }
+        }
+        self
+    }
+}
+
+impl<'t> Positions<'t> {
+    /// The checkpoints of `text` (one pass).
+    pub(crate) fn new(text: &'t str) -> Self {
+        let text = text.as_bytes();
+        let mut checkpoints = Vec::with_capacity(text.len() / BLOCK + 1);
+        let mut state = Checkpoint::default();
+        for block in text.chunks(BLOCK) {
+            checkpoints.push(state);
+            state = state.advance(block);
+        }
+        checkpoints.push(state);
+        scanned(text.len());
+        Self { text, checkpoints }
+    }
+
+    /// Line and column (1-based) of byte offset `pos` (the end of the text if beyond).
+    pub(crate) fn line_col(&self, pos: usize) -> (u32, u32) {
+        let pos = pos.min(self.text.len());
+        let block = pos / BLOCK;
+        let start = block * BLOCK;
+        scanned(pos - start);
+        let state = self.checkpoints[block].advance(&self.text[start..pos]);
+        (
+            state.lines.wrapping_add(1),
+            state.chars.wrapping_sub(state.line_start).wrapping_add(1),
+        )
+    }
+}
 
 /// The message and field a diagnostic is about.
 #[derive(Debug, Clone, Default)]
@@ -37,15 +123,18 @@ impl Ctx {
 pub(crate) struct Parser<'a, 'input> {
     file: &'a str,
     doc: &'a Document<'input>,
+    positions: Positions<'input>,
     diagnostics: Vec<Diagnostic>,
 }
 
 impl<'a, 'input> Parser<'a, 'input> {
-    /// A parser of `doc`, which `file` names in diagnostics, with no diagnostics yet.
-    pub(crate) fn new(file: &'a str, doc: &'a Document<'input>) -> Self {
+    /// A parser of `doc`, which `file` names in diagnostics, with no diagnostics yet;
+    /// `positions` are those of the document's text.
+    fn new(file: &'a str, doc: &'a Document<'input>, positions: Positions<'input>) -> Self {
         Self {
             file,
             doc,
+            positions,
             diagnostics: Vec::new(),
         }
     }
@@ -74,8 +163,7 @@ impl<'a, 'input> Parser<'a, 'input> {
 
     /// Line and column (1-based) where `node` starts.
     pub(crate) fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
-        let pos = self.doc.text_pos_at(node.range().start);
-        (pos.row, pos.col)
+        self.positions.line_col(node.range().start)
     }
 
     /// Records a problem at `node`, about the message and field of `ctx`.
@@ -124,6 +212,28 @@ impl<'a, 'input> Parser<'a, 'input> {
         } else {
             self.report(node, ctx, ErrorKind::InvalidName(name.to_owned()));
             None
+        }
+    }
+
+    /// Reports `name` (of a `what`, at `node`) as unusable in Rust for `problem`, if any.
+    pub(crate) fn unusable(
+        &mut self,
+        node: Node<'_, '_>,
+        ctx: &Ctx,
+        what: &'static str,
+        name: &str,
+        problem: Option<String>,
+    ) {
+        if let Some(reason) = problem {
+            self.report(
+                node,
+                ctx,
+                ErrorKind::UnusableName {
+                    what,
+                    name: name.to_owned(),
+                    reason,
+                },
+            );
         }
     }
 
@@ -238,20 +348,53 @@ impl Seen {
     }
 }
 
+/// A diagnostic about `file` at line and column `at`, about no message.
+fn at(file: &str, (line, column): (u32, u32), kind: ErrorKind) -> Error {
+    Error::new(vec![Diagnostic {
+        file: file.to_owned(),
+        line,
+        column,
+        message: None,
+        field: None,
+        kind,
+    }])
+}
+
 /// Parses `text` (named `file` in diagnostics) as XML and runs `run` on a [`Parser`] of
 /// it; the value `run` returns if it reported no problem, otherwise every problem.
 ///
+/// The text is first checked against the [`limits`], and positions are computed from
+/// checkpoints made in one pass (see [`Positions`]), so parsing takes time linear in the
+/// size of the text.
+///
 /// # Errors
-/// Malformed XML, or the problems `run` reported.
+/// A text beyond the limits, malformed XML, or the problems `run` reported.
 pub(crate) fn parse<T>(
     file: &str,
     text: &str,
     run: impl FnOnce(&mut Parser<'_, '_>) -> T,
 ) -> Result<T, Error> {
+    let size = text.len() as u64;
+    if size > limits::MAX_INPUT_BYTES {
+        return Err(too_large(file, size));
+    }
+    let positions = Positions::new(text);
+    limits::check_entities(text).map_err(|(pos, kind)| at(file, positions.line_col(pos), kind))?;
     let doc = parse_xml(file, text)?;
-    let mut p = Parser::new(file, &doc);
+    let mut p = Parser::new(file, &doc, positions);
     let value = run(&mut p);
     p.finish(value)
+}
+
+/// An input of `size` bytes, more than [`limits::MAX_INPUT_BYTES`].
+fn too_large(file: &str, size: u64) -> Error {
+    Error::single(
+        file,
+        ErrorKind::InputTooLarge {
+            size,
+            max: limits::MAX_INPUT_BYTES,
+        },
+    )
 }
 
 /// Reads the file at `path` and parses it with `parse` (given the file's name for
@@ -267,33 +410,49 @@ pub(crate) fn parse_file<T>(
     parse(&name, &text)
 }
 
-/// Reads a file, returning its name for diagnostics and its text.
+/// Reads a file, returning its name for diagnostics and its text; a file larger than
+/// [`limits::MAX_INPUT_BYTES`] is refused from its size, without reading it.
 fn read_file(path: &Path) -> Result<(String, String), Error> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::single(&name, ErrorKind::Io(e.to_string())))?;
+    let io = |e: std::io::Error| Error::single(&name, ErrorKind::Io(e.to_string()));
+    let file = std::fs::File::open(path).map_err(io)?;
+    let size = file.metadata().map_err(io)?.len();
+    if size > limits::MAX_INPUT_BYTES {
+        return Err(too_large(&name, size));
+    }
+    // The size may change while reading: read one byte more than allowed at most.
+    let mut text = String::new();
+    file.take(limits::MAX_INPUT_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > limits::MAX_INPUT_BYTES {
+        return Err(too_large(&name, text.len() as u64));
+    }
     Ok((name, text))
 }
 
-/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry; a syntax error
-/// is reported at its position in `file`.
+/// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry (its entities
+/// were checked against the [`limits`]), with at most [`limits::MAX_NODES`] nodes; a
+/// syntax error is reported at its position in `file`.
 fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
     Document::parse_with_options(
         text,
         ParsingOptions {
             allow_dtd: true,
+            nodes_limit: limits::MAX_NODES,
             ..ParsingOptions::default()
         },
     )
     .map_err(|e| {
+        if let roxmltree::Error::NodesLimitReached = e {
+            return Error::single(
+                file,
+                ErrorKind::TooManyNodes {
+                    max: limits::MAX_NODES,
+                },
+            );
+        }
         let pos = e.pos();
-        Error::new(vec![Diagnostic {
-            file: file.to_owned(),
-            line: pos.row,
-            column: pos.col,
-            message: None,
-            field: None,
-            kind: ErrorKind::Xml(e.to_string()),
-        }])
+        at(file, (pos.row, pos.col), ErrorKind::Xml(e.to_string()))
     })
 }

@@ -40,7 +40,7 @@ fn full_set_has_every_impl() {
         "impl ::pprz_messages::roles::SettingRequest for datalink::Setting {",
         "impl ::pprz_messages::roles::GetSettingRequest for datalink::GetSetting {",
         "impl ::pprz_messages::roles::SettingValue for telemetry::DlValue {",
-        "impl From<::pprz_messages::roles::LinkReport> for telemetry::DatalinkReport {",
+        "impl ::core::convert::From<::pprz_messages::roles::LinkReport> for telemetry::DatalinkReport {",
         "impl ::pprz_messages::roles::DatalinkReport for telemetry::DatalinkReport {}",
         SERVICE_SET,
         "    type GetSetting = datalink::GetSetting;",
@@ -187,8 +187,8 @@ fn the_runtime_path_is_used_everywhere() {
     let code = generate(Generator::new(FIXTURE).runtime_crate("crate::rt"));
     assert!(!code.contains("pprz_messages"), "{code}");
     assert!(code.contains("impl crate::rt::roles::ServiceSet for Set {"));
-    assert!(
-        code.contains("impl From<crate::rt::roles::LinkReport> for telemetry::DatalinkReport {")
-    );
+    assert!(code.contains(
+        "impl ::core::convert::From<crate::rt::roles::LinkReport> for telemetry::DatalinkReport {"
+    ));
     assert!(code.contains("`crate::rt::roles` the set fills"));
 }

@@ -25,11 +25,11 @@ impl<'a> AnyMessage<'a> {
     ///
     /// # Errors
     /// Unknown class or message id, or a payload of the wrong length.
-    pub fn decode(class_id: u8, msg_id: u8, payload: &'a [u8]) -> Result<Self, ::pprz_messages::DecodeError> {
+    pub fn decode(class_id: u8, msg_id: u8, payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
         match class_id {
             1 => telemetry::AnyMessage::decode(msg_id, payload).map(Self::Telemetry),
             2 => datalink::AnyMessage::decode(msg_id, payload).map(Self::Datalink),
-            _ => Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
+            _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
         }
     }
 
@@ -74,7 +74,7 @@ impl<'a> AnyMessage<'a> {
     }
 
     /// Encodes the fields into `buf`, returning the length written (errors as the message's encoder).
-    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, ::pprz_messages::EncodeError> {
+    pub fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, ::pprz_messages::EncodeError> {
         match self {
             Self::Telemetry(m) => m.encode(buf),
             Self::Datalink(m) => m.encode(buf),
@@ -126,7 +126,7 @@ impl ::pprz_messages::roles::SettingValue for telemetry::DlValue {
     }
 }
 
-impl From<::pprz_messages::roles::LinkReport> for telemetry::DatalinkReport {
+impl ::core::convert::From<::pprz_messages::roles::LinkReport> for telemetry::DatalinkReport {
     fn from(r: ::pprz_messages::roles::LinkReport) -> Self {
         Self {
             uplink_lost_time: r.uplink_lost_time,
@@ -187,19 +187,19 @@ pub mod telemetry {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for Pong {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let r = __rt::wire::Reader::exact(payload, 0)?;
             let msg = Self;
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
@@ -226,16 +226,16 @@ pub mod telemetry {
         pub lat: i32,
     }
 
-    impl<'a> Default for Mixed<'a> {
+    impl<'a> ::core::default::Default for Mixed<'a> {
         fn default() -> Self {
             Self {
-                mode: Default::default(),
-                samples: Default::default(),
-                type_: [Default::default(); 3],
-                name: Default::default(),
-                tag: [Default::default(); 4],
-                big: [Default::default(); 40],
-                lat: Default::default(),
+                mode: ::core::default::Default::default(),
+                samples: ::core::default::Default::default(),
+                type_: [::core::default::Default::default(); 3],
+                name: ::core::default::Default::default(),
+                tag: [::core::default::Default::default(); 4],
+                big: [::core::default::Default::default(); 40],
+                lat: ::core::default::Default::default(),
             }
         }
     }
@@ -252,31 +252,31 @@ pub mod telemetry {
             fields: &[
                 __rt::FieldDescriptor {
                     name: "mode", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &["OFF", "2D", "3D"],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &["OFF", "2D", "3D"],
                 },
                 __rt::FieldDescriptor {
                     name: "samples", ty: __rt::FieldType::Vector(__rt::BaseType::I16),
-                    unit: Some("adc"), alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::Some("adc"), alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "type", ty: __rt::FieldType::Array(__rt::BaseType::F32, 3),
-                    unit: Some("rad"), alt_unit: Some("deg"), alt_unit_coef: Some(57.29577951308232), format: None, values: &[],
+                    unit: ::core::option::Option::Some("rad"), alt_unit: ::core::option::Option::Some("deg"), alt_unit_coef: ::core::option::Option::Some(57.29577951308232), format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "name", ty: __rt::FieldType::Vector(__rt::BaseType::Char),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "tag", ty: __rt::FieldType::Array(__rt::BaseType::Char, 4),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "big", ty: __rt::FieldType::Array(__rt::BaseType::U8, 40),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "lat", ty: __rt::FieldType::Scalar(__rt::BaseType::I32),
-                    unit: Some("1e7deg"), alt_unit: Some("deg"), alt_unit_coef: Some(1e-7), format: None, values: &[],
+                    unit: ::core::option::Option::Some("1e7deg"), alt_unit: ::core::option::Option::Some("deg"), alt_unit_coef: ::core::option::Option::Some(1e-7), format: ::core::option::Option::None, values: &[],
                 },
             ],
         };
@@ -287,7 +287,7 @@ pub mod telemetry {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let mut w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
             w.scalar(self.mode)?;
             w.vector(&self.samples)?;
@@ -296,13 +296,13 @@ pub mod telemetry {
             w.array(&self.tag)?;
             w.array(&self.big)?;
             w.scalar(self.lat)?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for Mixed<'a> {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let mut r = __rt::wire::Reader::new(payload);
             let msg = Self {
                 mode: r.scalar()?,
@@ -314,13 +314,13 @@ pub mod telemetry {
                 lat: r.scalar()?,
             };
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
     impl<'a> Mixed<'a> {
         /// `mode` as [`values::MixedMode`], `None` if the raw value has no label.
-        pub fn mode_value(&self) -> Option<values::MixedMode> {
+        pub fn mode_value(&self) -> ::core::option::Option<values::MixedMode> {
             values::MixedMode::from_raw(self.mode)
         }
     }
@@ -356,27 +356,27 @@ pub mod telemetry {
             fields: &[
                 __rt::FieldDescriptor {
                     name: "uplink_lost_time", ty: __rt::FieldType::Scalar(__rt::BaseType::U16),
-                    unit: Some("s"), alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::Some("s"), alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "uplink_nb_msgs", ty: __rt::FieldType::Scalar(__rt::BaseType::U16),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "downlink_nb_msgs", ty: __rt::FieldType::Scalar(__rt::BaseType::U16),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "downlink_rate", ty: __rt::FieldType::Scalar(__rt::BaseType::U16),
-                    unit: Some("bytes/s"), alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::Some("bytes/s"), alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "uplink_rate", ty: __rt::FieldType::Scalar(__rt::BaseType::U16),
-                    unit: Some("msgs/s"), alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::Some("msgs/s"), alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "downlink_ovrn", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
             ],
         };
@@ -387,7 +387,7 @@ pub mod telemetry {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let mut w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
             w.scalar(self.uplink_lost_time)?;
             w.scalar(self.uplink_nb_msgs)?;
@@ -395,13 +395,13 @@ pub mod telemetry {
             w.scalar(self.downlink_rate)?;
             w.scalar(self.uplink_rate)?;
             w.scalar(self.downlink_ovrn)?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for DatalinkReport {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let mut r = __rt::wire::Reader::exact(payload, 11)?;
             let msg = Self {
                 uplink_lost_time: r.scalar()?,
@@ -412,7 +412,7 @@ pub mod telemetry {
                 downlink_ovrn: r.scalar()?,
             };
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
@@ -439,11 +439,11 @@ pub mod telemetry {
             fields: &[
                 __rt::FieldDescriptor {
                     name: "index", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "value", ty: __rt::FieldType::Scalar(__rt::BaseType::F32),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
             ],
         };
@@ -454,24 +454,24 @@ pub mod telemetry {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let mut w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
             w.scalar(self.index)?;
             w.scalar(self.value)?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for DlValue {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let mut r = __rt::wire::Reader::exact(payload, 5)?;
             let msg = Self {
                 index: r.scalar()?,
                 value: r.scalar()?,
             };
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
@@ -494,13 +494,13 @@ pub mod telemetry {
         ///
         /// # Errors
         /// Unknown message id, or a payload of the wrong length.
-        pub fn decode(msg_id: u8, payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        pub fn decode(msg_id: u8, payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             match msg_id {
                 3 => <Pong as __rt::Decode>::decode(payload).map(Self::Pong),
                 7 => <Mixed<'a> as __rt::Decode>::decode(payload).map(Self::Mixed),
                 30 => <DatalinkReport as __rt::Decode>::decode(payload).map(Self::DatalinkReport),
                 31 => <DlValue as __rt::Decode>::decode(payload).map(Self::DlValue),
-                _ => Err(__rt::DecodeError::UnknownMessage { class_id: CLASS_ID, msg_id }),
+                _ => ::core::result::Result::Err(__rt::DecodeError::UnknownMessage { class_id: CLASS_ID, msg_id }),
             }
         }
 
@@ -558,7 +558,7 @@ pub mod telemetry {
         ///
         /// # Errors
         /// See [`Message::encode`](__rt::Message::encode).
-        pub fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        pub fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             match self {
                 Self::Pong(m) => __rt::Message::encode(m, buf),
                 Self::Mixed(m) => __rt::Message::encode(m, buf),
@@ -569,25 +569,25 @@ pub mod telemetry {
 
     }
 
-    impl<'a> From<Pong> for AnyMessage<'a> {
+    impl<'a> ::core::convert::From<Pong> for AnyMessage<'a> {
         fn from(m: Pong) -> Self {
             Self::Pong(m)
         }
     }
 
-    impl<'a> From<Mixed<'a>> for AnyMessage<'a> {
+    impl<'a> ::core::convert::From<Mixed<'a>> for AnyMessage<'a> {
         fn from(m: Mixed<'a>) -> Self {
             Self::Mixed(m)
         }
     }
 
-    impl<'a> From<DatalinkReport> for AnyMessage<'a> {
+    impl<'a> ::core::convert::From<DatalinkReport> for AnyMessage<'a> {
         fn from(m: DatalinkReport) -> Self {
             Self::DatalinkReport(m)
         }
     }
 
-    impl<'a> From<DlValue> for AnyMessage<'a> {
+    impl<'a> ::core::convert::From<DlValue> for AnyMessage<'a> {
         fn from(m: DlValue) -> Self {
             Self::DlValue(m)
         }
@@ -611,12 +611,12 @@ pub mod telemetry {
             /// Labels by raw value, as in `messages.xml`.
             pub const LABELS: &'static [&'static str] = &["OFF", "2D", "3D"];
             /// The value for a raw field value.
-            pub const fn from_raw(raw: u8) -> Option<Self> {
+            pub const fn from_raw(raw: u8) -> ::core::option::Option<Self> {
                 match raw {
-                    0 => Some(Self::Off),
-                    1 => Some(Self::V2D),
-                    2 => Some(Self::V3D),
-                    _ => None,
+                    0 => ::core::option::Option::Some(Self::Off),
+                    1 => ::core::option::Option::Some(Self::V2D),
+                    2 => ::core::option::Option::Some(Self::V3D),
+                    _ => ::core::option::Option::None,
                 }
             }
             /// The raw field value.
@@ -633,14 +633,14 @@ pub mod telemetry {
             }
         }
 
-        impl TryFrom<u8> for MixedMode {
+        impl ::core::convert::TryFrom<u8> for MixedMode {
             type Error = u8;
-            fn try_from(raw: u8) -> Result<Self, u8> {
+            fn try_from(raw: u8) -> ::core::result::Result<Self, u8> {
                 Self::from_raw(raw).ok_or(raw)
             }
         }
 
-        impl From<MixedMode> for u8 {
+        impl ::core::convert::From<MixedMode> for u8 {
             fn from(v: MixedMode) -> u8 {
                 v.raw()
             }
@@ -683,15 +683,15 @@ pub mod datalink {
             fields: &[
                 __rt::FieldDescriptor {
                     name: "index", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "ac_id", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "value", ty: __rt::FieldType::Scalar(__rt::BaseType::F32),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
             ],
         };
@@ -702,18 +702,18 @@ pub mod datalink {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let mut w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
             w.scalar(self.index)?;
             w.scalar(self.ac_id)?;
             w.scalar(self.value)?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for Setting {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let mut r = __rt::wire::Reader::exact(payload, 6)?;
             let msg = Self {
                 index: r.scalar()?,
@@ -721,7 +721,7 @@ pub mod datalink {
                 value: r.scalar()?,
             };
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
@@ -750,19 +750,19 @@ pub mod datalink {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for Ping {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let r = __rt::wire::Reader::exact(payload, 0)?;
             let msg = Self;
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
@@ -789,11 +789,11 @@ pub mod datalink {
             fields: &[
                 __rt::FieldDescriptor {
                     name: "index", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
                 __rt::FieldDescriptor {
                     name: "ac_id", ty: __rt::FieldType::Scalar(__rt::BaseType::U8),
-                    unit: None, alt_unit: None, alt_unit_coef: None, format: None, values: &[],
+                    unit: ::core::option::Option::None, alt_unit: ::core::option::Option::None, alt_unit_coef: ::core::option::Option::None, format: ::core::option::Option::None, values: &[],
                 },
             ],
         };
@@ -804,24 +804,24 @@ pub mod datalink {
         }
 
         #[inline]
-        fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             let mut w = __rt::wire::Writer::new(buf, __rt::Message::encoded_len(self))?;
             w.scalar(self.index)?;
             w.scalar(self.ac_id)?;
-            Ok(w.finish())
+            ::core::result::Result::Ok(w.finish())
         }
     }
 
     impl<'a> __rt::Decode<'a> for GetSetting {
         #[inline]
-        fn decode(payload: &'a [u8]) -> Result<Self, __rt::DecodeError> {
+        fn decode(payload: &'a [u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             let mut r = __rt::wire::Reader::exact(payload, 2)?;
             let msg = Self {
                 index: r.scalar()?,
                 ac_id: r.scalar()?,
             };
             r.finish()?;
-            Ok(msg)
+            ::core::result::Result::Ok(msg)
         }
     }
 
@@ -842,12 +842,12 @@ pub mod datalink {
         ///
         /// # Errors
         /// Unknown message id, or a payload of the wrong length.
-        pub fn decode(msg_id: u8, payload: &[u8]) -> Result<Self, __rt::DecodeError> {
+        pub fn decode(msg_id: u8, payload: &[u8]) -> ::core::result::Result<Self, __rt::DecodeError> {
             match msg_id {
                 4 => <Setting as __rt::Decode>::decode(payload).map(Self::Setting),
                 8 => <Ping as __rt::Decode>::decode(payload).map(Self::Ping),
                 16 => <GetSetting as __rt::Decode>::decode(payload).map(Self::GetSetting),
-                _ => Err(__rt::DecodeError::UnknownMessage { class_id: CLASS_ID, msg_id }),
+                _ => ::core::result::Result::Err(__rt::DecodeError::UnknownMessage { class_id: CLASS_ID, msg_id }),
             }
         }
 
@@ -900,7 +900,7 @@ pub mod datalink {
         ///
         /// # Errors
         /// See [`Message::encode`](__rt::Message::encode).
-        pub fn encode(&self, buf: &mut [u8]) -> Result<usize, __rt::EncodeError> {
+        pub fn encode(&self, buf: &mut [u8]) -> ::core::result::Result<usize, __rt::EncodeError> {
             match self {
                 Self::Setting(m) => __rt::Message::encode(m, buf),
                 Self::Ping(m) => __rt::Message::encode(m, buf),
@@ -910,19 +910,19 @@ pub mod datalink {
 
     }
 
-    impl From<Setting> for AnyMessage {
+    impl ::core::convert::From<Setting> for AnyMessage {
         fn from(m: Setting) -> Self {
             Self::Setting(m)
         }
     }
 
-    impl From<Ping> for AnyMessage {
+    impl ::core::convert::From<Ping> for AnyMessage {
         fn from(m: Ping) -> Self {
             Self::Ping(m)
         }
     }
 
-    impl From<GetSetting> for AnyMessage {
+    impl ::core::convert::From<GetSetting> for AnyMessage {
         fn from(m: GetSetting) -> Self {
             Self::GetSetting(m)
         }
