@@ -4,8 +4,13 @@
 //! * [`set`]: a message set loaded from a `messages.xml` at run time (the full PPRZLINK
 //!   reference included), as descriptors for generic decoding.
 //! * [`format`](mod@format): text forms of decoded messages (values with units and labels).
+//! * [`escape`]: escaping of everything printed that comes from the aircraft or the XML.
 //! * [`monitor`]: the state of the `pprz-monitor` tool: per-message rates and latest
 //!   values, link statistics, PING round trips and SETTING acknowledgements.
+//! * [`ping`], [`settings`]: matching PONGs to PINGs and DL_VALUEs to SETTINGs.
+//! * [`input`]: the bounded queue between the reading threads and the decoder.
+//! * [`record`]: PPRZLOG recordings that never destroy an input nor lose data silently.
+//! * [`cli`]: the command line, with every value checked.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
 //!
 //! ```
@@ -25,7 +30,13 @@
 #![warn(missing_docs)]
 #![deny(unsafe_code)]
 
+pub mod cli;
+pub mod escape;
 pub mod format;
+pub mod input;
 pub mod monitor;
+pub mod ping;
+pub mod record;
 pub mod set;
+pub mod settings;
 pub mod uplink;

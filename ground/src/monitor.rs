@@ -4,66 +4,144 @@
 //!
 //! Time is passed in (seconds since the start of the run), so the state is testable and
 //! a replay reproduces the same output.
+//!
+//! Every piece of state is bounded, whatever arrives: one entry per message of the set
+//! (with its latest fields cut at [`format::MAX_FIELDS_LEN`]), rates counted in fixed
+//! time buckets, at most [`MAX_EVENTS`] events and notices, at most
+//! [`ping::MAX_OUTSTANDING`] PINGs and 256 requests outstanding.
+//! [`retained_bytes`](Monitor::retained_bytes) estimates the total.
+//!
+//! Everything printed is escaped ([`escape`](crate::escape)): no line contains a
+//! control character.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt::Write as _;
 
 use pprz_messages::dynamic;
+use pprz_messages::{BaseType, FieldType, MessageDescriptor};
 use pprz_transports::{AnyTransport, Decoder, DecoderStats};
 
 use crate::format;
+use crate::input::Drops;
+use crate::ping::PingTracker;
 use crate::set::RuntimeSet;
+use crate::settings::{Answer, Expired, SettingTracker};
 
 /// How long a window the rates are computed over, in seconds.
 pub const RATE_WINDOW: f64 = 5.0;
 
+/// Events and notices kept for the live view (the latest ones).
+pub const MAX_EVENTS: usize = 8;
+
+/// Time buckets of a rate.
+const BUCKETS: usize = 10;
+
+/// A count of events per second over the last [`RATE_WINDOW`] seconds, kept in
+/// [`BUCKETS`] fixed time buckets (constant memory, whatever the rate).
+#[derive(Debug, Clone, Copy, Default)]
+struct Rate {
+    /// `(bucket number, count)`; bucket `n` covers `[n, n + 1) * width`.
+    buckets: [(i64, u64); BUCKETS],
+}
+
+impl Rate {
+    const WIDTH: f64 = RATE_WINDOW / BUCKETS as f64;
+
+    fn bucket(now: f64) -> i64 {
+        // Saturating conversion; NaN is bucket 0.
+        (now / Self::WIDTH).floor() as i64
+    }
+
+    fn add(&mut self, now: f64, n: u64) {
+        let b = Self::bucket(now);
+        let slot = &mut self.buckets[b.rem_euclid(BUCKETS as i64) as usize];
+        if slot.0 != b {
+            *slot = (b, 0);
+        }
+        slot.1 = slot.1.saturating_add(n);
+    }
+
+    fn per_second(&self, now: f64) -> f64 {
+        let b = Self::bucket(now);
+        let oldest = b.saturating_sub(BUCKETS as i64);
+        let n: u64 = self
+            .buckets
+            .iter()
+            .filter(|(i, _)| *i <= b && *i > oldest)
+            .map(|(_, c)| *c)
+            .sum();
+        n as f64 / RATE_WINDOW.min(now.max(1e-9))
+    }
+}
+
 /// What the monitor knows about one message.
 #[derive(Debug, Clone, Default)]
 pub struct MessageStats {
-    /// Message name (or `id=N` when unknown).
+    /// Message name (escaped).
     pub name: String,
-    /// Class name.
+    /// Class name (escaped).
     pub class: String,
     /// Priority from the message set.
     pub priority: u8,
     /// Messages received.
     pub count: u64,
-    /// Arrival times in the last [`RATE_WINDOW`] seconds.
-    recent: VecDeque<f64>,
-    /// The latest fields, formatted.
+    /// Arrivals in the last [`RATE_WINDOW`] seconds.
+    recent: Rate,
+    /// The latest fields, formatted and escaped (at most [`format::MAX_FIELDS_LEN`]
+    /// bytes).
     pub last: String,
 }
 
 impl MessageStats {
     /// Messages per second over the last [`RATE_WINDOW`] seconds.
     pub fn rate(&self, now: f64) -> f64 {
-        let n = self
-            .recent
-            .iter()
-            .filter(|t| now - **t <= RATE_WINDOW)
-            .count();
-        n as f64 / RATE_WINDOW.min(now.max(1e-9))
+        self.recent.per_second(now)
     }
 }
 
 /// Events worth a line of their own in the live view.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
-    /// A PONG arrived `rtt` seconds after the last PING.
+    /// A PONG arrived `rtt` seconds after the PING it answers (the oldest outstanding).
     Pong {
         /// Round-trip time in seconds.
         rtt: f64,
     },
-    /// A DL_VALUE arrived; `ack_after` is set when it acknowledges a pending SETTING or
-    /// GET_SETTING of that index.
+    /// A DL_VALUE arrived; `answer` tells whether it acknowledges a pending SETTING
+    /// (with the value set), reports it not applied (another value), or answers a
+    /// GET_SETTING.
     DlValue {
         /// Setting index.
         index: u8,
         /// Value reported by the aircraft.
         value: f64,
-        /// Seconds since the request, if it answers one.
-        ack_after: Option<f64>,
+        /// What it means for the requests pending on this index.
+        answer: Answer,
     },
+}
+
+/// Things that went wrong, worth a line of their own in the live view.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Notice {
+    /// PINGs counted as lost (no PONG within the timeout, or too many outstanding).
+    PingsLost {
+        /// How many.
+        count: u64,
+    },
+    /// A PONG that answers no PING outstanding.
+    UnexpectedPong,
+    /// A SETTING or GET_SETTING given up after the timeout.
+    RequestExpired(Expired),
+    /// Input dropped under overload before the bytes that followed.
+    InputDropped(Drops),
+}
+
+/// Pushes `item` at time `now`, keeping the latest [`MAX_EVENTS`].
+fn push_bounded<T>(queue: &mut VecDeque<(f64, T)>, now: f64, item: T) {
+    if queue.len() >= MAX_EVENTS {
+        queue.pop_front();
+    }
+    queue.push_back((now, item));
 }
 
 /// The decoding monitor.
@@ -72,14 +150,24 @@ pub struct Monitor {
     decoder: Decoder<AnyTransport>,
     messages: BTreeMap<(u8, u8), MessageStats>,
     bytes: u64,
-    byte_times: VecDeque<(f64, usize)>,
+    byte_rate: Rate,
     unknown: u64,
     malformed: u64,
     last_report: Option<String>,
-    ping_sent: Option<f64>,
-    pending_settings: BTreeMap<u8, f64>,
+    pings: PingTracker,
+    settings: SettingTracker,
     events: VecDeque<(f64, Event)>,
-    last_rtt: Option<f64>,
+    notices: VecDeque<(f64, Notice)>,
+    input_dropped: Drops,
+    input_gaps: u64,
+}
+
+/// The scalar type of field `name` of `desc`.
+fn scalar_type(desc: Option<&MessageDescriptor<'_>>, name: &str) -> Option<BaseType> {
+    desc?.fields.iter().find_map(|f| match f.ty {
+        FieldType::Scalar(base) if f.name == name => Some(base),
+        _ => None,
+    })
 }
 
 impl Monitor {
@@ -90,29 +178,33 @@ impl Monitor {
             decoder: Decoder::new(transport),
             messages: BTreeMap::new(),
             bytes: 0,
-            byte_times: VecDeque::new(),
+            byte_rate: Rate::default(),
             unknown: 0,
             malformed: 0,
             last_report: None,
-            ping_sent: None,
-            pending_settings: BTreeMap::new(),
+            pings: PingTracker::default(),
+            settings: SettingTracker::default(),
             events: VecDeque::new(),
-            last_rtt: None,
+            notices: VecDeque::new(),
+            input_dropped: Drops::default(),
+            input_gaps: 0,
         }
     }
 
+    /// The same monitor with other PING and request trackers (other bounds and
+    /// timeouts).
+    pub fn with_trackers(mut self, pings: PingTracker, settings: SettingTracker) -> Self {
+        self.pings = pings;
+        self.settings = settings;
+        self
+    }
+
     /// Feeds received bytes at time `now`; `on_message` gets one text line per decoded
-    /// message (the plain output mode), and the raw frame bytes (for recording).
+    /// message (the plain output mode; escaped, without control characters), and the
+    /// raw frame bytes (for recording).
     pub fn feed(&mut self, now: f64, bytes: &[u8], mut on_message: impl FnMut(&str, &[u8])) {
         self.bytes += bytes.len() as u64;
-        self.byte_times.push_back((now, bytes.len()));
-        while self
-            .byte_times
-            .front()
-            .is_some_and(|(t, _)| now - t > RATE_WINDOW)
-        {
-            self.byte_times.pop_front();
-        }
+        self.byte_rate.add(now, bytes.len() as u64);
         let mut input = bytes;
         while let Some(frame) = self.decoder.feed(&mut input) {
             let (source, class, id) = (frame.source(), frame.class(), frame.msg_id());
@@ -134,13 +226,27 @@ impl Monitor {
         }
     }
 
+    /// Input was dropped under overload just before the next bytes: counts it, notes it
+    /// for the live view, and abandons the frame being assembled (its end was dropped),
+    /// decoding the frames buffered behind it, as [`flush`](Self::flush) does.
+    pub fn input_gap(&mut self, now: f64, dropped: Drops, on_message: impl FnMut(&str, &[u8])) {
+        if dropped.is_empty() {
+            return;
+        }
+        self.input_dropped.bytes += dropped.bytes;
+        self.input_dropped.reads += dropped.reads;
+        self.input_gaps += 1;
+        push_bounded(&mut self.notices, now, Notice::InputDropped(dropped));
+        self.flush(now, on_message);
+    }
+
     fn handle(&mut self, now: f64, source: u8, class: u8, id: u8, payload: &[u8]) -> String {
-        let desc = self.set.find(class, id);
-        let line = format::line(source, class, id, desc, payload);
-        let Some(desc) = desc else {
+        let Some(desc) = self.set.find(class, id) else {
             self.unknown += 1;
-            return line;
+            return format::line(source, class, id, None, payload);
         };
+        let body = format::fields(desc, payload);
+        let line = format::known_line(source, desc, &body);
         let ok = dynamic::check(desc, payload).is_ok();
         if !ok {
             self.malformed += 1;
@@ -149,41 +255,41 @@ impl Monitor {
             .messages
             .entry((class, id))
             .or_insert_with(|| MessageStats {
-                name: desc.name.to_owned(),
-                class: desc.class_name.to_owned(),
+                name: crate::escape::token(desc.name),
+                class: crate::escape::token(desc.class_name),
                 priority: desc.priority,
                 ..MessageStats::default()
             });
         entry.count += 1;
-        entry.recent.push_back(now);
-        while entry.recent.front().is_some_and(|t| now - t > RATE_WINDOW) {
-            entry.recent.pop_front();
-        }
-        entry.last = format::fields(desc, payload);
+        entry.recent.add(now, 1);
+        entry.last = body;
         if ok {
             match desc.name {
-                "PONG" => {
-                    if let Some(sent) = self.ping_sent.take() {
-                        self.last_rtt = Some(now - sent);
-                        self.event(now, Event::Pong { rtt: now - sent });
-                    }
-                }
+                "PONG" => match self.pings.pong(now) {
+                    Some(rtt) => push_bounded(&mut self.events, now, Event::Pong { rtt }),
+                    None => push_bounded(&mut self.notices, now, Notice::UnexpectedPong),
+                },
                 "DL_VALUE" => {
                     let value = |name| {
                         dynamic::fields(desc, payload)
                             .filter_map(Result::ok)
                             .find(|(f, _)| f.name == name)
-                            .and_then(|(_, v)| v.as_f64())
+                            .map(|(_, v)| v)
                     };
-                    if let (Some(index), Some(value)) = (value("index"), value("value")) {
-                        let index = index as u8;
-                        let ack_after = self.pending_settings.remove(&index).map(|t| now - t);
-                        self.event(
+                    let index = value("index").and_then(|v| v.as_i64());
+                    let number = value("value").and_then(|v| v.as_f64());
+                    if let (Some(index), Some(value)) =
+                        (index.and_then(|i| u8::try_from(i).ok()), number)
+                    {
+                        let base = scalar_type(Some(desc), "value").unwrap_or(BaseType::F64);
+                        let answer = self.settings.dl_value(now, index, value, base);
+                        push_bounded(
+                            &mut self.events,
                             now,
                             Event::DlValue {
                                 index,
                                 value,
-                                ack_after,
+                                answer,
                             },
                         );
                     }
@@ -195,36 +301,90 @@ impl Monitor {
         line
     }
 
-    fn event(&mut self, now: f64, event: Event) {
-        self.events.push_back((now, event));
-        while self.events.len() > 8 {
-            self.events.pop_front();
+    /// Gives up the PINGs and requests older than their timeouts at `now` (counted
+    /// lost, noted for the live view). Call it regularly; the other methods taking
+    /// `now` do it too where it matters.
+    pub fn tick(&mut self, now: f64) {
+        let lost = self.pings.expire(now);
+        if lost > 0 {
+            push_bounded(&mut self.notices, now, Notice::PingsLost { count: lost });
+        }
+        for e in self.settings.expire(now) {
+            push_bounded(&mut self.notices, now, Notice::RequestExpired(e));
         }
     }
 
-    /// Records that a PING was sent at `now` (the next PONG gives the round-trip time).
+    /// Records that a PING was sent at `now`; the PONGs answer the PINGs outstanding in
+    /// order, oldest first.
     pub fn ping_sent(&mut self, now: f64) {
-        self.ping_sent = Some(now);
+        let lost = self.pings.sent(now);
+        if lost > 0 {
+            push_bounded(&mut self.notices, now, Notice::PingsLost { count: lost });
+        }
     }
 
-    /// Records that a SETTING or GET_SETTING of `index` was sent at `now`.
+    /// Records that a SETTING of `index` to `value` was sent at `now`: only a DL_VALUE
+    /// carrying that value (compared as the type of the `value` fields of SETTING and
+    /// DL_VALUE) acknowledges it; another value is reported as not applied.
+    pub fn setting_value_sent(&mut self, now: f64, index: u8, value: f64) {
+        let base = scalar_type(self.set.find_by_name("datalink", "SETTING"), "value")
+            .unwrap_or(BaseType::F32);
+        self.settings.setting_sent(now, index, value, base);
+    }
+
+    /// Records that a request for setting `index` whose value is not known here was
+    /// sent at `now` (a SETTING sent elsewhere): the next DL_VALUE of that index answers
+    /// it, but is not taken as proof that a value was applied. Prefer
+    /// [`setting_value_sent`](Self::setting_value_sent).
     pub fn setting_sent(&mut self, now: f64, index: u8) {
-        self.pending_settings.insert(index, now);
+        self.settings.get_setting_sent(now, index);
     }
 
-    /// The latest events (PONG round trips, DL_VALUE acknowledgements), oldest first.
+    /// Records that a GET_SETTING of `index` was sent at `now`.
+    pub fn get_setting_sent(&mut self, now: f64, index: u8) {
+        self.settings.get_setting_sent(now, index);
+    }
+
+    /// The latest events (PONG round trips, DL_VALUEs), oldest first; at most
+    /// [`MAX_EVENTS`].
     pub fn events(&self) -> impl Iterator<Item = &(f64, Event)> {
         self.events.iter()
     }
 
+    /// The latest notices (PINGs lost, requests given up, input dropped), oldest first;
+    /// at most [`MAX_EVENTS`].
+    pub fn notices(&self) -> impl Iterator<Item = &(f64, Notice)> {
+        self.notices.iter()
+    }
+
     /// The last round-trip time measured.
     pub fn last_rtt(&self) -> Option<f64> {
-        self.last_rtt
+        self.pings.last_rtt()
+    }
+
+    /// The PINGs outstanding and their statistics.
+    pub fn pings(&self) -> &PingTracker {
+        &self.pings
+    }
+
+    /// The SETTING and GET_SETTING requests pending and their statistics.
+    pub fn settings(&self) -> &SettingTracker {
+        &self.settings
+    }
+
+    /// Input dropped under overload so far (see [`input_gap`](Self::input_gap)).
+    pub fn input_dropped(&self) -> Drops {
+        self.input_dropped
     }
 
     /// Statistics per message, by (class, id).
     pub fn messages(&self) -> &BTreeMap<(u8, u8), MessageStats> {
         &self.messages
+    }
+
+    /// The message set.
+    pub fn set(&self) -> &RuntimeSet {
+        &self.set
     }
 
     /// The decoder's counters (frames, checksum errors...).
@@ -242,6 +402,11 @@ impl Monitor {
         self.malformed
     }
 
+    /// Bytes received.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
     /// Messages received per priority level, most important first.
     pub fn per_priority(&self) -> BTreeMap<std::cmp::Reverse<u8>, u64> {
         let mut out = BTreeMap::new();
@@ -253,30 +418,83 @@ impl Monitor {
 
     /// Bytes per second over the last [`RATE_WINDOW`] seconds.
     pub fn byte_rate(&self, now: f64) -> f64 {
-        let n: usize = self
-            .byte_times
-            .iter()
-            .filter(|(t, _)| now - t <= RATE_WINDOW)
-            .map(|(_, n)| n)
-            .sum();
-        n as f64 / RATE_WINDOW.min(now.max(1e-9))
+        self.byte_rate.per_second(now)
     }
 
-    /// The live view: a table of messages and the link statistics.
-    pub fn render(&self, now: f64) -> String {
-        let mut s = String::new();
+    /// An estimate of the heap memory the monitor holds, in bytes (the decoder's
+    /// fixed buffer included): bounded by the size of the message set, whatever the
+    /// input.
+    pub fn retained_bytes(&self) -> usize {
+        let per_message = std::mem::size_of::<((u8, u8), MessageStats)>() + 4 * 8;
+        let messages: usize = self
+            .messages
+            .values()
+            .map(|m| per_message + m.name.capacity() + m.class.capacity() + m.last.capacity())
+            .sum();
+        messages
+            + std::mem::size_of::<Decoder<AnyTransport>>()
+            + self.last_report.as_ref().map_or(0, String::capacity)
+            + self.events.capacity() * std::mem::size_of::<(f64, Event)>()
+            + self.notices.capacity() * std::mem::size_of::<(f64, Notice)>()
+            + self.pings.capacity() * 8
+            + self.settings.pending() * 64
+    }
+
+    /// The status line: time, byte rate and every counter of lost or rejected input.
+    fn status(&self, now: f64) -> String {
         let st = self.decoder.stats();
-        let _ = writeln!(
-            s,
-            "t={now:7.1}s  {:7.0} B/s  frames ok {}  checksum errors {}  length errors {}  dropped bytes {}  unknown {}  malformed {}",
+        format!(
+            "t={now:7.1}s  {:7.0} B/s  frames ok {}  checksum errors {}  length errors {}  dropped bytes {}  unknown {}  malformed {}  input dropped {} B in {} reads",
             self.byte_rate(now),
             st.frames,
             st.checksum_errors,
             st.length_errors,
             st.dropped_bytes,
             self.unknown,
-            self.malformed
-        );
+            self.malformed,
+            self.input_dropped.bytes,
+            self.input_dropped.reads,
+        )
+    }
+
+    /// PING and SETTING statistics, when there were any.
+    fn uplink_status(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let p = &self.pings;
+        if p.sent_count() > 0 || p.unexpected() > 0 {
+            let mut s = format!(
+                "pings: sent {}  answered {}  lost {}  outstanding {}  unexpected pongs {}",
+                p.sent_count(),
+                p.answered(),
+                p.lost(),
+                p.outstanding(),
+                p.unexpected()
+            );
+            if let Some(rtt) = p.last_rtt() {
+                let _ = write!(s, "  last round trip {:.1} ms", rtt * 1e3);
+            }
+            out.push(s);
+        }
+        let st = &self.settings;
+        if st.acknowledged() + st.not_applied() + st.unanswered() > 0 || st.pending() > 0 {
+            out.push(format!(
+                "settings: acknowledged {}  not applied {}  unanswered {}  pending {}",
+                st.acknowledged(),
+                st.not_applied(),
+                st.unanswered(),
+                st.pending()
+            ));
+        }
+        out
+    }
+
+    /// The live view: the status, a table of messages, the latest events and notices.
+    pub fn render(&self, now: f64) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "{}", self.status(now));
+        for line in self.uplink_status() {
+            let _ = writeln!(s, "{line}");
+        }
         if let Some(report) = &self.last_report {
             let _ = writeln!(s, "aircraft link report: {report}");
         }
@@ -287,9 +505,7 @@ impl Monitor {
         );
         for m in self.messages.values() {
             let mut last = m.last.clone();
-            if last.chars().count() > 110 {
-                last = last.chars().take(107).chain("...".chars()).collect();
-            }
+            format::truncate(&mut last, 110);
             let _ = writeln!(
                 s,
                 "{:<10} {:<20} {:>4} {:>7} {:>7.1}  {last}",
@@ -301,23 +517,10 @@ impl Monitor {
             );
         }
         for (t, e) in &self.events {
-            let _ = match e {
-                Event::Pong { rtt } => {
-                    writeln!(s, "[{t:7.1}s] PONG: round trip {:.1} ms", rtt * 1e3)
-                }
-                Event::DlValue {
-                    index,
-                    value,
-                    ack_after: Some(after),
-                } => writeln!(
-                    s,
-                    "[{t:7.1}s] DL_VALUE index={index} value={value}: acknowledged after {:.1} ms",
-                    after * 1e3
-                ),
-                Event::DlValue { index, value, .. } => {
-                    writeln!(s, "[{t:7.1}s] DL_VALUE index={index} value={value}")
-                }
-            };
+            let _ = writeln!(s, "[{t:7.1}s] {}", describe_event(e));
+        }
+        for (t, n) in &self.notices {
+            let _ = writeln!(s, "[{t:7.1}s] {}", describe_notice(n));
         }
         s
     }
@@ -329,5 +532,300 @@ impl Monitor {
             let _ = write!(s, "  {}: {n}", p.0);
         }
         s
+    }
+
+    /// The summary at the end of a run: the status line (with the input dropped under
+    /// overload), PING and SETTING statistics, and messages per priority level.
+    pub fn summary(&self, now: f64) -> String {
+        let mut s = self.status(now);
+        for line in self.uplink_status() {
+            s.push('\n');
+            s.push_str(&line);
+        }
+        s.push('\n');
+        s.push_str(&self.priority_summary());
+        s
+    }
+}
+
+/// An event as a line of the live view.
+pub fn describe_event(e: &Event) -> String {
+    match e {
+        Event::Pong { rtt } => format!("PONG: round trip {:.1} ms", rtt * 1e3),
+        Event::DlValue {
+            index,
+            value,
+            answer,
+        } => {
+            let head = format!("DL_VALUE index={index} value={value}");
+            match answer {
+                Answer::Unsolicited => head,
+                Answer::Acknowledged { after } => {
+                    format!("{head}: SETTING acknowledged after {:.1} ms", after * 1e3)
+                }
+                Answer::NotApplied { requested, after } => format!(
+                    "{head}: SETTING to {requested} not applied ({:.1} ms after it was sent)",
+                    after * 1e3
+                ),
+                Answer::Answered { after } => {
+                    format!("{head}: answer after {:.1} ms", after * 1e3)
+                }
+            }
+        }
+    }
+}
+
+/// A notice as a line of the live view.
+pub fn describe_notice(n: &Notice) -> String {
+    match n {
+        Notice::PingsLost { count } => format!("{count} PING(s) lost: no PONG in time"),
+        Notice::UnexpectedPong => "PONG that answers no PING outstanding".into(),
+        Notice::RequestExpired(Expired {
+            index,
+            requested: Some(requested),
+            reported: Some(reported),
+        }) => format!(
+            "SETTING index={index} to {requested} not applied: the aircraft still reports {reported}"
+        ),
+        Notice::RequestExpired(Expired {
+            index,
+            requested: Some(requested),
+            reported: None,
+        }) => format!("SETTING index={index} to {requested}: no answer"),
+        Notice::RequestExpired(Expired { index, .. }) => {
+            format!("request for setting index={index}: no answer")
+        }
+        Notice::InputDropped(d) => format!(
+            "input overload: dropped {} bytes in {} reads",
+            d.bytes, d.reads
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::escape;
+    use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
+
+    const XML: &str = r#"<protocol>
+      <msg_class name="telemetry" id="1">
+        <message name="PONG" id="3"/>
+        <message name="DL_VALUE" id="31"><field name="index" type="uint8"/><field name="value" type="float"/></message>
+        <message name="INFO_MSG" id="215"><field name="msg" type="char[]"/></message>
+        <message name="GPS_LLA" id="9"><field name="lat" type="int32" unit="1e7deg" alt_unit="deg" alt_unit_coef="0.0000001"/></message>
+      </msg_class>
+      <msg_class name="datalink" id="2">
+        <message name="SETTING" id="4"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/><field name="value" type="float"/></message>
+        <message name="PING" id="8"/>
+      </msg_class></protocol>"#;
+
+    fn monitor() -> Monitor {
+        let set = RuntimeSet::parse("t.xml", XML).unwrap();
+        Monitor::new(set, PprzV2::new().into())
+    }
+
+    fn frame(id: u8, payload: &[u8]) -> Vec<u8> {
+        let mut buf = [0u8; 300];
+        let meta = TxMeta::new(MsgHeader::new(7, 0, 1, id));
+        let n = PprzV2::new().encode(&meta, payload, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn dl_value(index: u8, value: f32) -> Vec<u8> {
+        let mut p = vec![index];
+        p.extend(value.to_le_bytes());
+        frame(31, &p)
+    }
+
+    fn feed(m: &mut Monitor, now: f64, bytes: &[u8]) -> Vec<String> {
+        let mut lines = Vec::new();
+        m.feed(now, bytes, |l, _| lines.push(l.to_owned()));
+        lines
+    }
+
+    fn no_control(text: &str) {
+        for line in text.lines() {
+            assert!(!line.chars().any(escape::is_unsafe), "{line:?}");
+        }
+    }
+
+    /// Issue: with `--ping 0.2` and a true round trip of 500 ms, 100.8 ms was shown.
+    #[test]
+    fn each_pong_is_matched_to_its_ping() {
+        let mut m = monitor();
+        let pong = frame(3, &[]);
+        for i in 0..20 {
+            m.ping_sent(f64::from(i) * 0.2);
+        }
+        for i in 0..17 {
+            feed(&mut m, f64::from(i) * 0.2 + 0.5, &pong);
+        }
+        let rtts: Vec<f64> = m
+            .events()
+            .map(|(_, e)| match e {
+                Event::Pong { rtt } => *rtt,
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        assert_eq!(rtts.len(), MAX_EVENTS);
+        for rtt in rtts {
+            assert!((rtt - 0.5).abs() < 1e-9, "{rtt}");
+        }
+        assert!((m.last_rtt().unwrap() - 0.5).abs() < 1e-9);
+        let view = m.render(4.0);
+        assert!(view.contains("PONG: round trip 500.0 ms"), "{view}");
+        assert!(
+            view.contains("pings: sent 20  answered 17  lost 0  outstanding 3"),
+            "{view}"
+        );
+        // The outstanding ones time out.
+        m.tick(100.0);
+        assert_eq!(m.pings().lost(), 3);
+        assert!(m.render(100.0).contains("3 PING(s) lost"));
+        // A PONG nobody asked for is noted, not measured.
+        feed(&mut m, 101.0, &pong);
+        assert_eq!(m.pings().unexpected(), 1);
+    }
+
+    /// Issue: a periodic DL_VALUE carrying the old value was shown as the
+    /// acknowledgement of a SETTING the aircraft ignored.
+    #[test]
+    fn only_the_value_set_acknowledges_a_setting() {
+        let mut m = monitor();
+        m.setting_value_sent(1.0, 4, 0.1);
+        feed(&mut m, 1.1, &dl_value(4, 1.0));
+        let last = m.events().last().unwrap().1.clone();
+        assert!(
+            matches!(
+                last,
+                Event::DlValue {
+                    index: 4,
+                    value: 1.0,
+                    answer: Answer::NotApplied { .. }
+                }
+            ),
+            "{last:?}"
+        );
+        assert!(
+            m.render(1.1)
+                .contains("SETTING to 0.10000000149011612 not applied")
+        );
+        // The value set, as the float the aircraft stores.
+        feed(&mut m, 1.2, &dl_value(4, 0.1));
+        let last = m.events().last().unwrap().1.clone();
+        assert!(
+            matches!(last, Event::DlValue { answer: Answer::Acknowledged { after }, .. } if (after - 0.2).abs() < 1e-9),
+            "{last:?}"
+        );
+        assert_eq!(m.settings().acknowledged(), 1);
+        // A SETTING that the aircraft never applies is given up and counted.
+        m.setting_value_sent(2.0, 5, 3.0);
+        feed(&mut m, 2.1, &dl_value(5, 2.0));
+        m.tick(10.0);
+        assert_eq!(m.settings().not_applied(), 1);
+        let view = m.render(10.0);
+        assert!(
+            view.contains("SETTING index=5 to 3 not applied: the aircraft still reports 2"),
+            "{view}"
+        );
+        assert!(
+            view.contains("settings: acknowledged 1  not applied 1"),
+            "{view}"
+        );
+    }
+
+    #[test]
+    fn input_dropped_is_counted_shown_and_resynchronises() {
+        let mut m = monitor();
+        let f = frame(215, &[2, b'o', b'k']);
+        // Half a frame, then a gap: its end was dropped.
+        feed(&mut m, 0.0, &f[..4]);
+        let mut lines = Vec::new();
+        m.input_gap(
+            0.1,
+            Drops {
+                bytes: 4000,
+                reads: 3,
+            },
+            |l, _| lines.push(l.to_owned()),
+        );
+        lines.extend(feed(&mut m, 0.1, &f));
+        assert_eq!(lines, [r#"7 telemetry INFO_MSG msg="ok""#]);
+        m.input_gap(
+            0.2,
+            Drops {
+                bytes: 10,
+                reads: 1,
+            },
+            |_, _| {},
+        );
+        m.input_gap(0.3, Drops::default(), |_, _| {});
+        assert_eq!(
+            m.input_dropped(),
+            Drops {
+                bytes: 4010,
+                reads: 4
+            }
+        );
+        let view = m.render(0.3);
+        assert!(view.contains("input dropped 4010 B in 4 reads"), "{view}");
+        assert!(
+            view.contains("input overload: dropped 4000 bytes in 3 reads"),
+            "{view}"
+        );
+        assert!(m.summary(0.3).contains("input dropped 4010 B in 4 reads"));
+    }
+
+    /// Issue: one INFO_MSG forged a `7 telemetry ALIVE md5sum=FORGED` line plus
+    /// clear-screen and window-title escape codes.
+    #[test]
+    fn hostile_text_cannot_forge_lines_or_reach_the_terminal() {
+        let mut m = monitor();
+        let text = b"hi\n7 telemetry ALIVE md5sum=FORGED\x1b[2J\x1b]0;owned\x07\r\xc2\x9b";
+        let mut p = vec![text.len() as u8];
+        p.extend_from_slice(text);
+        let lines = feed(&mut m, 0.0, &frame(215, &p));
+        assert_eq!(lines.len(), 1);
+        assert!(
+            lines[0].starts_with(
+                r#"7 telemetry INFO_MSG msg="hi\n7 telemetry ALIVE md5sum=FORGED\x1b[2J"#
+            ),
+            "{}",
+            lines[0]
+        );
+        no_control(&lines[0]);
+        let view = m.render(1.0);
+        no_control(&view);
+        assert!(!view.contains("\nALIVE") && !view.contains('\x1b') && !view.contains('\r'));
+    }
+
+    #[test]
+    fn units_are_apart_from_values() {
+        let mut m = monitor();
+        let lines = feed(&mut m, 0.0, &frame(9, &434_629_172i32.to_le_bytes()));
+        assert_eq!(
+            lines,
+            ["7 telemetry GPS_LLA lat=434629172 [1e7deg] 43.4629172 deg"]
+        );
+    }
+
+    #[test]
+    fn rates_and_state_are_bounded() {
+        let mut m = monitor();
+        let f = dl_value(1, 1.0);
+        let chunk: Vec<u8> = f.repeat(1000);
+        for i in 0..200 {
+            feed(&mut m, f64::from(i) * 0.01, &chunk);
+        }
+        // 200,000 messages in two seconds: the rate is right, the state small.
+        let stats = &m.messages()[&(1, 31)];
+        assert_eq!(stats.count, 200_000);
+        assert!((stats.rate(2.0) - 1e5).abs() < 1.0, "{}", stats.rate(2.0));
+        assert_eq!(stats.rate(100.0), 0.0);
+        assert!(m.retained_bytes() < 64 * 1024, "{}", m.retained_bytes());
+        assert!(m.events().count() <= MAX_EVENTS);
+        let r = m.byte_rate(2.0);
+        assert!((r - 200.0 * chunk.len() as f64 / 2.0).abs() < 1.0, "{r}");
     }
 }

@@ -107,7 +107,8 @@ fn decodes_records_and_replays_the_same_output() {
     let lines: Vec<&str> = live.lines().collect();
     assert_eq!(lines.len(), 5, "{live}");
     assert!(
-        lines[0].starts_with("7 telemetry GPS mode=3byte_mask utm_east=37712345cm[377123.450m]"),
+        lines[0]
+            .starts_with("7 telemetry GPS mode=3 [byte_mask] utm_east=37712345 [cm] 377123.450 m"),
         "{}",
         lines[0]
     );

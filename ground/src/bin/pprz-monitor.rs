@@ -1,118 +1,27 @@
 //! `pprz-monitor`: watch a Paparazzi-compatible aircraft live, from UDP, TCP, a serial
 //! port, a file or standard input, with any `messages.xml`.
+//!
+//! Exit status: 0 after a complete run (end of input, `--duration`, Ctrl-C), 1 when
+//! the input, the output or the recording failed, 2 for invalid options.
 
-use std::io::{Read, Write};
+use std::fs::File;
+use std::io::{BufWriter, ErrorKind, Write};
 use std::net::{SocketAddr, TcpStream, UdpSocket};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use clap::{Parser, ValueEnum};
+use clap::Parser;
+use pprz_ground::cli::Args;
+use pprz_ground::escape;
+use pprz_ground::input::{self, DEFAULT_CAPACITY, End, InputQueue, Overflow, Pop};
 use pprz_ground::monitor::Monitor;
+use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
-use pprz_transports::{
-    AnyTransport, Encoder, MsgHeader, PprzLog, PprzV1, PprzV2, TxMeta, XBee24, XBee868,
-};
-
-/// Transports the monitor can decode.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum Transport {
-    /// PPRZ protocol v2 (source, destination, class, id).
-    Pprz2,
-    /// PPRZ protocol v1 (sender, id); messages are taken as telemetry.
-    Pprz1,
-    /// XBee API, 802.15.4 modules.
-    Xbee,
-    /// XBee API, 868 MHz modules.
-    Xbee868,
-    /// PPRZLOG records (SD card logs, recordings of this tool).
-    Pprzlog,
-}
-
-impl Transport {
-    fn any(self) -> AnyTransport {
-        match self {
-            Self::Pprz2 => PprzV2::new().into(),
-            Self::Pprz1 => PprzV1::new(1).into(),
-            Self::Xbee => XBee24::default().into(),
-            Self::Xbee868 => XBee868::default().into(),
-            Self::Pprzlog => PprzLog::TELEMETRY.into(),
-        }
-    }
-}
-
-/// Watch a Paparazzi-compatible aircraft: decode its telemetry live with any
-/// messages.xml, measure PING round trips, send SETTINGs and see them acknowledged.
-#[derive(Debug, Parser)]
-#[command(version, about)]
-struct Args {
-    /// The messages.xml to decode with (any Paparazzi file, e.g. the full PPRZLINK one).
-    #[arg(long, default_value = "messages.xml")]
-    messages: PathBuf,
-    /// Framing of the byte stream.
-    #[arg(long, value_enum, default_value = "pprz2")]
-    transport: Transport,
-    /// Listen for UDP datagrams on this address (Paparazzi's ground link uses port 4242).
-    #[arg(long, value_name = "ADDR", group = "input")]
-    udp: Option<SocketAddr>,
-    /// Connect to a TCP server.
-    #[arg(long, value_name = "ADDR", group = "input")]
-    tcp: Option<SocketAddr>,
-    /// Read a serial port (e.g. /dev/ttyUSB0).
-    #[arg(long, value_name = "DEVICE", group = "input")]
-    serial: Option<String>,
-    /// Serial port baud rate.
-    #[arg(long, default_value_t = 57_600)]
-    baud: u32,
-    /// Read (replay) a file, e.g. a PPRZLOG recording with `--transport pprzlog`.
-    #[arg(long, value_name = "PATH", group = "input")]
-    file: Option<PathBuf>,
-    /// Read standard input.
-    #[arg(long, group = "input")]
-    stdin: bool,
-    /// Where uplink frames go with --udp (the aircraft's datalink port, e.g. 127.0.0.1:4243).
-    /// With --tcp or --serial they go back on the same stream.
-    #[arg(long, value_name = "ADDR")]
-    uplink: Option<SocketAddr>,
-    /// Aircraft id for PING/SETTING.
-    #[arg(long, default_value_t = 7)]
-    ac_id: u8,
-    /// Send a PING every this many seconds and show the round-trip time.
-    #[arg(long, value_name = "SECONDS")]
-    ping: Option<f64>,
-    /// Send SETTING index=value at start (repeatable) and show the DL_VALUE acknowledgement.
-    #[arg(long = "setting", value_name = "INDEX=VALUE", value_parser = parse_setting)]
-    settings: Vec<(u8, f32)>,
-    /// One line per message instead of the live table (for scripts).
-    #[arg(long)]
-    lines: bool,
-    /// Record every received frame to this PPRZLOG file (replay it with --file and
-    /// --transport pprzlog).
-    #[arg(long, value_name = "PATH")]
-    record: Option<PathBuf>,
-    /// Stop after this many seconds.
-    #[arg(long, value_name = "SECONDS")]
-    duration: Option<f64>,
-}
-
-fn parse_setting(s: &str) -> Result<(u8, f32), String> {
-    let (i, v) = s
-        .split_once('=')
-        .ok_or_else(|| format!("expected INDEX=VALUE, got `{s}`"))?;
-    let i = i
-        .trim()
-        .parse::<u8>()
-        .map_err(|e| format!("index `{i}`: {e}"))?;
-    let v = v
-        .trim()
-        .parse::<f32>()
-        .map_err(|e| format!("value `{v}`: {e}"))?;
-    Ok((i, v))
-}
+use pprz_transports::AnyTransport;
 
 /// Where uplink frames are written.
 enum UplinkSink {
@@ -133,56 +42,37 @@ impl UplinkSink {
     }
 }
 
-/// Reads `reader` on a thread, sending chunks; an empty chunk means end of input.
-fn spawn_reader(mut reader: Box<dyn Read + Send>, tx: mpsc::Sender<Vec<u8>>) {
-    std::thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        loop {
-            match reader.read(&mut buf) {
-                Ok(0) => {
-                    let _ = tx.send(Vec::new());
-                    return;
-                }
-                Ok(n) => {
-                    if tx.send(buf[..n].to_vec()).is_err() {
-                        return;
-                    }
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => {
-                    eprintln!("input error: {e}");
-                    let _ = tx.send(Vec::new());
-                    return;
-                }
-            }
-        }
-    });
+/// An input opened but not read yet (reading starts once the recording is open).
+enum Source {
+    Udp(UdpSocket),
+    Stream(Box<dyn std::io::Read + Send>, Overflow),
 }
 
-fn open_input(args: &Args, tx: mpsc::Sender<Vec<u8>>) -> Result<UplinkSink, String> {
+/// The identities of the input files (which the recording must not overwrite), each
+/// with a description.
+type Inputs = Vec<(FileId, String)>;
+
+/// Opens the input; returns it, the uplink, and the input files.
+fn open_input(args: &Args) -> Result<(Source, UplinkSink, Inputs), String> {
+    let mut inputs = Vec::new();
+    if let Ok(id) = FileId::of_path(&args.messages) {
+        inputs.push((id, format!("the messages file {}", args.messages.display())));
+    }
     if let Some(addr) = args.udp {
         let socket = UdpSocket::bind(addr).map_err(|e| format!("cannot bind UDP {addr}: {e}"))?;
         let recv = socket.try_clone().map_err(|e| e.to_string())?;
-        std::thread::spawn(move || {
-            let mut buf = [0u8; 2048];
-            while let Ok((n, _)) = recv.recv_from(&mut buf) {
-                if tx.send(buf[..n].to_vec()).is_err() {
-                    return;
-                }
-            }
-        });
-        return Ok(match args.uplink {
+        let sink = match args.uplink {
             Some(to) => UplinkSink::Udp(socket, to),
             None => UplinkSink::None,
-        });
+        };
+        return Ok((Source::Udp(recv), sink, inputs));
     }
     if let Some(addr) = args.tcp {
         let stream =
             TcpStream::connect(addr).map_err(|e| format!("cannot connect to {addr}: {e}"))?;
         let write = stream.try_clone().map_err(|e| e.to_string())?;
-        spawn_reader(Box::new(stream), tx);
-        return Ok(UplinkSink::Stream(Box::new(write)));
+        let source = Source::Stream(Box::new(stream), Overflow::DropOldest);
+        return Ok((source, UplinkSink::Stream(Box::new(write)), inputs));
     }
     if let Some(dev) = &args.serial {
         let port = serialport::new(dev, args.baud)
@@ -190,48 +80,135 @@ fn open_input(args: &Args, tx: mpsc::Sender<Vec<u8>>) -> Result<UplinkSink, Stri
             .open()
             .map_err(|e| format!("cannot open serial port {dev}: {e}"))?;
         let write = port.try_clone().map_err(|e| e.to_string())?;
-        spawn_reader(Box::new(port), tx);
-        return Ok(UplinkSink::Stream(Box::new(write)));
+        if let Ok(id) = FileId::of_path(Path::new(dev)) {
+            inputs.push((id, format!("the serial port {dev}")));
+        }
+        let source = Source::Stream(Box::new(port), Overflow::DropOldest);
+        return Ok((source, UplinkSink::Stream(Box::new(write)), inputs));
     }
     if let Some(path) = &args.file {
-        let file = std::fs::File::open(path)
-            .map_err(|e| format!("cannot open {}: {e}", path.display()))?;
-        spawn_reader(Box::new(file), tx);
-        return Ok(UplinkSink::None);
+        let file = open_file(path)?;
+        let id = FileId::of_file(path, &file)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        inputs.push((id, format!("the --file input {}", path.display())));
+        let source = Source::Stream(Box::new(file), Overflow::Block);
+        return Ok((source, UplinkSink::None, inputs));
     }
-    spawn_reader(Box::new(std::io::stdin()), tx);
-    Ok(UplinkSink::None)
+    if let Some(id) = FileId::of_stdin() {
+        inputs.push((id, "the file standard input reads".to_owned()));
+    }
+    let source = Source::Stream(Box::new(std::io::stdin()), Overflow::Block);
+    Ok((source, UplinkSink::None, inputs))
+}
+
+/// Opens a file to replay: a directory is an error now, not a read error later.
+fn open_file(path: &Path) -> Result<File, String> {
+    let cannot = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", path.display());
+    let file = File::open(path).map_err(|e| cannot(&e))?;
+    let meta = file.metadata().map_err(|e| cannot(&e))?;
+    if meta.is_dir() {
+        return Err(cannot(&"it is a directory"));
+    }
+    Ok(file)
+}
+
+/// Where decoded messages go: standard output (`--lines`) and the recording. Keeps
+/// the first error of each.
+struct Output {
+    lines: bool,
+    stdout: BufWriter<std::io::Stdout>,
+    stdout_error: Option<std::io::Error>,
+    recorder: Option<Recorder<BufWriter<File>>>,
+    record_path: Option<PathBuf>,
+    record_error: Option<String>,
+}
+
+impl Output {
+    fn message(&mut self, now: f64, line: &str, raw: &[u8]) {
+        if self.lines
+            && self.stdout_error.is_none()
+            && let Err(e) = writeln!(self.stdout, "{line}")
+        {
+            self.stdout_error = Some(e);
+        }
+        if let Some(r) = self.recorder.as_mut()
+            && self.record_error.is_none()
+            && let Err(e) = r.record(now, raw)
+        {
+            self.record_error = Some(self.record_failure(&e));
+        }
+    }
+
+    fn record_failure(&self, e: &dyn std::fmt::Display) -> String {
+        let path = self.record_path.as_deref().unwrap_or(Path::new("?"));
+        format!("recording to {} failed: {e}", path.display())
+    }
+
+    fn flush_stdout(&mut self) {
+        if self.stdout_error.is_none()
+            && let Err(e) = self.stdout.flush()
+        {
+            self.stdout_error = Some(e);
+        }
+    }
+
+    /// Whether the run must stop: the output or the recording failed.
+    fn failed(&self) -> bool {
+        self.stdout_error.is_some() || self.record_error.is_some()
+    }
+
+    /// Writes the table view.
+    fn screen(&mut self, text: &str) {
+        if self.stdout_error.is_none()
+            && let Err(e) =
+                write!(self.stdout, "\x1b[2J\x1b[H{text}").and_then(|()| self.stdout.flush())
+        {
+            self.stdout_error = Some(e);
+        }
+    }
 }
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    let set = match RuntimeSet::load(&args.messages) {
-        Ok(set) => set,
+    if let Err(e) = args.check() {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("{e}");
-            eprintln!("(give the messages.xml of the aircraft with --messages)");
-            return ExitCode::FAILURE;
+            eprintln!("error: {}", escape::lines(&e));
+            ExitCode::FAILURE
         }
-    };
-    let transport = args.transport.any();
-    let (tx, rx) = mpsc::channel();
-    let mut uplink_sink = match open_input(&args, tx) {
-        Ok(sink) => sink,
-        Err(e) => {
-            eprintln!("{e}");
-            return ExitCode::FAILURE;
+    }
+}
+
+fn run(args: &Args) -> Result<(), String> {
+    let set = RuntimeSet::load(&args.messages)
+        .map_err(|e| format!("{e}\n(give the messages.xml of the aircraft with --messages)"))?;
+    let transport: AnyTransport = args.transport.any();
+    let (source, mut uplink_sink, inputs) = open_input(args)?;
+    // The recording is opened (and emptied) only after checking it is no input.
+    let recorder = match &args.record {
+        Some(path) => {
+            let file = record::open_recording(path, &inputs).map_err(|e| e.to_string())?;
+            Some(Recorder::new(BufWriter::new(file), transport))
         }
-    };
-    let mut record = match &args.record {
-        Some(path) => match std::fs::File::create(path) {
-            Ok(f) => Some(std::io::BufWriter::new(f)),
-            Err(e) => {
-                eprintln!("cannot create {}: {e}", path.display());
-                return ExitCode::FAILURE;
-            }
-        },
         None => None,
     };
+    let queue = match source {
+        Source::Udp(socket) => {
+            let q = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
+            input::spawn_udp(socket, q.clone());
+            q
+        }
+        Source::Stream(reader, overflow) => {
+            let q = InputQueue::new(DEFAULT_CAPACITY, overflow);
+            input::spawn_stream(reader, q.clone());
+            q
+        }
+    };
+    let live = queue.overflow() == Overflow::DropOldest;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
@@ -243,100 +220,138 @@ fn main() -> ExitCode {
     let start = Instant::now();
     let now = || start.elapsed().as_secs_f64();
     let mut monitor = Monitor::new(set, transport);
-    let log_transport = PprzLog::TELEMETRY;
-    let mut frame_buf = vec![0u8; log_transport.max_frame_len()];
-    let mut send =
-        |monitor: &mut Monitor, name: &str, values: &[(&str, f64)], setting: Option<u8>| {
-            match uplink::frame(&set, transport, args.ac_id, name, values) {
-                Ok(frame) => match uplink_sink.send(&frame) {
-                    Ok(()) => match setting {
-                        Some(index) => monitor.setting_sent(now(), index),
-                        None => monitor.ping_sent(now()),
-                    },
-                    Err(e) => eprintln!("cannot send {name}: {e}"),
-                },
-                Err(e) => eprintln!("cannot build {name}: {e}"),
+    let mut out = Output {
+        lines: args.lines,
+        stdout: BufWriter::new(std::io::stdout()),
+        stdout_error: None,
+        recorder,
+        record_path: args.record.clone(),
+        record_error: None,
+    };
+    let mut send = |name: &str, values: &[(&str, f64)]| match uplink::frame(
+        &set, transport, args.ac_id, name, values,
+    ) {
+        Ok(frame) => match uplink_sink.send(&frame) {
+            Ok(()) => true,
+            Err(e) => {
+                eprintln!("cannot send {name}: {}", escape::lines(&e.to_string()));
+                false
             }
-        };
+        },
+        Err(e) => {
+            eprintln!("cannot build {name}: {}", escape::lines(&e.to_string()));
+            false
+        }
+    };
     for (index, value) in &args.settings {
         let values = [
             ("index", f64::from(*index)),
             ("ac_id", f64::from(args.ac_id)),
             ("value", f64::from(*value)),
         ];
-        send(&mut monitor, "SETTING", &values, Some(*index));
+        if send("SETTING", &values) {
+            monitor.setting_value_sent(now(), *index, f64::from(*value));
+        }
     }
     let mut next_ping = args.ping.map(|_| 0.0);
     let mut next_render = 0.0;
-    let mut ended = false;
-    while !stop.load(Ordering::SeqCst) && !ended {
+    let mut next_flush = 0.0;
+    let mut next_drop_warning = 0.0;
+    let mut input_error = None;
+    while !stop.load(Ordering::SeqCst) && !out.failed() {
         let t = now();
         if args.duration.is_some_and(|d| t >= d) {
             break;
         }
+        monitor.tick(t);
         if let (Some(period), Some(at)) = (args.ping, next_ping)
             && t >= at
         {
-            send(&mut monitor, "PING", &[], None);
-            next_ping = Some(at + period);
-        }
-        match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok(chunk) if chunk.is_empty() => ended = true,
-            Ok(chunk) => {
-                monitor.feed(now(), &chunk, |line, raw| {
-                    if args.lines {
-                        println!("{line}");
-                    }
-                    if let Some(w) = record.as_mut() {
-                        write_record(w, &log_transport, &mut frame_buf, now(), raw, transport);
-                    }
-                });
+            if send("PING", &[]) {
+                monitor.ping_sent(now());
             }
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => ended = true,
+            // After a stall, the next PING is one period from now, not a burst.
+            next_ping = Some((at + period).max(t));
         }
-        if !args.lines && now() >= next_render {
-            print!("\x1b[2J\x1b[H{}", monitor.render(now()));
-            let _ = std::io::stdout().flush();
-            next_render = now() + 0.5;
+        match queue.pop(Duration::from_millis(50)) {
+            Pop::Data {
+                bytes,
+                dropped_before,
+            } => {
+                let t = now();
+                if !dropped_before.is_empty() {
+                    if args.lines && t >= next_drop_warning {
+                        let d = monitor.input_dropped();
+                        eprintln!(
+                            "warning: input overload at t={t:.1}s: dropped {} bytes in {} reads so far",
+                            d.bytes + dropped_before.bytes,
+                            d.reads + dropped_before.reads
+                        );
+                        next_drop_warning = t + 1.0;
+                    }
+                    monitor.input_gap(t, dropped_before, |line, raw| out.message(t, line, raw));
+                }
+                monitor.feed(t, &bytes, |line, raw| out.message(t, line, raw));
+            }
+            Pop::Idle => {}
+            Pop::End(End::Eof) => break,
+            Pop::End(End::Error(e)) => {
+                input_error = Some(e);
+                break;
+            }
+        }
+        let t = now();
+        if args.lines && (live || t >= next_flush) {
+            out.flush_stdout();
+            next_flush = t + 0.1;
+        }
+        if !args.lines && t >= next_render {
+            out.screen(&monitor.render(t));
+            next_render = t + 0.5;
         }
     }
-    monitor.flush(now(), |line, _| {
-        if args.lines {
-            println!("{line}");
-        }
-    });
-    if let Some(mut w) = record {
-        let _ = w.flush();
+    queue.close();
+    let t = now();
+    if !out.failed() {
+        monitor.flush(t, |line, raw| out.message(t, line, raw));
     }
+    monitor.tick(t);
     if !args.lines {
-        print!("\x1b[2J\x1b[H{}", monitor.render(now()));
+        out.screen(&monitor.render(t));
     }
-    eprintln!("{}", monitor.priority_summary());
-    ExitCode::SUCCESS
-}
-
-/// Appends one received frame to a PPRZLOG recording (time stamp in 100 µs ticks).
-fn write_record(
-    w: &mut impl Write,
-    log: &PprzLog,
-    buf: &mut [u8],
-    now: f64,
-    raw: &[u8],
-    transport: AnyTransport,
-) {
-    let Ok((frame, _)) = pprz_transports::Framing::parse(&transport, raw) else {
-        return;
-    };
-    let header = MsgHeader::new(
-        frame.source(),
-        frame.destination().unwrap_or(0),
-        frame.class(),
-        frame.msg_id(),
-    )
-    .with_component(frame.component());
-    let meta = TxMeta::new(header).at((now * 10_000.0) as u32);
-    if let Ok(n) = log.encode(&meta, frame.payload(), buf) {
-        let _ = w.write_all(&buf[..n]);
+    out.flush_stdout();
+    let mut errors = Vec::new();
+    if let Some(e) = input_error {
+        errors.push(format!("input error: {e}"));
+    }
+    if let Some(r) = out.recorder.take() {
+        let records = r.records();
+        match r.finish() {
+            Ok(_) if out.record_error.is_none() => {
+                if let Some(path) = &args.record {
+                    eprintln!("recorded {records} frames to {}", path.display());
+                }
+            }
+            Ok(_) => {}
+            Err(e) => {
+                if out.record_error.is_none() {
+                    out.record_error = Some(out.record_failure(&e));
+                }
+            }
+        }
+    }
+    if let Some(e) = out.record_error.take() {
+        errors.push(e);
+    }
+    match out.stdout_error.take() {
+        Some(e) if e.kind() == ErrorKind::BrokenPipe => {} // the reader has seen enough
+        Some(e) => errors.push(format!("cannot write the output: {e}")),
+        None => {}
+    }
+    eprintln!("{}", monitor.summary(t));
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(errors.join("\n"))
     }
 }

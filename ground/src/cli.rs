@@ -1,0 +1,302 @@
+//! The command line of `pprz-monitor`, with every value checked when it is parsed: a
+//! value out of range is an error with a clear message (and exit status 2), never a
+//! run that does not end (`--duration NaN`) or floods the link (`--ping 0`).
+//!
+//! ```
+//! use clap::Parser as _;
+//! use pprz_ground::cli::Args;
+//! let args = Args::try_parse_from(["pprz-monitor", "--stdin", "--duration", "2.5"]).unwrap();
+//! assert_eq!(args.duration, Some(2.5));
+//! let e = Args::try_parse_from(["pprz-monitor", "--duration", "NaN"]).unwrap_err();
+//! assert!(e.to_string().contains("not a finite number"));
+//! ```
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use clap::{Parser, ValueEnum};
+use pprz_transports::{AnyTransport, PprzLog, PprzV1, PprzV2, XBee24, XBee868};
+
+/// Longest `--duration`: one year, in seconds.
+pub const MAX_DURATION: f64 = 366.0 * 24.0 * 3600.0;
+
+/// Shortest `--ping` period, in seconds (20 PINGs per second).
+pub const MIN_PING_PERIOD: f64 = 0.05;
+
+/// Longest `--ping` period, in seconds (one hour).
+pub const MAX_PING_PERIOD: f64 = 3600.0;
+
+/// Highest `--baud` rate accepted.
+pub const MAX_BAUD: u32 = 20_000_000;
+
+/// Transports the monitor can decode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Transport {
+    /// PPRZ protocol v2 (source, destination, class, id).
+    Pprz2,
+    /// PPRZ protocol v1 (sender, id); messages are taken as telemetry.
+    Pprz1,
+    /// XBee API, 802.15.4 modules.
+    Xbee,
+    /// XBee API, 868 MHz modules.
+    Xbee868,
+    /// PPRZLOG records (SD card logs, recordings of this tool).
+    Pprzlog,
+}
+
+impl Transport {
+    /// The transport, with its default settings.
+    pub fn any(self) -> AnyTransport {
+        match self {
+            Self::Pprz2 => PprzV2::new().into(),
+            Self::Pprz1 => PprzV1::new(1).into(),
+            Self::Xbee => XBee24::default().into(),
+            Self::Xbee868 => XBee868::default().into(),
+            Self::Pprzlog => PprzLog::TELEMETRY.into(),
+        }
+    }
+}
+
+/// Watch a Paparazzi-compatible aircraft: decode its telemetry live with any
+/// messages.xml, measure PING round trips, send SETTINGs and see them acknowledged.
+#[derive(Debug, Parser)]
+#[command(name = "pprz-monitor", version, about)]
+pub struct Args {
+    /// The messages.xml to decode with (any Paparazzi file, e.g. the full PPRZLINK one).
+    #[arg(long, default_value = "messages.xml")]
+    pub messages: PathBuf,
+    /// Framing of the byte stream.
+    #[arg(long, value_enum, default_value = "pprz2")]
+    pub transport: Transport,
+    /// Listen for UDP datagrams on this address (Paparazzi's ground link uses port 4242).
+    #[arg(long, value_name = "ADDR", group = "input")]
+    pub udp: Option<SocketAddr>,
+    /// Connect to a TCP server.
+    #[arg(long, value_name = "ADDR", group = "input")]
+    pub tcp: Option<SocketAddr>,
+    /// Read a serial port (e.g. /dev/ttyUSB0).
+    #[arg(long, value_name = "DEVICE", group = "input")]
+    pub serial: Option<String>,
+    /// Serial port baud rate.
+    #[arg(long, default_value_t = 57_600, value_parser = parse_baud)]
+    pub baud: u32,
+    /// Read (replay) a file, e.g. a PPRZLOG recording with `--transport pprzlog`.
+    #[arg(long, value_name = "PATH", group = "input")]
+    pub file: Option<PathBuf>,
+    /// Read standard input.
+    #[arg(long, group = "input")]
+    pub stdin: bool,
+    /// Where uplink frames go with --udp (the aircraft's datalink port, e.g. 127.0.0.1:4243).
+    /// With --tcp or --serial they go back on the same stream.
+    #[arg(long, value_name = "ADDR")]
+    pub uplink: Option<SocketAddr>,
+    /// Aircraft id for PING/SETTING.
+    #[arg(long, default_value_t = 7)]
+    pub ac_id: u8,
+    /// Send a PING every this many seconds (0.05 to 3600) and show the round-trip time.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_ping_period, allow_negative_numbers = true)]
+    pub ping: Option<f64>,
+    /// Send SETTING index=value at start (repeatable) and show the DL_VALUE acknowledgement.
+    #[arg(long = "setting", value_name = "INDEX=VALUE", value_parser = parse_setting)]
+    pub settings: Vec<(u8, f32)>,
+    /// One line per message instead of the live table (for scripts).
+    #[arg(long)]
+    pub lines: bool,
+    /// Record every received frame to this PPRZLOG file (replay it with --file and
+    /// --transport pprzlog). It must not be one of the inputs.
+    #[arg(long, value_name = "PATH")]
+    pub record: Option<PathBuf>,
+    /// Stop after this many seconds (more than 0, at most a year).
+    #[arg(long, value_name = "SECONDS", value_parser = parse_duration, allow_negative_numbers = true)]
+    pub duration: Option<f64>,
+}
+
+impl Args {
+    /// Checks the combinations of options that clap cannot: PINGs and SETTINGs need a
+    /// link to the aircraft.
+    ///
+    /// # Errors
+    /// A message naming the problem.
+    pub fn check(&self) -> Result<(), String> {
+        let wants_uplink = self.ping.is_some() || !self.settings.is_empty();
+        let has_uplink = self.tcp.is_some()
+            || self.serial.is_some()
+            || (self.udp.is_some() && self.uplink.is_some());
+        if wants_uplink && !has_uplink {
+            return Err(
+                "--ping and --setting need a link to the aircraft: --tcp, --serial, or --udp with --uplink"
+                    .into(),
+            );
+        }
+        if self.uplink.is_some() && self.udp.is_none() {
+            return Err("--uplink goes with --udp (with --tcp or --serial, uplink frames go back on the same stream)".into());
+        }
+        Ok(())
+    }
+}
+
+/// A number of seconds: finite, more than 0, at most `max`.
+fn seconds(s: &str, min: f64, min_inclusive: bool, max: f64) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
+    if !v.is_finite() {
+        return Err(format!("`{s}` is not a finite number"));
+    }
+    let above = if min_inclusive { v >= min } else { v > min };
+    if !above || v > max {
+        let lo = if min_inclusive {
+            "at least"
+        } else {
+            "more than"
+        };
+        return Err(format!(
+            "{v} s is out of range: {lo} {min} s, at most {max} s"
+        ));
+    }
+    Ok(v)
+}
+
+/// `--duration`: finite, more than 0 s, at most [`MAX_DURATION`].
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_duration(s: &str) -> Result<f64, String> {
+    seconds(s, 0.0, false, MAX_DURATION)
+}
+
+/// `--ping`: finite, from [`MIN_PING_PERIOD`] to [`MAX_PING_PERIOD`].
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_ping_period(s: &str) -> Result<f64, String> {
+    seconds(s, MIN_PING_PERIOD, true, MAX_PING_PERIOD)
+}
+
+/// `--baud`: from 1 to [`MAX_BAUD`].
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_baud(s: &str) -> Result<u32, String> {
+    let v: u32 = s
+        .trim()
+        .parse()
+        .map_err(|e| format!("`{s}` is not a baud rate: {e}"))?;
+    if v == 0 || v > MAX_BAUD {
+        return Err(format!("{v} is out of range: 1 to {MAX_BAUD}"));
+    }
+    Ok(v)
+}
+
+/// `--setting INDEX=VALUE`: an index 0..=255 and a finite value that fits a `float`.
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_setting(s: &str) -> Result<(u8, f32), String> {
+    let (i, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected INDEX=VALUE, got `{s}`"))?;
+    let i = i
+        .trim()
+        .parse::<u8>()
+        .map_err(|e| format!("index `{i}`: {e} (0 to 255)"))?;
+    let v = v
+        .trim()
+        .parse::<f32>()
+        .map_err(|e| format!("value `{v}`: {e}"))?;
+    if !v.is_finite() {
+        return Err(format!(
+            "value `{v}` is not a finite number that fits a float"
+        ));
+    }
+    Ok((i, v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(args: &[&str]) -> Result<Args, String> {
+        Args::try_parse_from(std::iter::once("pprz-monitor").chain(args.iter().copied()))
+            .map_err(|e| e.to_string())
+    }
+
+    /// Issue: `--duration NaN` never ended, `--ping 0` sent PINGs continuously.
+    #[test]
+    fn invalid_numbers_are_refused() {
+        for bad in ["NaN", "nan", "inf", "-inf", "0", "-1", "1e300", "x", ""] {
+            let e = parse(&["--stdin", &format!("--duration={bad}")]).unwrap_err();
+            assert!(e.contains("--duration"), "{bad}: {e}");
+        }
+        for bad in ["0", "0.0", "NaN", "inf", "-0.2", "0.001", "1e9", "abc"] {
+            let e = parse(&["--tcp", "127.0.0.1:1", &format!("--ping={bad}")]).unwrap_err();
+            assert!(e.contains("--ping"), "{bad}: {e}");
+        }
+        for bad in ["0", "99999999999", "-5"] {
+            assert!(parse(&[&format!("--baud={bad}")]).is_err(), "{bad}");
+        }
+        for bad in ["1=NaN", "1=inf", "1=1e39", "256=1", "-1=1", "1", "x=1"] {
+            let e = parse(&["--tcp", "127.0.0.1:1", &format!("--setting={bad}")]).unwrap_err();
+            assert!(e.contains("--setting"), "{bad}: {e}");
+        }
+        let e = parse(&["--duration", "-1"]).unwrap_err();
+        assert!(e.contains("more than 0 s"), "{e}");
+        let e = parse(&["--duration", "NaN"]).unwrap_err();
+        assert!(e.contains("not a finite number"), "{e}");
+        let e = parse(&["--tcp", "127.0.0.1:1", "--ping", "0"]).unwrap_err();
+        assert!(e.contains("at least 0.05 s"), "{e}");
+    }
+
+    #[test]
+    fn valid_values_are_kept() {
+        let a = parse(&[
+            "--tcp",
+            "127.0.0.1:1",
+            "--ping",
+            "0.2",
+            "--duration",
+            "10",
+            "--setting",
+            "3 = 1.5",
+            "--baud",
+            "115200",
+        ])
+        .unwrap();
+        assert_eq!(
+            (a.ping, a.duration, a.baud),
+            (Some(0.2), Some(10.0), 115_200)
+        );
+        assert_eq!(a.settings, [(3, 1.5)]);
+        assert_eq!(a.check(), Ok(()));
+        assert_eq!(parse(&["--ping", "3600"]).unwrap().ping, Some(3600.0));
+    }
+
+    #[test]
+    fn pings_and_settings_need_an_uplink() {
+        for args in [
+            &["--file", "x", "--ping", "1"][..],
+            &["--stdin", "--setting", "1=2"],
+            &["--udp", "127.0.0.1:4242", "--ping", "1"],
+        ] {
+            let e = parse(args).unwrap().check().unwrap_err();
+            assert!(e.contains("need a link"), "{e}");
+        }
+        let ok = parse(&[
+            "--udp",
+            "127.0.0.1:4242",
+            "--uplink",
+            "127.0.0.1:4243",
+            "--ping",
+            "1",
+        ])
+        .unwrap();
+        assert_eq!(ok.check(), Ok(()));
+        assert!(
+            parse(&["--tcp", "127.0.0.1:1", "--uplink", "127.0.0.1:2"])
+                .unwrap()
+                .check()
+                .is_err()
+        );
+    }
+}
