@@ -391,12 +391,12 @@ fn parse_protocol(p: &mut xml::Parser<'_, '_>) -> Protocol {
 /// A `<msg_class>` and its messages; `None` if its name or id is unusable.
 fn parse_class(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Class> {
     let ctx = Ctx::default();
-    let name = p.name(node, "msg_class", &ctx);
-    if let Some(name) = &name {
-        // The module (snake case) and the variant of the set's `AnyMessage` (camel case).
+    // The name makes a module (snake case) and a variant of the set's `AnyMessage`
+    // (camel case).
+    let name = p.name(node, "msg_class", &ctx).filter(|name| {
         let problem = names::snake_name_problem(name).or_else(|| names::type_name_problem(name));
-        p.unusable(node, &ctx, "class", name, problem);
-    }
+        !p.unusable(node, &ctx, "class", name, problem)
+    });
     let id = p
         .required(node, "msg_class", "id", &ctx)
         .and_then(|v| parse_id(p, node, v, &ctx));
@@ -445,14 +445,15 @@ fn parse_message(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Mess
     let mut ctx = Ctx::default();
     let name = p.name(node, "message", &ctx);
     ctx.message = name.clone();
-    if let Some(name) = &name {
+    // An unusable name is reported, and the message left out of the checks of its class.
+    let name = name.filter(|name| {
         let problem = names::type_name_problem(name).or_else(|| {
             (names::camel_case(name) == ANY_MESSAGE).then(|| {
                 format!("its Rust type name `{ANY_MESSAGE}` is that of the enum of the messages of its class")
             })
         });
-        p.unusable(node, &ctx, "message", name, problem);
-    }
+        !p.unusable(node, &ctx, "message", name, problem)
+    });
     let id = p
         .required(node, "message", "id", &ctx)
         .and_then(|v| parse_id(p, node, v, &ctx));
@@ -539,9 +540,8 @@ fn parse_field(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>, message: &Ctx) -
     };
     let name = p.name(node, "field", &ctx);
     ctx.field = name.clone();
-    if let Some(name) = &name {
-        p.unusable(node, &ctx, "field", name, names::snake_name_problem(name));
-    }
+    let name =
+        name.filter(|name| !p.unusable(node, &ctx, "field", name, names::snake_name_problem(name)));
     for child in node.children().filter(Node::is_element) {
         p.unexpected(child, &ctx, "only text inside <field>");
     }

@@ -603,10 +603,9 @@ fn parse_config(p: &mut xml::Parser<'_, '_>) -> TelemetryConfig {
 /// A `<process>` and its modes; `None` if its name is unusable.
 fn parse_process(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<ProcessDef> {
     let ctx = Ctx::default();
-    let name = p.name(node, "process", &ctx);
-    if let Some(name) = &name {
-        p.unusable(node, &ctx, "process", name, names::snake_name_problem(name));
-    }
+    let name = p
+        .name(node, "process", &ctx)
+        .filter(|name| !p.unusable(node, &ctx, "process", name, names::snake_name_problem(name)));
     let mut mode_elements = 0;
     let mut seen = Seen::default();
     let modes = p.children(node, "mode", &ctx, "<mode>", |p, child| {

@@ -215,7 +215,8 @@ impl<'a, 'input> Parser<'a, 'input> {
         }
     }
 
-    /// Reports `name` (of a `what`, at `node`) as unusable in Rust for `problem`, if any.
+    /// Reports `name` (of a `what`, at `node`) as unusable in Rust for `problem`, if
+    /// any; whether it was reported.
     pub(crate) fn unusable(
         &mut self,
         node: Node<'_, '_>,
@@ -223,18 +224,20 @@ impl<'a, 'input> Parser<'a, 'input> {
         what: &'static str,
         name: &str,
         problem: Option<String>,
-    ) {
-        if let Some(reason) = problem {
-            self.report(
-                node,
-                ctx,
-                ErrorKind::UnusableName {
-                    what,
-                    name: name.to_owned(),
-                    reason,
-                },
-            );
-        }
+    ) -> bool {
+        let Some(reason) = problem else {
+            return false;
+        };
+        self.report(
+            node,
+            ctx,
+            ErrorKind::UnusableName {
+                what,
+                name: name.to_owned(),
+                reason,
+            },
+        );
+        true
     }
 
     /// Reports `node` as an element not allowed where `expected` is.
@@ -455,4 +458,78 @@ fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
         let pos = e.pos();
         at(file, (pos.row, pos.col), ErrorKind::Xml(e.to_string()))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A valid `messages.xml` of `classes` classes of `messages` messages of 8 fields.
+    fn protocol(classes: u8, messages: u8) -> String {
+        let mut xml = String::from("<?xml version=\"1.0\"?>\n<protocol>\n");
+        for c in 1..=classes {
+            xml.push_str(&format!("  <msg_class name=\"class_{c}\" id=\"{c}\">\n"));
+            for m in 0..messages {
+                xml.push_str(&format!(
+                    "    <message name=\"MSG_{m}\" id=\"{m}\">\n      <description>Généré: é</description>\n"
+                ));
+                for f in 0..8 {
+                    xml.push_str(&format!(
+                        "      <field name=\"f{f}\" type=\"uint16\" unit=\"m\">field {f}</field>\n"
+                    ));
+                }
+                xml.push_str("    </message>\n");
+            }
+            xml.push_str("  </msg_class>\n");
+        }
+        xml.push_str("</protocol>\n");
+        xml
+    }
+
+    #[test]
+    fn positions_are_those_of_the_xml_parser() {
+        // Multi-byte characters, a long line crossing several checkpoints, empty lines.
+        let mut text = String::from("<a>\n\n  <b>é€𝄞</b>\n");
+        text.push_str(&"xé".repeat(3 * BLOCK));
+        text.push_str("\n<c/>\n</a>");
+        let doc = Document::parse(&text).unwrap();
+        let positions = Positions::new(&text);
+        let offsets = (0..=text.len()).filter(|&i| text.is_char_boundary(i));
+        for pos in offsets.chain([text.len() + 10]) {
+            let expected = doc.text_pos_at(pos);
+            assert_eq!(
+                positions.line_col(pos),
+                (expected.row, expected.col),
+                "offset {pos}"
+            );
+        }
+    }
+
+    /// Bytes scanned for positions while parsing `text`.
+    fn scanned_by_parse(text: &str) -> usize {
+        SCANNED.with(|s| s.set(0));
+        let p = crate::Protocol::parse("large.xml", text).expect("valid");
+        assert!(p.message_count() > 0);
+        SCANNED.with(std::cell::Cell::get)
+    }
+
+    #[test]
+    fn positions_take_linear_work() {
+        // The positions of every class, message and field are computed: a scan from the
+        // start of the text for each (as before) grows with the square of the size.
+        let small = protocol(2, 100);
+        let large = protocol(8, 100);
+        let (s, l) = (scanned_by_parse(&small), scanned_by_parse(&large));
+        let elements = 8 * 100 * 9;
+        assert!(
+            l <= large.len() + elements * BLOCK,
+            "{l} bytes scanned for a text of {}",
+            large.len()
+        );
+        // Four times the text: about four times the work (a square would be 16 times).
+        assert!(
+            l <= 5 * s,
+            "{s} bytes scanned, then {l} for 4 times the text"
+        );
+    }
 }

@@ -187,3 +187,78 @@ fn too_many_values_for_the_type() {
         }
     );
 }
+
+#[test]
+fn class_ids_above_15_are_refused() {
+    let (kinds, text) = errors("class_id_out_of_range.xml");
+    assert_eq!(kinds, [ErrorKind::ClassIdOutOfRange { id: 16, max: 15 }]);
+    assert_eq!(
+        text,
+        "error: class_id_out_of_range.xml:7:3: class id 16 does not fit a PPRZ v2 frame: class ids are 4 bits (0..=15)"
+    );
+    let xml = r#"<protocol><msg_class name="a" id="0"/><msg_class name="b" id="15"/></protocol>"#;
+    assert!(pprz_codegen::Protocol::parse("ids.xml", xml).is_ok());
+    let xml = r#"<protocol><msg_class name="a" id="255"/></protocol>"#;
+    let err = pprz_codegen::Protocol::parse("ids.xml", xml).unwrap_err();
+    assert_eq!(
+        err.diagnostics()[0].kind,
+        ErrorKind::ClassIdOutOfRange { id: 255, max: 15 }
+    );
+}
+
+#[test]
+fn elements_inside_fields_and_second_descriptions_are_refused() {
+    let (kinds, text) = errors("field_content.xml");
+    assert_eq!(
+        kinds,
+        [
+            ErrorKind::UnexpectedElement {
+                found: "field".into(),
+                expected: "only text inside <field>"
+            },
+            ErrorKind::UnexpectedElement {
+                found: "unit".into(),
+                expected: "only text inside <field>"
+            },
+            ErrorKind::DuplicateElement {
+                element: "description",
+                first_line: 7
+            },
+        ]
+    );
+    assert_eq!(
+        text,
+        "error: field_content.xml:9:9: message NESTED, field outer: unexpected element <field>, expected only text inside <field>\n\
+         error: field_content.xml:11:38: message NESTED, field odd: unexpected element <unit>, expected only text inside <field>\n\
+         error: field_content.xml:12:7: message NESTED: duplicate <description> (first defined on line 7): only one is allowed"
+    );
+}
+
+#[test]
+fn the_reference_messages_xml_passes() {
+    let Some(dir) =
+        pprz_test_support::reference::locate_for_test("the_reference_messages_xml_passes")
+    else {
+        return;
+    };
+    let p = pprz_codegen::Protocol::from_file(dir.join("messages.xml")).expect("valid");
+    assert_eq!(p.message_count(), 367);
+    // Text inside <field> is its description.
+    let gps = p.message("telemetry", "GPS").unwrap();
+    assert!(gps.fields.iter().any(|f| f.description.is_some()));
+}
+
+#[test]
+fn write_errors_name_the_output_file() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/small.xml");
+    let err = Generator::new(&path)
+        .write_to("/nonexistent/dir/x.rs")
+        .unwrap_err();
+    assert!(matches!(err.diagnostics()[0].kind, ErrorKind::Write(_)));
+    let text = err.to_string();
+    assert!(
+        text.starts_with("error: /nonexistent/dir/x.rs: cannot write output file: ")
+            && text.contains("os error"),
+        "{text}"
+    );
+}
