@@ -31,9 +31,13 @@
 //!   line, one-line table rows), and a change of the emitter shows as the same change of
 //!   the snapshot. `prettyplease` would impose its own layout.
 //! - The safety token trees would bring is obtained otherwise: identifiers come from
-//!   validated names (`names`), free text from `messages.xml` is emitted through `{:?}`
-//!   string literals (`#[doc = "..."]`) or escaped, and the snapshot test compiles the
-//!   output.
+//!   validated names (`names`: keywords and names that would shadow a primitive type or
+//!   a crate are escaped, names that make no usable Rust name are refused by the model),
+//!   standard items are named by their full path (`::core::result::Result`, ...) so that
+//!   no message type (`RESULT`, `OPTION`, `SOME`...) and nothing where the code is
+//!   included shadows them, free text from `messages.xml` is emitted through `{:?}`
+//!   string literals (`#[doc = "..."]`) or escaped, and the tests compile the output
+//!   (the snapshot, and `tests/fixtures/hostile_names.xml` in a scratch crate).
 //!
 //! What is emitted more than once has one helper: both `AnyMessage` enums come from
 //! [`emit_any_enum`], parameterised by their variants, their `decode` dispatch and their

@@ -146,6 +146,24 @@
 //! assert!(out.code.contains("name: \"ALIVE\", class_id: 1, msg_id: 2, period_ticks: 126"));
 //! ```
 //!
+//! # What is refused
+//!
+//! Besides malformed XML and wrong types, sizes or ids, the generator refuses, each with
+//! file and line:
+//!
+//! - class ids above [`model::MAX_CLASS_ID`] (15): a PPRZ v2 frame carries the class in
+//!   4 bits, next to the component id, so such a message could never be sent;
+//! - names that make no usable Rust name ([`ErrorKind::UnusableName`]): no letter or
+//!   digit (`_`), a type name starting with a digit (`_1ST` -> `1St`) or equal to `Self`,
+//!   a message named like its class's `AnyMessage`; names that make the same Rust name
+//!   (`FOO_BAR`, `FOO__BAR`, `fooBar`) are duplicates. Keywords are escaped (`type` ->
+//!   `type_`), as are class modules that would shadow a primitive type or a crate
+//!   (`u8` -> `u8_`, `core` -> `core_`); any other name (`RESULT`, `OPTION`, `SOME`,
+//!   `SET`...) is fine, as the generated code names standard items by their full path;
+//! - elements inside `<field>` (its text is its description), and a second
+//!   `<description>` in a message;
+//! - inputs beyond the [`limits`]: size, entity declarations and expansion, nodes.
+//!
 //! A command-line front end, `pprz-codegen`, is built with the `cli` feature (default).
 
 #![warn(missing_docs)]

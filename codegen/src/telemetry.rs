@@ -499,10 +499,16 @@ pub(crate) fn emit(s: &Schedule, runtime: &str) -> String {
             out!(out, "                    name: {:?},", m.name);
             match &m.key_press {
                 Some(k) => {
-                    out!(out, "                    key_press: Some({k:?}),");
+                    out!(
+                        out,
+                        "                    key_press: ::core::option::Option::Some({k:?}),"
+                    );
                 }
                 None => {
-                    out!(out, "                    key_press: None,");
+                    out!(
+                        out,
+                        "                    key_press: ::core::option::Option::None,"
+                    );
                 }
             }
             out!(out, "                    messages: &[");

@@ -429,7 +429,7 @@ fn tables_content() {
         "pub static SCHEDULE: crate::rt::schedule::Schedule<'static> = crate::rt::schedule::Schedule {",
         "        crate::rt::schedule::Process {",
         "                crate::rt::schedule::Mode {",
-        "key_press: Some(\"d\"),",
+        "key_press: ::core::option::Option::Some(\"d\"),",
         "// ENERGY: every 0.25 s, phase 0.1 s",
         "crate::rt::schedule::Periodic { name: \"ENERGY\", class_id: 1, msg_id: 12, period_ticks: 25, phase_ticks: 10, period_s: 0.25 },",
         "// ALIVE: every 2.1 s, automatic phase",

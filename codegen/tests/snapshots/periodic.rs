@@ -18,7 +18,7 @@ pub static SCHEDULE: ::pprz_messages::schedule::Schedule<'static> = ::pprz_messa
             modes: &[
                 ::pprz_messages::schedule::Mode {
                     name: "default",
-                    key_press: Some("d"),
+                    key_press: ::core::option::Option::Some("d"),
                     messages: &[
                         // ALIVE: every 2.1 s, automatic phase
                         ::pprz_messages::schedule::Periodic { name: "ALIVE", class_id: 1, msg_id: 2, period_ticks: 126, phase_ticks: 0, period_s: 2.1 },
@@ -36,7 +36,7 @@ pub static SCHEDULE: ::pprz_messages::schedule::Schedule<'static> = ::pprz_messa
                 },
                 ::pprz_messages::schedule::Mode {
                     name: "raw_sensors",
-                    key_press: None,
+                    key_press: ::core::option::Option::None,
                     messages: &[
                         // ALIVE: every 2.1 s, automatic phase
                         ::pprz_messages::schedule::Periodic { name: "ALIVE", class_id: 1, msg_id: 2, period_ticks: 126, phase_ticks: 0, period_s: 2.1 },
@@ -48,7 +48,7 @@ pub static SCHEDULE: ::pprz_messages::schedule::Schedule<'static> = ::pprz_messa
                 },
                 ::pprz_messages::schedule::Mode {
                     name: "off",
-                    key_press: None,
+                    key_press: ::core::option::Option::None,
                     messages: &[
                     ],
                 },
@@ -59,7 +59,7 @@ pub static SCHEDULE: ::pprz_messages::schedule::Schedule<'static> = ::pprz_messa
             modes: &[
                 ::pprz_messages::schedule::Mode {
                     name: "all",
-                    key_press: None,
+                    key_press: ::core::option::Option::None,
                     messages: &[
                         // ATTITUDE: every 0.02 s, automatic phase
                         ::pprz_messages::schedule::Periodic { name: "ATTITUDE", class_id: 1, msg_id: 6, period_ticks: 1, phase_ticks: 0, period_s: 0.02 },
