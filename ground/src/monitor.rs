@@ -30,6 +30,11 @@ use crate::settings::{Answer, Expired, SettingTracker};
 /// How long a window the rates are computed over, in seconds.
 pub const RATE_WINDOW: f64 = 5.0;
 
+/// Seconds of silence of a live link after which the decoder is flushed: a frame held
+/// behind a false start (which announced a longer frame) is decoded then, not when the
+/// next bytes arrive.
+pub const IDLE_FLUSH: f64 = 0.5;
+
 /// Events and notices kept for the live view (the latest ones).
 pub const MAX_EVENTS: usize = 8;
 

@@ -17,7 +17,7 @@ use clap::Parser;
 use pprz_ground::cli::Args;
 use pprz_ground::escape;
 use pprz_ground::input::{self, DEFAULT_CAPACITY, End, InputQueue, Overflow, Pop};
-use pprz_ground::monitor::Monitor;
+use pprz_ground::monitor::{IDLE_FLUSH, Monitor};
 use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
@@ -258,6 +258,7 @@ fn run(args: &Args) -> Result<(), String> {
     let mut next_flush = 0.0;
     let mut next_drop_warning = 0.0;
     let mut input_error = None;
+    let mut last_data: Option<f64> = None;
     while !stop.load(Ordering::SeqCst) && !out.failed() {
         let t = now();
         if args.duration.is_some_and(|d| t >= d) {
@@ -292,8 +293,16 @@ fn run(args: &Args) -> Result<(), String> {
                     monitor.input_gap(t, dropped_before, |line, raw| out.message(t, line, raw));
                 }
                 monitor.feed(t, &bytes, |line, raw| out.message(t, line, raw));
+                last_data = Some(t);
             }
-            Pop::Idle => {}
+            Pop::Idle => {
+                // A silent link: decode the frames held behind a false start.
+                let t = now();
+                if last_data.is_some_and(|at| t - at >= IDLE_FLUSH) {
+                    monitor.flush(t, |line, raw| out.message(t, line, raw));
+                    last_data = None;
+                }
+            }
             Pop::End(End::Eof) => break,
             Pop::End(End::Error(e)) => {
                 input_error = Some(e);
