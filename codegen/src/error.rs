@@ -40,6 +40,11 @@ pub enum ErrorKind {
         /// Largest number of nodes accepted.
         max: u32,
     },
+    /// An element has more attributes than accepted (see [`crate::limits`]).
+    TooManyAttributes {
+        /// Largest number of attributes of an element.
+        max: usize,
+    },
     /// An entity of the document type definition refers to another entity: nested
     /// entities are refused (they are how a small file expands exponentially).
     NestedEntity {
@@ -166,6 +171,12 @@ impl fmt::Display for ErrorKind {
                 f,
                 "too many XML nodes: at most {max} elements, text runs and comments are read"
             ),
+            Self::TooManyAttributes { max } => {
+                write!(
+                    f,
+                    "too many attributes: at most {max} per element are accepted"
+                )
+            }
             Self::NestedEntity { name, referenced } => write!(
                 f,
                 "entity `{name}` refers to entity `{referenced}`: nested entities are refused"

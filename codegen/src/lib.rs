@@ -162,7 +162,8 @@
 //!   `SET`...) is fine, as the generated code names standard items by their full path;
 //! - elements inside `<field>` (its text is its description), and a second
 //!   `<description>` in a message;
-//! - inputs beyond the [`limits`]: size, entity declarations and expansion, nodes.
+//! - inputs beyond the [`limits`]: size, attributes per element, entity declarations
+//!   and expansion, nodes.
 //!
 //! A command-line front end, `pprz-codegen`, is built with the `cli` feature (default).
 

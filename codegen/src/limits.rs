@@ -16,7 +16,11 @@
 //!    [`MAX_ENTITY_EXPANSION`] bytes in all ([`ErrorKind::EntityExpansionTooLarge`]);
 //!    character references (`&#38;`) and the predefined entities (`&amp;`, `&lt;`, ...)
 //!    are not limited;
-//! 3. while it is parsed, its number of XML nodes: at most [`MAX_NODES`]
+//! 3. its tags: at most [`MAX_ATTRIBUTES`] attributes per element, in the document and
+//!    in entity values ([`ErrorKind::TooManyAttributes`]: the XML parser compares each
+//!    attribute with the others of its element, which takes time growing with the
+//!    square of their number);
+//! 4. while it is parsed, its number of XML nodes: at most [`MAX_NODES`]
 //!    ([`ErrorKind::TooManyNodes`]).
 //!
 //! The entity check scans the text once and counts conservatively: a declaration or a
@@ -60,6 +64,9 @@ pub const MAX_ENTITY_REFERENCES: usize = 100_000;
 /// reference, in bytes (1 MiB).
 pub const MAX_ENTITY_EXPANSION: usize = 1024 * 1024;
 
+/// Largest number of attributes of one element (a `<field>` has 8 at most).
+pub const MAX_ATTRIBUTES: usize = 64;
+
 /// Entities every XML parser knows, which are character references.
 const PREDEFINED: [&str; 5] = ["amp", "lt", "gt", "apos", "quot"];
 
@@ -100,8 +107,10 @@ fn references(text: &str) -> impl Iterator<Item = (usize, &str)> {
 fn declaration(rest: &str) -> Option<(&str, Option<&str>)> {
     let rest = rest.trim_start();
     let rest = rest.strip_prefix('%').unwrap_or(rest).trim_start();
+    // A name ends at the first character that cannot be in one, so that no scan runs
+    // into the next declaration (each starts with `<`): the whole check stays linear.
     let name_len = rest
-        .find(|c: char| c.is_whitespace() || c == '"' || c == '\'' || c == '>')
+        .find(|c: char| c.is_whitespace() || "\"'<>&%;".contains(c))
         .unwrap_or(rest.len());
     let (name, rest) = rest.split_at(name_len);
     if name.is_empty() {
@@ -118,9 +127,90 @@ fn declaration(rest: &str) -> Option<(&str, Option<&str>)> {
     Some((name, value))
 }
 
+/// The byte offset of the first `needle` in `bytes` from `from`, if any.
+fn find(bytes: &[u8], from: usize, needle: &[u8]) -> Option<usize> {
+    bytes
+        .get(from..)?
+        .windows(needle.len())
+        .position(|w| w == needle)
+        .map(|at| from + at)
+}
+
+/// The end of the markup starting at `bytes[from]`: the byte offset after the first
+/// `stop` byte, skipping quoted strings if `quoted`, and the number of `=` outside them.
+fn markup_end(bytes: &[u8], from: usize, stops: &[u8], quoted: bool) -> (usize, usize) {
+    let (mut quote, mut equals) = (None, 0usize);
+    for (j, &b) in bytes.iter().enumerate().skip(from) {
+        match quote {
+            Some(q) if b == q => quote = None,
+            Some(_) => {}
+            None if quoted && (b == b'"' || b == b'\'') => quote = Some(b),
+            None if stops.contains(&b) => return (j + 1, equals),
+            None if b == b'=' => equals += 1,
+            None => {}
+        }
+    }
+    (bytes.len(), equals)
+}
+
+/// Checks that no element of `text` has more than [`MAX_ATTRIBUTES`] attributes; on a
+/// violation, the byte offset of the element.
+///
+/// Markup is skipped as the XML parser reads it: comments, CDATA sections, processing
+/// instructions, the start of a document type definition (up to its `[`, whose
+/// declarations are then read one by one), entity declarations (with their quoted
+/// values), other declarations and end tags (up to the first `>`); in a start tag, the
+/// `=` outside quoted values are counted. Each byte is looked at once or twice: linear.
+fn check_attributes(text: &str) -> Result<(), (usize, ErrorKind)> {
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while let Some(found) = bytes
+        .get(i..)
+        .and_then(|b| b.iter().position(|&b| b == b'<'))
+    {
+        let at = i + found;
+        let rest = &bytes[at..];
+        let skip_to =
+            |end: &[u8], from: usize| find(bytes, from, end).map_or(bytes.len(), |e| e + end.len());
+        i = if rest.starts_with(b"<!--") {
+            skip_to(b"-->", at + 4)
+        } else if rest.starts_with(b"<![CDATA[") {
+            skip_to(b"]]>", at + 9)
+        } else if rest.starts_with(b"<?") {
+            skip_to(b"?>", at + 2)
+        } else if rest.starts_with(b"<!DOCTYPE") {
+            markup_end(bytes, at, b"[>", true).0
+        } else if rest.starts_with(b"<!ENTITY") {
+            markup_end(bytes, at, b">", true).0
+        } else if rest.starts_with(b"<!") || rest.starts_with(b"</") {
+            markup_end(bytes, at, b">", false).0
+        } else {
+            let (end, equals) = markup_end(bytes, at, b">", true);
+            if equals > MAX_ATTRIBUTES {
+                return Err((
+                    at,
+                    ErrorKind::TooManyAttributes {
+                        max: MAX_ATTRIBUTES,
+                    },
+                ));
+            }
+            end
+        };
+    }
+    Ok(())
+}
+
+/// Checks the tags of `text` (see [`check_attributes`]) and its entity declarations and
+/// references against the limits; on a violation, the byte offset where it is and what
+/// it is.
+pub(crate) fn check(text: &str) -> Result<(), (usize, ErrorKind)> {
+    check_attributes(text)?;
+    check_entities(text)
+}
+
 /// Checks the entity declarations and references of `text` against the limits; on a
 /// violation, the byte offset where it is and what it is.
-pub(crate) fn check_entities(text: &str) -> Result<(), (usize, ErrorKind)> {
+fn check_entities(text: &str) -> Result<(), (usize, ErrorKind)> {
     const DECL: &str = "<!ENTITY";
     // Declared entities and the size of their value (the largest, if declared twice).
     let mut entities: HashMap<&str, usize> = HashMap::new();
@@ -135,6 +225,8 @@ pub(crate) fn check_entities(text: &str) -> Result<(), (usize, ErrorKind)> {
             return Err((at, ErrorKind::TooManyEntities { max: MAX_ENTITIES }));
         }
         let value = value.unwrap_or("");
+        // The value is parsed where it is referred to: its tags count as well.
+        check_attributes(value).map_err(|(_, kind)| (at, kind))?;
         if let Some((_, referenced)) = references(value).find(|(_, r)| !PREDEFINED.contains(r)) {
             return Err((
                 at,
@@ -243,6 +335,50 @@ mod tests {
             check_entities(&doc(&decls, "")).unwrap_err().1,
             ErrorKind::TooManyEntities { max: MAX_ENTITIES }
         );
+    }
+
+    #[test]
+    fn malformed_declarations_are_skipped() {
+        let text = format!("<a>{}</a>", "<!ENTITY".repeat(100_000));
+        assert_eq!(check_entities(&text), Ok(()));
+        assert_eq!(declaration(" % p 'v'>"), Some(("p", Some("v"))));
+        assert_eq!(declaration(" e SYSTEM \"f\">"), Some(("e", None)));
+        assert_eq!(declaration("<!ENTITY"), None);
+    }
+
+    #[test]
+    fn attributes_are_limited() {
+        let attrs = |n: usize| (0..n).map(|i| format!(" a{i}='=>'")).collect::<String>();
+        let ok = format!(
+            "<?xml version=\"1.0\"?><!DOCTYPE a [<!-- it's --><!ATTLIST a b CDATA 'it>\n<!ENTITY e '>'>]>\
+             <!-- <b {} --><a{}>x > y<![CDATA[<c {}]]></a>",
+            attrs(100),
+            attrs(MAX_ATTRIBUTES),
+            attrs(100)
+        );
+        assert_eq!(check(&ok), Ok(()));
+        let text = format!("<a><b/><c{}/></a>", attrs(MAX_ATTRIBUTES + 1));
+        assert_eq!(
+            check(&text),
+            Err((
+                7,
+                ErrorKind::TooManyAttributes {
+                    max: MAX_ATTRIBUTES
+                }
+            ))
+        );
+        let text = doc(
+            &format!("<!ENTITY e \"<c{}/>\">", attrs(MAX_ATTRIBUTES + 1)),
+            "&e;",
+        );
+        let (at, kind) = check(&text).unwrap_err();
+        assert_eq!(
+            kind,
+            ErrorKind::TooManyAttributes {
+                max: MAX_ATTRIBUTES
+            }
+        );
+        assert!(text[at..].starts_with("<!ENTITY e"));
     }
 
     #[test]

@@ -382,7 +382,7 @@ pub(crate) fn parse<T>(
         return Err(too_large(file, size));
     }
     let positions = Positions::new(text);
-    limits::check_entities(text).map_err(|(pos, kind)| at(file, positions.line_col(pos), kind))?;
+    limits::check(text).map_err(|(pos, kind)| at(file, positions.line_col(pos), kind))?;
     let doc = parse_xml(file, text)?;
     let mut p = Parser::new(file, &doc, positions);
     let value = run(&mut p);

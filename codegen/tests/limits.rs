@@ -4,7 +4,7 @@
 //! they are expanded or even read.
 
 use pprz_codegen::limits::{
-    MAX_ENTITIES, MAX_ENTITY_EXPANSION, MAX_ENTITY_REFERENCES, MAX_INPUT_BYTES,
+    MAX_ATTRIBUTES, MAX_ENTITIES, MAX_ENTITY_EXPANSION, MAX_ENTITY_REFERENCES, MAX_INPUT_BYTES,
 };
 use pprz_codegen::{ErrorKind, Generator, Protocol};
 
@@ -180,5 +180,25 @@ fn inputs_beyond_the_size_limit_are_refused() {
             4 * MAX_INPUT_BYTES
         )),
         "{err}"
+    );
+}
+
+#[test]
+fn an_element_with_many_attributes_is_refused() {
+    // The XML parser compares each attribute of an element with the others: 100,000
+    // attributes (1 MB) would take it seconds, growing with the square of their number.
+    let attributes: String = (0..100_000).map(|i| format!(" a{i}=\"\"")).collect();
+    let xml =
+        format!("<?xml version=\"1.0\"?>\n<protocol>\n  <msg_class{attributes}/>\n</protocol>\n");
+    let (kind, text) = refused(&xml);
+    assert_eq!(
+        kind,
+        ErrorKind::TooManyAttributes {
+            max: MAX_ATTRIBUTES
+        }
+    );
+    assert_eq!(
+        text,
+        "error: hostile.xml:3:3: too many attributes: at most 64 per element are accepted"
     );
 }
