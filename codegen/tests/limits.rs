@@ -202,3 +202,22 @@ fn an_element_with_many_attributes_is_refused() {
         "error: hostile.xml:3:3: too many attributes: at most 64 per element are accepted"
     );
 }
+
+#[test]
+fn a_document_of_too_many_nodes_is_refused() {
+    // 4 million empty elements (16 MB): memory for the tree grows with the nodes.
+    let mut xml = String::from("<protocol>");
+    xml.push_str(&"<a/>".repeat(usize::try_from(pprz_codegen::limits::MAX_NODES).unwrap()));
+    xml.push_str("</protocol>");
+    let (kind, text) = refused(&xml);
+    assert_eq!(
+        kind,
+        ErrorKind::TooManyNodes {
+            max: pprz_codegen::limits::MAX_NODES
+        }
+    );
+    assert_eq!(
+        text,
+        "error: hostile.xml: too many XML nodes: at most 4000000 elements, text runs and comments are read"
+    );
+}

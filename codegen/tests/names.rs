@@ -165,3 +165,28 @@ fn unusable_names_are_refused_with_their_line() {
         ErrorKind::UnusableName { what: "message", name, .. } if name == "SELF"
     )));
 }
+
+#[test]
+fn telemetry_process_names_are_escaped_or_refused() {
+    let messages = r#"<protocol><msg_class name="telemetry" id="1"><message name="ALIVE" id="2"/></msg_class></protocol>"#;
+    let telemetry = r#"<telemetry>
+<process name="u32"><mode name="default"><message name="ALIVE" period="1"/></mode></process>
+<process name="_"><mode name="default"/></process>
+</telemetry>"#;
+    let g = Generator::from_str("messages.xml", messages)
+        .telemetry_from_str("telemetry.xml", telemetry);
+    let err = g.generate_telemetry().unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "error: telemetry.xml:3:1: process name `_` cannot be used: it has no letter or digit to make a Rust name from"
+    );
+    let telemetry = r#"<telemetry><process name="u32"><mode name="default">
+<message name="ALIVE" period="1"/></mode></process></telemetry>"#;
+    let code = Generator::from_str("messages.xml", messages)
+        .telemetry_from_str("telemetry.xml", telemetry)
+        .generate_telemetry()
+        .unwrap()
+        .code;
+    // `pub const FREQUENCY_HZ: u32` next to it still names the primitive type.
+    assert!(code.contains("pub mod u32_ {"), "{code}");
+}
