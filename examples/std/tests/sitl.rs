@@ -109,3 +109,61 @@ fn overload_sheds_only_low_priority() {
         "{out}"
     );
 }
+
+/// Options that used to run forever (`--speed 0`), stall (`--speed 1e6`) or exit at once
+/// with success (`--speed NaN`, `--speed -1`, `--duration -1`) are refused with a message
+/// and a failure status, before anything starts.
+#[test]
+fn nonsense_options_are_refused() {
+    for (option, value) in [
+        ("--speed", "0"),
+        ("--speed", "1e6"),
+        ("--speed", "NaN"),
+        ("--speed", "-1"),
+        ("--speed", "inf"),
+        ("--duration", "-1"),
+        ("--duration", "0"),
+        ("--duration", "NaN"),
+        ("--duration", "1e300"),
+        ("--baud", "0"),
+        ("--baud", "9"),
+        ("--ping-rate", "0"),
+        ("--ping-rate", "1e9"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+            .args(["--headless", &format!("{option}={value}")])
+            .output()
+            .expect("sitl starts");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{option}={value}: {stderr}");
+        assert!(
+            stderr.contains(option) && stderr.contains(value),
+            "{option}={value}: {stderr}"
+        );
+    }
+}
+
+/// A 1 kHz PING flood from the ground: the aircraft answers within its reply limit,
+/// counts the PONGs it refuses, and its telemetry flows on (nothing of normal priority
+/// shed, ATTITUDE still arriving).
+#[test]
+fn ping_flood_is_rate_limited_in_the_summary() {
+    let out = run_sitl(&["--ping-rate", "1000"]);
+    let refused: u64 = out
+        .split("replies over the rate limit ")
+        .nth(1)
+        .and_then(|rest| rest.split(')').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no rate-limit count in the summary:\n{out}"));
+    assert!(refused > 1000, "{refused} refused:\n{out}");
+    let [_, _, normal_shed, _] = level_row(&out, "normal");
+    assert_eq!(normal_shed, 0, "{out}");
+    let attitudes = out
+        .lines()
+        .filter(|l| l.starts_with("7 telemetry ATTITUDE "))
+        .count();
+    assert!(attitudes >= 12, "{attitudes} ATTITUDE:\n{out}");
+    let pongs = out.lines().filter(|l| *l == "7 telemetry PONG").count() as u64;
+    // 10 at once, then 20 per second over 6 s: well under the thousands of PINGs.
+    assert!((5..=140).contains(&pongs), "{pongs} PONGs:\n{out}");
+}

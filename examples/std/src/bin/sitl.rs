@@ -28,6 +28,7 @@ use embedded_io_async::{Read, Write};
 use pprz_devices::host::{HostConfig, HostDevice};
 use pprz_devices::sim::{Overflow, SimConfig, SimEnd, SimLink, SimRx, SimTx};
 use pprz_example_app::{AC_ID, Config, M};
+use pprz_ground::cli;
 use pprz_ground::monitor::Monitor;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
@@ -40,18 +41,23 @@ use static_cell::StaticCell;
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Args {
-    /// Stop after this many (simulated) seconds; Ctrl-C stops too.
-    #[arg(long, default_value_t = 20.0)]
+    /// Stop after this many (simulated) seconds, more than 0 and at most a year; Ctrl-C
+    /// stops too.
+    #[arg(long, default_value_t = 20.0, value_parser = cli::parse_duration)]
     duration: f64,
     /// Flood the radio with low-priority payload at 10x its capacity.
     #[arg(long)]
     overload: bool,
-    /// Simulated seconds per wall-clock second.
-    #[arg(long, default_value_t = 1.0)]
+    /// Simulated seconds per wall-clock second (0.01 to 100).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed)]
     speed: f64,
-    /// Radio baud rate (8N1).
-    #[arg(long, default_value_t = 57_600)]
+    /// Radio baud rate (8N1), 300 to 4000000.
+    #[arg(long, default_value_t = 57_600, value_parser = parse_radio_baud)]
     baud: u32,
+    /// PINGs the ground sends per (simulated) second, 0.1 to 10000: above the aircraft's
+    /// reply limit (20/s) the extra PONGs are refused and counted, and telemetry flows on.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_ping_rate)]
+    ping_rate: f64,
     /// Where the ground listens for telemetry (Paparazzi's link uses port 4242).
     #[arg(long, default_value = "127.0.0.1:4242")]
     ground: SocketAddr,
@@ -67,6 +73,39 @@ struct Args {
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))]
     messages: PathBuf,
+}
+
+/// A finite number within `min..=max`, for the options below.
+fn number_in(s: &str, min: f64, max: f64) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number"))?;
+    if !(min..=max).contains(&v) {
+        // NaN is in no range.
+        return Err(format!("`{s}` is out of range: {min} to {max}"));
+    }
+    Ok(v)
+}
+
+/// `--speed`: faster than 100x, the pacer's time steps outrun the simulated radio and the
+/// executor (nothing would be sent); 0 would never end.
+fn parse_speed(s: &str) -> Result<f64, String> {
+    number_in(s, 0.01, 100.0)
+}
+
+/// `--ping-rate`: at most 10 kHz (a flood), at least one PING every 10 s.
+fn parse_ping_rate(s: &str) -> Result<f64, String> {
+    number_in(s, 0.1, 10_000.0)
+}
+
+/// `--baud`: the simulated radio carries `baud / 10` bytes per second.
+fn parse_radio_baud(s: &str) -> Result<u32, String> {
+    let baud = cli::parse_baud(s)?;
+    if !(300..=4_000_000).contains(&baud) {
+        return Err(format!("{baud} is out of range: 300 to 4000000"));
+    }
+    Ok(baud)
 }
 
 /// Radio buffer: bytes in flight plus received, per direction.
@@ -238,18 +277,20 @@ fn main() -> ExitCode {
     let mut monitor = Monitor::new(set, transport);
     let _ = socket.set_read_timeout(Some(StdDuration::from_millis(20)));
     let mut buf = [0u8; 2048];
+    let ping_period = 1.0 / args.ping_rate;
     let mut next_ping = 1.0;
     let mut setting_sent = false;
     let mut next_render = 0.0;
     while !stop.load(Ordering::SeqCst) && start.elapsed().as_secs_f64() < wall_limit {
         let t = sim_now(args.speed);
-        if t >= next_ping {
+        // Every PING due by now (a flood sends many per pass; a slow pass skips none).
+        while t >= next_ping {
             if let Ok(frame) = uplink::frame(&set, transport, AC_ID, "PING", &[])
                 && socket.send_to(&frame, args.uplink).is_ok()
             {
                 monitor.ping_sent(t);
             }
-            next_ping += 1.0;
+            next_ping += ping_period;
         }
         if !setting_sent && t >= 3.0 {
             // Setting 2 is the example's `gain`.
@@ -314,15 +355,26 @@ fn print_summary(downlink: &Dl, monitor: Option<&Monitor>) {
         "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug)"
     );
     println!(
-        "  downlink: sent {}, dropped {} (queue full {}, arena full {}), evicted {}, still queued {}",
+        "  downlink: sent {}, dropped {} (queue full {}, arena full {}, replies over the rate limit {}), evicted {}, still queued {}",
         stats.sent,
         stats.dropped.total(),
         stats.dropped.queue_full,
         stats.dropped.arena_full,
+        stats.dropped.rate_limited,
         stats.evicted.total(),
         stats.queued
     );
-    if let Some(rtt) = monitor.and_then(Monitor::last_rtt) {
-        println!("  last PING round trip: {:.1} ms", rtt * 1e3);
+    if let Some(m) = monitor {
+        let pings = m.pings();
+        print!(
+            "  PINGs: sent {}, answered {}, lost {}",
+            pings.sent_count(),
+            pings.answered(),
+            pings.lost()
+        );
+        match m.last_rtt() {
+            Some(rtt) => println!(", last round trip {:.1} ms", rtt * 1e3),
+            None => println!(),
+        }
     }
 }
