@@ -15,6 +15,9 @@ use pprz_messages::{FieldDescriptor, MessageDescriptor, MessageSet};
 #[derive(Debug, Clone, Copy)]
 pub struct RuntimeSet {
     set: MessageSet<'static>,
+    /// The protocol the descriptors borrow from (kept reachable: a leak checker does
+    /// not report the storage of a set loaded once).
+    protocol: &'static Protocol,
 }
 
 impl RuntimeSet {
@@ -58,7 +61,13 @@ impl RuntimeSet {
         messages.dedup_by_key(|m| (m.class_id, m.id));
         Self {
             set: MessageSet::new(messages.leak()),
+            protocol,
         }
+    }
+
+    /// The validated protocol the set was built from.
+    pub fn protocol(&self) -> &'static Protocol {
+        self.protocol
     }
 
     /// The descriptor table.

@@ -1,0 +1,128 @@
+//! Fuzz the monitor's generic run-time decoder with the full PPRZLINK reference message
+//! set: arbitrary bytes through every transport, and through the formatting and
+//! printing paths (lines, live view, summary), with PINGs, SETTINGs, input gaps and
+//! timeouts interleaved.
+//!
+//! Input layout: byte 0 selects the transport (mod 5), byte 1 seeds the chunk sizes and
+//! the operations between chunks; the rest is the received byte stream.
+//!
+//! Checked: no panic; no line printed contains a control character or an invisible
+//! formatting character (the text comes from the "aircraft"); the state stays bounded.
+//!
+//! The reference `messages.xml` is not in the repository (license): it is loaded once
+//! from `$PPRZLINK_DIR/messages.xml`, else from `shared/pprzlink` next to the workspace
+//! (`pprz_test_support::reference::dir`, which resolves it from the workspace's own
+//! location, not from the current directory). The harness panics at start-up, naming
+//! the path, when it is missing.
+#![no_main]
+
+use std::sync::OnceLock;
+
+use libfuzzer_sys::fuzz_target;
+use pprz_ground::escape;
+use pprz_ground::format::MAX_FIELDS_LEN;
+use pprz_ground::input::Drops;
+use pprz_ground::monitor::{Monitor, MAX_EVENTS};
+use pprz_ground::ping::PingTracker;
+use pprz_ground::set::RuntimeSet;
+use pprz_ground::settings::SettingTracker;
+use pprz_transports::{AnyTransport, PprzLog, PprzV1, PprzV2, XBee24, XBee868};
+
+fn reference_set() -> RuntimeSet {
+    static SET: OnceLock<RuntimeSet> = OnceLock::new();
+    *SET.get_or_init(|| {
+        let dir = pprz_test_support::reference::dir();
+        let path = dir.join("messages.xml");
+        RuntimeSet::load(&path).unwrap_or_else(|e| {
+            panic!(
+                "the monitor fuzz target needs the PPRZLINK reference messages.xml: cannot load {} ({e}); set {} to the directory that holds it",
+                path.display(),
+                pprz_test_support::reference::DIR_VAR
+            )
+        })
+    })
+}
+
+fn transport(selector: u8) -> AnyTransport {
+    match selector % 5 {
+        0 => PprzV2::new().into(),
+        1 => PprzV1::new(1).into(),
+        2 => XBee24::default().into(),
+        3 => XBee868::default().into(),
+        _ => PprzLog::TELEMETRY.into(),
+    }
+}
+
+fn assert_clean(line: &str) {
+    if let Some(c) = line
+        .chars()
+        .find(|&c| c.is_control() || escape::is_unsafe(c))
+    {
+        panic!("printed a control character {c:?}: {line:?}");
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let set = reference_set();
+    let (selector, seed, stream) = match data {
+        [a, b, rest @ ..] => (*a, *b, rest),
+        _ => return,
+    };
+    let mut monitor = Monitor::new(set, transport(selector))
+        .with_trackers(PingTracker::new(4, 0.05), SettingTracker::new(0.05));
+    let mut state = u32::from(seed) | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state
+    };
+    let on_line = |line: &str, raw: &[u8]| {
+        assert_clean(line);
+        assert!(!raw.is_empty());
+    };
+    let mut now = 0.0;
+    let mut rest = stream;
+    while !rest.is_empty() {
+        let r = next();
+        let size = if seed == 0 {
+            rest.len()
+        } else {
+            1 + r as usize % 300
+        };
+        let (chunk, tail) = rest.split_at(size.min(rest.len()));
+        rest = tail;
+        now += f64::from(r >> 24) * 0.001;
+        monitor.feed(now, chunk, on_line);
+        // Operations between chunks, drawn from the bytes just fed.
+        let op = chunk[0];
+        match (r >> 9) % 16 {
+            0 => monitor.ping_sent(now),
+            1 => monitor.setting_value_sent(now, op, f64::from(chunk[chunk.len() - 1]) * 0.25),
+            2 => monitor.get_setting_sent(now, op),
+            3 => monitor.input_gap(
+                now,
+                Drops {
+                    bytes: u64::from(op),
+                    reads: 1,
+                },
+                on_line,
+            ),
+            4 => monitor.tick(now),
+            5 => {
+                for line in monitor.render(now).lines() {
+                    assert_clean(line);
+                }
+            }
+            _ => {}
+        }
+    }
+    monitor.flush(now, on_line);
+    for line in monitor.render(now).lines().chain(monitor.summary(now).lines()) {
+        assert_clean(line);
+    }
+    assert!(monitor.messages().len() <= set.set().len());
+    assert!(monitor.events().count() <= MAX_EVENTS);
+    assert!(monitor.notices().count() <= MAX_EVENTS);
+    assert!(monitor.messages().values().all(|m| m.last.len() <= MAX_FIELDS_LEN));
+});
