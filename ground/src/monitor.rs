@@ -165,6 +165,8 @@ pub struct Monitor {
     notices: VecDeque<(f64, Notice)>,
     input_dropped: Drops,
     input_gaps: u64,
+    event_count: u64,
+    notice_count: u64,
 }
 
 /// The scalar type of field `name` of `desc`.
@@ -193,6 +195,8 @@ impl Monitor {
             notices: VecDeque::new(),
             input_dropped: Drops::default(),
             input_gaps: 0,
+            event_count: 0,
+            notice_count: 0,
         }
     }
 
@@ -241,7 +245,7 @@ impl Monitor {
         self.input_dropped.bytes += dropped.bytes;
         self.input_dropped.reads += dropped.reads;
         self.input_gaps += 1;
-        push_bounded(&mut self.notices, now, Notice::InputDropped(dropped));
+        self.notice(now, Notice::InputDropped(dropped));
         self.flush(now, on_message);
     }
 
@@ -271,8 +275,8 @@ impl Monitor {
         if ok {
             match desc.name {
                 "PONG" => match self.pings.pong(now) {
-                    Some(rtt) => push_bounded(&mut self.events, now, Event::Pong { rtt }),
-                    None => push_bounded(&mut self.notices, now, Notice::UnexpectedPong),
+                    Some(rtt) => self.event(now, Event::Pong { rtt }),
+                    None => self.notice(now, Notice::UnexpectedPong),
                 },
                 "DL_VALUE" => {
                     let value = |name| {
@@ -288,8 +292,7 @@ impl Monitor {
                     {
                         let base = scalar_type(Some(desc), "value").unwrap_or(BaseType::F64);
                         let answer = self.settings.dl_value(now, index, value, base);
-                        push_bounded(
-                            &mut self.events,
+                        self.event(
                             now,
                             Event::DlValue {
                                 index,
@@ -306,16 +309,37 @@ impl Monitor {
         line
     }
 
+    fn event(&mut self, now: f64, event: Event) {
+        self.event_count += 1;
+        push_bounded(&mut self.events, now, event);
+    }
+
+    fn notice(&mut self, now: f64, notice: Notice) {
+        self.notice_count += 1;
+        push_bounded(&mut self.notices, now, notice);
+    }
+
+    /// Events so far (more than [`events`](Self::events) keeps): the latest
+    /// `event_count() - n` events are the ones after the first `n`.
+    pub fn event_count(&self) -> u64 {
+        self.event_count
+    }
+
+    /// Notices so far (more than [`notices`](Self::notices) keeps).
+    pub fn notice_count(&self) -> u64 {
+        self.notice_count
+    }
+
     /// Gives up the PINGs and requests older than their timeouts at `now` (counted
     /// lost, noted for the live view). Call it regularly; the other methods taking
     /// `now` do it too where it matters.
     pub fn tick(&mut self, now: f64) {
         let lost = self.pings.expire(now);
         if lost > 0 {
-            push_bounded(&mut self.notices, now, Notice::PingsLost { count: lost });
+            self.notice(now, Notice::PingsLost { count: lost });
         }
         for e in self.settings.expire(now) {
-            push_bounded(&mut self.notices, now, Notice::RequestExpired(e));
+            self.notice(now, Notice::RequestExpired(e));
         }
     }
 
@@ -324,7 +348,7 @@ impl Monitor {
     pub fn ping_sent(&mut self, now: f64) {
         let lost = self.pings.sent(now);
         if lost > 0 {
-            push_bounded(&mut self.notices, now, Notice::PingsLost { count: lost });
+            self.notice(now, Notice::PingsLost { count: lost });
         }
     }
 
@@ -489,6 +513,30 @@ impl Monitor {
                 st.unanswered(),
                 st.pending()
             ));
+            for p in st.pending_requests() {
+                out.push(match p {
+                    Expired {
+                        index,
+                        requested: Some(requested),
+                        reported: Some(reported),
+                    } => format!(
+                        "  pending: SETTING index={index} to {}: not applied so far, the aircraft reports {}",
+                        number(requested),
+                        number(reported)
+                    ),
+                    Expired {
+                        index,
+                        requested: Some(requested),
+                        reported: None,
+                    } => format!(
+                        "  pending: SETTING index={index} to {}: no answer yet",
+                        number(requested)
+                    ),
+                    Expired { index, .. } => {
+                        format!("  pending: request for setting index={index}: no answer yet")
+                    }
+                });
+            }
         }
         out
     }
@@ -553,6 +601,17 @@ impl Monitor {
     }
 }
 
+/// A value read from the wire: a value that is exactly a `float` is written as the
+/// `float` (`0.1`, not `0.10000000149011612`).
+fn number(v: f64) -> String {
+    let single = v as f32;
+    if f64::from(single) == v {
+        single.to_string()
+    } else {
+        v.to_string()
+    }
+}
+
 /// An event as a line of the live view.
 pub fn describe_event(e: &Event) -> String {
     match e {
@@ -562,14 +621,15 @@ pub fn describe_event(e: &Event) -> String {
             value,
             answer,
         } => {
-            let head = format!("DL_VALUE index={index} value={value}");
+            let head = format!("DL_VALUE index={index} value={}", number(*value));
             match answer {
                 Answer::Unsolicited => head,
                 Answer::Acknowledged { after } => {
                     format!("{head}: SETTING acknowledged after {:.1} ms", after * 1e3)
                 }
                 Answer::NotApplied { requested, after } => format!(
-                    "{head}: SETTING to {requested} not applied ({:.1} ms after it was sent)",
+                    "{head}: SETTING to {} not applied ({:.1} ms after it was sent)",
+                    number(*requested),
                     after * 1e3
                 ),
                 Answer::Answered { after } => {
@@ -590,13 +650,15 @@ pub fn describe_notice(n: &Notice) -> String {
             requested: Some(requested),
             reported: Some(reported),
         }) => format!(
-            "SETTING index={index} to {requested} not applied: the aircraft still reports {reported}"
+            "SETTING index={index} to {} not applied: the aircraft still reports {}",
+            number(*requested),
+            number(*reported)
         ),
         Notice::RequestExpired(Expired {
             index,
             requested: Some(requested),
             reported: None,
-        }) => format!("SETTING index={index} to {requested}: no answer"),
+        }) => format!("SETTING index={index} to {}: no answer", number(*requested)),
         Notice::RequestExpired(Expired { index, .. }) => {
             format!("request for setting index={index}: no answer")
         }
@@ -712,9 +774,16 @@ mod tests {
             ),
             "{last:?}"
         );
+        let view = m.render(1.1);
         assert!(
-            m.render(1.1)
-                .contains("SETTING to 0.10000000149011612 not applied")
+            view.contains("DL_VALUE index=4 value=1: SETTING to 0.1 not applied"),
+            "{view}"
+        );
+        assert!(
+            view.contains(
+                "pending: SETTING index=4 to 0.1: not applied so far, the aircraft reports 1"
+            ),
+            "{view}"
         );
         // The value set, as the float the aircraft stores.
         feed(&mut m, 1.2, &dl_value(4, 0.1));

@@ -204,6 +204,16 @@ impl SettingTracker {
         self.pending.len()
     }
 
+    /// The requests pending, by index, as they would expire now: the value a SETTING
+    /// asked for, and the other value the aircraft reported meanwhile, if any.
+    pub fn pending_requests(&self) -> impl Iterator<Item = Expired> + '_ {
+        self.pending.iter().map(|(&index, p)| Expired {
+            index,
+            requested: p.requested,
+            reported: p.reported,
+        })
+    }
+
     /// SETTINGs acknowledged with the value set.
     pub fn acknowledged(&self) -> u64 {
         self.acknowledged
@@ -247,6 +257,8 @@ mod tests {
             Answer::NotApplied { requested, .. } if requested == 2.5
         ));
         assert_eq!(s.pending(), 1);
+        let pending: Vec<_> = s.pending_requests().collect();
+        assert_eq!(pending[0].reported, Some(1.0));
         // The aircraft never applies it: given up, counted as not applied.
         assert_eq!(s.expire(14.0), []);
         assert_eq!(

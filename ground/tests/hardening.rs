@@ -274,3 +274,81 @@ fn text_from_the_aircraft_cannot_forge_output() {
     assert!(!view.contains("\nALIVE") && !view.lines().any(|l| l.starts_with("7 telemetry ALIVE")));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue: a DL_VALUE carrying the old value was shown as the acknowledgement of a
+/// SETTING the aircraft ignored. Over UDP with a fake aircraft that ignores one SETTING
+/// and applies another, and answers PINGs.
+#[test]
+fn settings_not_applied_are_reported_over_a_link() {
+    use std::net::UdpSocket;
+    let aircraft = UdpSocket::bind("127.0.0.1:0").unwrap();
+    aircraft
+        .set_read_timeout(Some(std::time::Duration::from_millis(100)))
+        .unwrap();
+    let port = aircraft.local_addr().unwrap().port();
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let stop = done.clone();
+    let fake = std::thread::spawn(move || {
+        let mut buf = [0u8; 512];
+        let reply = |id: u8, payload: &[u8]| frame(id, payload);
+        while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+            let Ok((n, from)) = aircraft.recv_from(&mut buf) else {
+                continue;
+            };
+            // PPRZ v2: 99 len source destination class id payload... ck_a ck_b
+            let f = &buf[..n];
+            let out = match (f[4], f[5]) {
+                (2, 8) => reply(3, &[]),
+                // SETTING index ac_id value: index 4 is refused (value in force 1.0),
+                // the others applied.
+                (2, 4) => {
+                    let index = f[6];
+                    let value = if index == 4 {
+                        1.0f32.to_le_bytes()
+                    } else {
+                        [f[8], f[9], f[10], f[11]]
+                    };
+                    let mut p = vec![index];
+                    p.extend(value);
+                    reply(31, &p)
+                }
+                _ => continue,
+            };
+            aircraft.send_to(&out, from).unwrap();
+        }
+    });
+    let (code, _, err) = run(monitor().args([
+        "--messages",
+        MESSAGES,
+        "--udp",
+        "127.0.0.1:0",
+        "--uplink",
+        &format!("127.0.0.1:{port}"),
+        "--setting",
+        "4=2.5",
+        "--setting",
+        "5=0.1",
+        "--ping",
+        "0.2",
+        "--lines",
+        "--duration",
+        "1.5",
+    ]));
+    done.store(true, std::sync::atomic::Ordering::SeqCst);
+    fake.join().unwrap();
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("DL_VALUE index=4 value=1: SETTING to 2.5 not applied"),
+        "{err}"
+    );
+    assert!(
+        err.contains("DL_VALUE index=5 value=0.1: SETTING acknowledged after"),
+        "{err}"
+    );
+    assert!(err.contains("PONG: round trip"), "{err}");
+    assert!(err.contains("settings: acknowledged 1"), "{err}");
+    assert!(
+        err.contains("pending: SETTING index=4 to 2.5: not applied so far, the aircraft reports 1"),
+        "{err}"
+    );
+}

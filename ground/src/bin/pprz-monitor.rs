@@ -17,7 +17,9 @@ use clap::Parser;
 use pprz_ground::cli::Args;
 use pprz_ground::escape;
 use pprz_ground::input::{self, DEFAULT_CAPACITY, End, InputQueue, Overflow, Pop};
-use pprz_ground::monitor::{IDLE_FLUSH, Monitor};
+use pprz_ground::monitor::{
+    IDLE_FLUSH, MAX_EVENTS, Monitor, Notice, describe_event, describe_notice,
+};
 use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
@@ -168,6 +170,25 @@ impl Output {
     }
 }
 
+/// In `--lines` mode (where standard output carries only messages), writes the events
+/// and notices that arrived since the last call to standard error; `seen` counts those
+/// already written. Input dropped is reported by the rate-limited overload warning.
+fn report_new(monitor: &Monitor, seen: &mut (u64, u64)) {
+    let new_events = (monitor.event_count() - seen.0).min(MAX_EVENTS as u64) as usize;
+    let events: Vec<_> = monitor.events().collect();
+    for (t, e) in &events[events.len().saturating_sub(new_events)..] {
+        eprintln!("[{t:7.1}s] {}", describe_event(e));
+    }
+    let new_notices = (monitor.notice_count() - seen.1).min(MAX_EVENTS as u64) as usize;
+    let notices: Vec<_> = monitor.notices().collect();
+    for (t, n) in &notices[notices.len().saturating_sub(new_notices)..] {
+        if !matches!(n, Notice::InputDropped(_)) {
+            eprintln!("[{t:7.1}s] {}", describe_notice(n));
+        }
+    }
+    *seen = (monitor.event_count(), monitor.notice_count());
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if let Err(e) = args.check() {
@@ -259,6 +280,7 @@ fn run(args: &Args) -> Result<(), String> {
     let mut next_drop_warning = 0.0;
     let mut input_error = None;
     let mut last_data: Option<f64> = None;
+    let mut seen = (0, 0);
     while !stop.load(Ordering::SeqCst) && !out.failed() {
         let t = now();
         if args.duration.is_some_and(|d| t >= d) {
@@ -272,7 +294,8 @@ fn run(args: &Args) -> Result<(), String> {
                 monitor.ping_sent(now());
             }
             // After a stall, the next PING is one period from now, not a burst.
-            next_ping = Some((at + period).max(t));
+            let next = at + period;
+            next_ping = Some(if next > t { next } else { t + period });
         }
         match queue.pop(Duration::from_millis(50)) {
             Pop::Data {
@@ -298,7 +321,7 @@ fn run(args: &Args) -> Result<(), String> {
             Pop::Idle => {
                 // A silent link: decode the frames held behind a false start.
                 let t = now();
-                if last_data.is_some_and(|at| t - at >= IDLE_FLUSH) {
+                if live && last_data.is_some_and(|at| t - at >= IDLE_FLUSH) {
                     monitor.flush(t, |line, raw| out.message(t, line, raw));
                     last_data = None;
                 }
@@ -308,6 +331,9 @@ fn run(args: &Args) -> Result<(), String> {
                 input_error = Some(e);
                 break;
             }
+        }
+        if args.lines {
+            report_new(&monitor, &mut seen);
         }
         let t = now();
         if args.lines && (live || t >= next_flush) {
@@ -325,7 +351,9 @@ fn run(args: &Args) -> Result<(), String> {
         monitor.flush(t, |line, raw| out.message(t, line, raw));
     }
     monitor.tick(t);
-    if !args.lines {
+    if args.lines {
+        report_new(&monitor, &mut seen);
+    } else {
         out.screen(&monitor.render(t));
     }
     out.flush_stdout();
