@@ -118,11 +118,18 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     monitor.flush(now, on_line);
-    for line in monitor.render(now).lines().chain(monitor.summary(now).lines()) {
+    for line in monitor
+        .render(now)
+        .lines()
+        .chain(monitor.summary(now).lines())
+    {
         assert_clean(line);
     }
     assert!(monitor.messages().len() <= set.set().len());
     assert!(monitor.events().count() <= MAX_EVENTS);
     assert!(monitor.notices().count() <= MAX_EVENTS);
-    assert!(monitor.messages().values().all(|m| m.last.len() <= MAX_FIELDS_LEN));
+    assert!(monitor
+        .messages()
+        .values()
+        .all(|m| m.last.len() <= MAX_FIELDS_LEN));
 });
