@@ -269,16 +269,26 @@ impl InputQueue {
     }
 
     /// The consumer stops: producers are woken and refused from now on, and what is
-    /// queued is released.
-    pub fn close(&self) {
+    /// queued is released. Returns the input lost that the consumer was not told about:
+    /// the reads discarded now (counted as dropped) and the drops not yet reported by a
+    /// [`Pop::Data`].
+    pub fn close(&self) -> Drops {
         let mut st = self.lock();
         st.closed = true;
+        let discarded = Drops {
+            bytes: st.stats.queued_bytes as u64,
+            reads: st.stats.queued_reads as u64,
+        };
+        st.stats.dropped.add(discarded);
+        let mut lost = std::mem::take(&mut st.gap);
+        lost.add(discarded);
         st.reads.clear();
         st.stats.queued_bytes = 0;
         st.stats.queued_reads = 0;
         st.stats.cost = 0;
         drop(st);
         self.shared.writable.notify_all();
+        lost
     }
 
     /// Takes the oldest read, waiting at most `timeout` for one.
@@ -448,6 +458,30 @@ mod tests {
         assert_eq!(q.pop(Duration::from_secs(1)), Pop::End(End::Eof));
     }
 
+    #[test]
+    fn closing_reports_the_input_not_handed_out() {
+        let q = InputQueue::new(MIN_CAPACITY, Overflow::DropOldest);
+        for i in 0..10u8 {
+            q.push(&[i; 10]);
+        }
+        // Seven reads dropped, three queued: all lost when the consumer stops.
+        assert_eq!(
+            q.close(),
+            Drops {
+                bytes: 100,
+                reads: 10
+            }
+        );
+        assert_eq!(
+            q.stats().dropped,
+            Drops {
+                bytes: 100,
+                reads: 10
+            }
+        );
+        assert_eq!(q.pop(Duration::ZERO), Pop::Idle);
+    }
+
     /// A 64 MiB input read as a stream through a small blocking queue: nothing is
     /// lost and the queue never holds more than its bound (the issue: `--file` of a
     /// 200 MB file used 197 MB).
@@ -519,9 +553,13 @@ mod tests {
         let reader = spawn_stream(std::io::repeat(7), q.clone());
         let (bytes, _) = data(q.pop(Duration::from_secs(10)));
         assert!(bytes.iter().all(|&b| b == 7));
-        q.close();
+        let lost = q.close();
         reader.join().unwrap();
         assert!(!q.push(&[1]));
-        assert_eq!(q.stats().cost, 0);
+        let st = q.stats();
+        assert_eq!(st.cost, 0);
+        // What was queued and never handed out is counted as dropped.
+        assert_eq!(st.dropped, lost);
+        assert!(lost.bytes <= (MIN_CAPACITY - CHUNK_OVERHEAD) as u64);
     }
 }

@@ -345,8 +345,11 @@ fn run(args: &Args) -> Result<(), String> {
             next_render = t + 0.5;
         }
     }
-    queue.close();
+    // Input read but not decoded (a run stopped by --duration or Ctrl-C, or by an
+    // error) counts as dropped too.
     let t = now();
+    let lost = queue.close();
+    monitor.input_gap(t, lost, |line, raw| out.message(t, line, raw));
     if !out.failed() {
         monitor.flush(t, |line, raw| out.message(t, line, raw));
     }
