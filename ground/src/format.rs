@@ -15,7 +15,7 @@
 //!
 //! Units that say there is no unit (`none`, `-`, empty) are not printed. Everything
 //! that comes from the aircraft or from `messages.xml` goes through
-//! [`escape`](crate::escape): a line never contains a control character, and text
+//! [`escape`]: a line never contains a control character, and text
 //! fields are quoted so that they cannot forge fields or lines.
 
 use std::fmt::Write as _;

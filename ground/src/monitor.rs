@@ -8,7 +8,7 @@
 //! Every piece of state is bounded, whatever arrives: one entry per message of the set
 //! (with its latest fields cut at [`format::MAX_FIELDS_LEN`]), rates counted in fixed
 //! time buckets, at most [`MAX_EVENTS`] events and notices, at most
-//! [`ping::MAX_OUTSTANDING`] PINGs and 256 requests outstanding.
+//! [`crate::ping::MAX_OUTSTANDING`] PINGs and 256 requests outstanding.
 //! [`retained_bytes`](Monitor::retained_bytes) estimates the total.
 //!
 //! Everything printed is escaped ([`escape`](crate::escape)): no line contains a
