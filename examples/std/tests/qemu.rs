@@ -22,6 +22,7 @@ use pprz_default::periodic::SCHEDULE;
 use pprz_example_app::AC_ID;
 use pprz_ground::monitor::{Event, Monitor};
 use pprz_ground::set::RuntimeSet;
+use pprz_ground::settings::Answer;
 use pprz_ground::uplink;
 use pprz_messages::{Decode, Message};
 use pprz_transports::{AnyTransport, Decoder, PprzV2};
@@ -216,7 +217,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         }
         if pong_rtt.is_some() && ack.is_none() && now >= next_setting {
             stream.write_all(&setting).expect("send SETTING");
-            monitor.setting_sent(now, GAIN_INDEX);
+            monitor.setting_value_sent(now, GAIN_INDEX, f64::from(GAIN));
             setting_first_sent.get_or_insert(now);
             next_setting = now + 1.0;
         }
@@ -261,8 +262,15 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
                 Event::Pong { rtt } => {
                     pong_rtt.get_or_insert(*rtt);
                 }
-                Event::DlValue { index, value, .. } => {
-                    monitor_saw_gain |= *index == GAIN_INDEX && *value == f64::from(GAIN);
+                Event::DlValue {
+                    index,
+                    value,
+                    answer,
+                } => {
+                    // The monitor takes it as the acknowledgement of the value set.
+                    monitor_saw_gain |= *index == GAIN_INDEX
+                        && *value == f64::from(GAIN)
+                        && matches!(answer, Answer::Acknowledged { .. });
                 }
             }
         }

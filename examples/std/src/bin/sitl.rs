@@ -298,7 +298,7 @@ fn main() -> ExitCode {
             if let Ok(frame) = uplink::frame(&set, transport, AC_ID, "SETTING", &values)
                 && socket.send_to(&frame, args.uplink).is_ok()
             {
-                monitor.setting_sent(t, 2);
+                monitor.setting_value_sent(t, 2, 2.5);
             }
             setting_sent = true;
         }
