@@ -26,5 +26,5 @@
 pub mod arena;
 pub mod downlink;
 pub mod overload;
-pub mod rng;
+pub use pprz_test_support::rng;
 pub mod stream;

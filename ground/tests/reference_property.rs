@@ -18,38 +18,18 @@ use pprz_ground::ping::PingTracker;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::SettingTracker;
 use pprz_messages::dynamic;
+use pprz_test_support::rng::Rng;
 use pprz_transports::{
     AnyTransport, Encoder, MsgHeader, PprzLog, PprzV1, PprzV2, TxMeta, XBee24, XBee868,
 };
 
-/// SplitMix64: small, fast, deterministic.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-
-    fn chance(&mut self, percent: u64) -> bool {
-        self.next() % 100 < percent
-    }
-
-    /// A field byte: often one that is hostile when printed.
-    fn byte(&mut self) -> u8 {
-        const HOSTILE: &[u8] = b"\x1b[2J\x1b]0;t\x07\n\r\t\0\x7f\\\"= ,()[]\xc2\x9b\xe2\x80\xae";
-        if self.chance(30) {
-            HOSTILE[self.below(HOSTILE.len())]
-        } else {
-            self.next() as u8
-        }
+/// A field byte: often one that is hostile when printed.
+fn hostile_byte(rng: &mut Rng) -> u8 {
+    const HOSTILE: &[u8] = b"\x1b[2J\x1b]0;t\x07\n\r\t\0\x7f\\\"= ,()[]\xc2\x9b\xe2\x80\xae";
+    if rng.chance(30) {
+        HOSTILE[rng.below(HOSTILE.len())]
+    } else {
+        rng.next_u64() as u8
     }
 }
 
@@ -86,12 +66,12 @@ fn random_frame(rng: &mut Rng, set: &RuntimeSet, transport: AnyTransport) -> (Ve
     let desc = &messages[rng.below(messages.len())];
     let mut payload = vec![0u8; transport.max_payload_len()];
     let max_elements = [0, 1, 5, 40, 255][rng.below(5)];
-    let n = match dynamic::synthesize(desc, &mut payload, max_elements, || rng.byte()) {
+    let n = match dynamic::synthesize(desc, &mut payload, max_elements, || hostile_byte(rng)) {
         Ok(n) => n,
         Err(_) => dynamic::synthesize(desc, &mut payload, 0, || 0).unwrap_or(0),
     };
     payload.truncate(n);
-    let meta = TxMeta::new(MsgHeader::new(7, 0, desc.class_id, desc.id)).at(rng.next() as u32);
+    let meta = TxMeta::new(MsgHeader::new(7, 0, desc.class_id, desc.id)).at(rng.next_u64() as u32);
     let mut buf = vec![0u8; transport.max_frame_len()];
     let Ok(len) = transport.encode(&meta, &payload, &mut buf) else {
         return (Vec::new(), false);
@@ -114,7 +94,7 @@ fn random_frame(rng: &mut Rng, set: &RuntimeSet, transport: AnyTransport) -> (Ve
             true
         }
         3 => {
-            let junk: Vec<u8> = (0..rng.below(40)).map(|_| rng.byte()).collect();
+            let junk: Vec<u8> = (0..rng.below(40)).map(|_| hostile_byte(rng)).collect();
             buf.splice(0..0, junk);
             true
         }
@@ -143,7 +123,7 @@ fn random_reference_frames_through_the_monitor() {
     let set = RuntimeSet::load(dir.join("messages.xml")).expect("the reference loads");
     let set_len = set.set().len();
     assert!(set_len > 100, "the full reference set: {set_len} messages");
-    let mut rng = Rng(0x5EED_0F9A_9A00);
+    let mut rng = Rng::new(0x5EED_0F9A_9A00);
     for (name, transport) in transports() {
         let mut m = Monitor::new(set, transport)
             .with_trackers(PingTracker::new(8, 0.5), SettingTracker::new(0.5));
@@ -167,8 +147,8 @@ fn random_reference_frames_through_the_monitor() {
             }
             match rng.below(40) {
                 0 => m.ping_sent(now),
-                1 => m.setting_value_sent(now, rng.next() as u8, rng.below(1000) as f64 * 0.1),
-                2 => m.get_setting_sent(now, rng.next() as u8),
+                1 => m.setting_value_sent(now, rng.next_u64() as u8, rng.below(1000) as f64 * 0.1),
+                2 => m.get_setting_sent(now, rng.next_u64() as u8),
                 3 => m.input_gap(
                     now,
                     Drops {

@@ -9,6 +9,7 @@ use std::thread;
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use pprz_telemetry::arena::{AllocError, ArenaStats, FrameArena, FrameBuf, GRANULARITY};
+use pprz_test_support::rng::Rng;
 use proptest::prelude::*;
 
 type Arena<const N: usize> = FrameArena<CriticalSectionRawMutex, N>;
@@ -31,24 +32,6 @@ fn intact(frame: &FrameBuf<'_>, id: u32) -> bool {
 /// Units of a request: its length rounded up to the granularity, at least one.
 fn units(len: usize) -> usize {
     len.div_ceil(GRANULARITY).max(1)
-}
-
-/// A small deterministic generator (SplitMix64), for the fixed-seed workloads.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `lo..=hi` (the modulo bias is irrelevant here).
-    fn range(&mut self, lo: usize, hi: usize) -> usize {
-        lo + (self.next() % (hi - lo + 1) as u64) as usize
-    }
 }
 
 #[derive(Clone, Debug)]
@@ -255,7 +238,7 @@ fn frames_across_threads() {
     let (tx, rx) = mpsc::sync_channel::<(FrameBuf<'static>, u32)>(8);
     let worker = |seed: u64, tx: Option<mpsc::SyncSender<(FrameBuf<'static>, u32)>>| {
         move || {
-            let mut rng = Rng(seed);
+            let mut rng = Rng::new(seed);
             let mut held: Vec<(FrameBuf<'static>, u32)> = Vec::new();
             let mut id = (seed as u32) << 24;
             for _ in 0..rounds {
@@ -314,7 +297,7 @@ struct Fill {
 /// at each failure.
 fn steady_state_fill<const N: usize>(seed: u64, rounds: usize) -> Fill {
     let arena = Arena::<N>::new();
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let mut live: Vec<(FrameBuf<'_>, usize)> = Vec::new();
     let mut requested = 0;
     let (mut used_sum, mut payload_sum) = (0.0, 0.0);

@@ -3,8 +3,10 @@
 //!
 //! [`reference`](mod@reference) locates the PPRZLINK reference data (`messages.xml`, `units.xml`,
 //! telemetry configurations) that compatibility tests compare against, and decides
-//! whether its absence skips a test or fails it.
+//! whether its absence skips a test or fails it. [`rng`] is the deterministic generator
+//! of fixed-seed tests and benchmark workloads.
 
 #![forbid(unsafe_code)]
 
 pub mod reference;
+pub mod rng;

@@ -1,4 +1,4 @@
-//! A small deterministic generator for the fixed-seed workloads.
+//! A small deterministic generator for fixed-seed tests and benchmark workloads.
 
 /// SplitMix64: tiny, fast, and the same sequence on every platform.
 #[derive(Debug, Clone)]
@@ -17,6 +17,16 @@ impl Rng {
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         z ^ (z >> 31)
+    }
+
+    /// Uniform in `0..n` (0 when `n` is 0; the modulo bias is irrelevant here).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+
+    /// True with a chance of `percent` in 100.
+    pub fn chance(&mut self, percent: u64) -> bool {
+        self.next_u64() % 100 < percent
     }
 
     /// Uniform in `lo..=hi` (the modulo bias is irrelevant here).
@@ -41,6 +51,8 @@ mod tests {
             let (x, y) = (a.range(8, 255), b.range(8, 255));
             assert_eq!(x, y);
             assert!((8..=255).contains(&x));
+            assert!(a.below(3) < 3 && b.below(3) < 3);
         }
+        assert_eq!(a.below(0), 0);
     }
 }
