@@ -61,7 +61,7 @@ use pprz_messages::Message;
 use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, TxMeta};
 
 use crate::arena::{AllocError, ArenaStats, FrameArena, FrameBuf};
-use crate::queue::{FrameQueue, Pushed};
+use crate::queue::{FrameQueue, MessageKey, Pushed};
 use crate::stats::{DeviceStats, DropReason};
 
 /// Allocation of frame memory: implemented by [`FrameArena`] of any size, so a
@@ -106,14 +106,16 @@ impl<Msg: Message> EncodeFields for Msg {
     }
 }
 
-/// Class, id and priority of a send, and whether it answers a request (subject to the
-/// devices' [`ReplyLimit`]), passed as one word to the shared send path.
+/// Class, id and priority of a send, whether it answers a request (subject to the
+/// devices' [`ReplyLimit`]) and whether it is a state message (a newer one supersedes a
+/// waiting older one), passed as one word to the shared send path.
 #[derive(Clone, Copy)]
 struct Route {
     class: u8,
     msg_id: u8,
     priority: u8,
     reply: bool,
+    latest: bool,
 }
 
 impl Route {
@@ -124,6 +126,15 @@ impl Route {
             msg_id: Msg::ID,
             priority,
             reply: false,
+            latest: false,
+        }
+    }
+
+    #[inline]
+    fn latest<Msg: Message>(priority: u8) -> Self {
+        Self {
+            latest: true,
+            ..Self::of::<Msg>(priority)
         }
     }
 
@@ -398,6 +409,23 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         self.send_to(msg, Targets::ALL, Msg::PRIORITY)
     }
 
+    /// Sends `msg`, a **state** message (a periodic sample: attitude, position, status),
+    /// to every device at the message's own priority: where an older `Msg` of the same
+    /// priority still waits in a device's queue, the new one takes its place (the old
+    /// one counts as [`superseded`](DeviceStats::superseded)), so a saturated link
+    /// carries the latest value, not a stale backlog. Events (acknowledgements,
+    /// one-shot messages) go with [`send`](Self::send). Never blocks.
+    ///
+    /// Only one stream of `Msg` should be sent this way: two sources of the same
+    /// message (two sensors reporting through one message type) would supersede each
+    /// other.
+    ///
+    /// # Errors
+    /// The message was dropped for at least one device (counted there).
+    pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.send_fields(msg, Route::latest::<Msg>(Msg::PRIORITY), Targets::ALL)
+    }
+
     /// Sends `msg` to the devices in `targets` (indices beyond the last device are
     /// ignored) with `priority`, addressed to the ground. Never blocks.
     ///
@@ -433,7 +461,9 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             msg_id,
             priority,
             reply,
+            latest,
         } = route;
+        let latest = latest.then_some(MessageKey { class, msg_id });
         if (0..D).all(|d| !targets.contains(d)) {
             self.undeliverable.lock(|n| n.set(n.get().wrapping_add(1)));
             return Err(SendError {
@@ -476,7 +506,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 0 => Q,
                 depth => depth,
             };
-            if self.queues[device].push(priority, seq, frame, depth) == Pushed::Dropped {
+            if self.queues[device].push(priority, seq, latest, frame, depth) == Pushed::Dropped {
                 error = Some(SendError {
                     device,
                     reason: DropReason::QueueFull,
@@ -723,6 +753,17 @@ impl<'d> Sender<'d> {
             .send_fields(msg, Route::of::<Msg>(priority), targets)
     }
 
+    /// Sends the state message `msg` to every device, superseding a waiting older one;
+    /// see [`Downlink::send_latest`].
+    ///
+    /// # Errors
+    /// The message was dropped for at least one device (counted there).
+    #[inline]
+    pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.core
+            .send_fields(msg, Route::latest::<Msg>(Msg::PRIORITY), Targets::ALL)
+    }
+
     /// Our aircraft id.
     pub fn ac_id(&self) -> u8 {
         self.core.ac_id()
@@ -802,6 +843,20 @@ impl<'d> Device<'d> {
     ) -> Result<(), SendError> {
         self.core
             .send_fields(msg, Route::of::<Msg>(priority), Targets::from(*self))
+    }
+
+    /// Sends the state message `msg` to this device only, superseding a waiting older
+    /// one; see [`Downlink::send_latest`].
+    ///
+    /// # Errors
+    /// The message was dropped (counted in this device's statistics).
+    #[inline]
+    pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.core.send_fields(
+            msg,
+            Route::latest::<Msg>(Msg::PRIORITY),
+            Targets::from(*self),
+        )
     }
 
     /// Sends `msg`, an answer to a request received on this device, to this device at

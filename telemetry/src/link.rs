@@ -147,6 +147,16 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
         self.downlink.send(msg)
     }
 
+    /// Sends the state message `msg` (a periodic sample) at its own priority: a newer
+    /// one takes the place of an older one still waiting, so a saturated link carries
+    /// the latest value; see [`Downlink::send_latest`]. Never blocks.
+    ///
+    /// # Errors
+    /// As [`send`](Self::send).
+    pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
+        self.downlink.send_latest(msg)
+    }
+
     /// Sends `msg` with `priority` instead of its own; never blocks.
     ///
     /// # Errors

@@ -35,11 +35,22 @@ use embassy_sync::waitqueue::WakerRegistration;
 use crate::arena::FrameBuf;
 use crate::stats::{DeviceStats, DropReason};
 
-/// A queued frame: its priority, its global sequence number (age) and its bytes.
+/// A queued frame: its priority, its global sequence number (age), its bytes, and for a
+/// state message (latest value wins) the message it carries.
 struct Entry<'a> {
     priority: u8,
     seq: u32,
+    latest: Option<MessageKey>,
     frame: FrameBuf<'a>,
+}
+
+/// Class and id of a state message: a newer one supersedes a waiting older one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MessageKey {
+    /// Class id.
+    pub class: u8,
+    /// Message id.
+    pub msg_id: u8,
 }
 
 /// What a push did.
@@ -50,6 +61,9 @@ pub enum Pushed {
     Queued,
     /// Queued after evicting a less important frame.
     QueuedEvicting,
+    /// Queued in the place of an older instance of the same state message, which was
+    /// released (counted as superseded).
+    Superseded,
     /// Not queued: the queue is full of frames at least as important (counted as a
     /// [`DropReason::QueueFull`] drop; the frame's memory is released).
     Dropped,
@@ -163,10 +177,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                     queued: 0,
                     waiting: 0,
                     queue_high_water: 0,
+                    superseded: 0,
                     levels: [crate::stats::LevelStats {
                         submitted: 0,
                         sent: 0,
                         lost: 0,
+                        superseded: 0,
                     }; 3],
                 },
             })),
@@ -192,23 +208,46 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         });
     }
 
-    /// Queues a frame. When the queue holds `depth` frames (clamped to `1..=Q`), the
-    /// oldest of its least important frames is evicted if it is strictly less important
-    /// than `priority`; otherwise the new frame is dropped. Either way it is counted.
-    /// Never blocks.
-    pub fn push(&self, priority: u8, seq: u32, frame: FrameBuf<'a>, depth: usize) -> Pushed {
+    /// Queues a frame. A state message (`latest`) takes the place of a waiting older
+    /// instance of the same message of the same priority, which is released and counted
+    /// as superseded (it keeps that instance's place in line, so the newest value goes
+    /// out when the old one would have). Otherwise, when the queue holds `depth` frames
+    /// (clamped to `1..=Q`), the oldest of its least important frames is evicted if it is
+    /// strictly less important than `priority`; otherwise the new frame is dropped.
+    /// Either way it is counted. Never blocks.
+    pub fn push(
+        &self,
+        priority: u8,
+        seq: u32,
+        latest: Option<MessageKey>,
+        frame: FrameBuf<'a>,
+        depth: usize,
+    ) -> Pushed {
         let depth = depth.clamp(1, Q);
-        // Evicted or rejected frames are released after the lock is let go.
+        // Evicted, superseded or rejected frames are released after the lock is let go.
         let mut released = None;
         let result = self.with(|s| {
             s.submitted(priority);
+            if latest.is_some()
+                && let Some(old) = s
+                    .entries
+                    .iter_mut()
+                    .find(|e| e.latest == latest && e.priority == priority)
+            {
+                released = Some(core::mem::replace(&mut old.frame, frame));
+                s.stats.superseded = s.stats.superseded.wrapping_add(1);
+                let l = s.level(priority);
+                l.superseded = l.superseded.wrapping_add(1);
+                s.waker.wake();
+                return (Pushed::Superseded, None);
+            }
             let mut result = Pushed::Queued;
             if s.entries.len() >= depth {
                 match s.candidate() {
                     Some(i) if s.entries[i].priority < priority => {
                         let victim = s.entries.remove(i);
                         s.lost(victim.priority);
-                        released = Some(victim);
+                        released = Some(victim.frame);
                         s.stats.evicted.queue_full = s.stats.evicted.queue_full.wrapping_add(1);
                         result = Pushed::QueuedEvicting;
                     }
@@ -225,6 +264,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             let entry = Entry {
                 priority,
                 seq,
+                latest,
                 frame,
             };
             if let Err(entry) = s.entries.insert(at, entry) {

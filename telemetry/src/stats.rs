@@ -4,12 +4,14 @@
 //! Accounting invariant, at every snapshot:
 //!
 //! ```text
-//! submitted = sent + dropped.total() + evicted.total() + queued
+//! submitted = sent + dropped.total() + evicted.total() + superseded + queued
 //! ```
 //!
 //! where `queued` counts the frames waiting in the device's queue plus the one its writer
-//! is writing. Every message accepted for sending is therefore either sent or counted as
-//! dropped or evicted, by reason.
+//! is writing, and `superseded` the state messages replaced, while waiting, by a newer
+//! instance of the same message ([`Downlink::send_latest`](crate::Downlink::send_latest)).
+//! Every message accepted for sending is therefore either sent or counted as dropped,
+//! evicted or superseded, by reason.
 
 use core::fmt;
 
@@ -125,6 +127,8 @@ pub struct LevelStats {
     pub sent: u32,
     /// Dropped or evicted (shed), or lost to a write error.
     pub lost: u32,
+    /// Replaced while waiting by a newer instance of the same state message.
+    pub superseded: u32,
 }
 
 /// Statistics of one device of the downlink (a snapshot).
@@ -141,6 +145,10 @@ pub struct DeviceStats {
     pub dropped: DropCounts,
     /// Queued messages evicted by more important ones.
     pub evicted: EvictCounts,
+    /// State messages replaced, while waiting, by a newer instance of the same message
+    /// (sent with [`send_latest`](crate::Downlink::send_latest)): not lost information,
+    /// so counted apart from the drops.
+    pub superseded: u32,
     /// Frames waiting in the queue or being written now.
     pub queued: u16,
     /// Frames waiting in the queue (`queued` without the one being written).
@@ -148,20 +156,32 @@ pub struct DeviceStats {
     /// Largest number of frames ever waiting in the queue.
     pub queue_high_water: u16,
     /// The same accounting per priority level (high, normal, low; indexed by
-    /// [`pprz_messages::priority::level`]): `submitted - sent - lost` of a level are
-    /// still queued.
+    /// [`pprz_messages::priority::level`]): `submitted - sent - lost - superseded` of a
+    /// level are still queued.
     pub levels: [LevelStats; 3],
 }
 
 impl DeviceStats {
-    /// Whether `submitted = sent + dropped + evicted + queued` (it always should).
+    /// Whether `submitted = sent + dropped + evicted + superseded + queued`, for the
+    /// device and for each level (it always should).
     pub fn is_balanced(&self) -> bool {
+        let queued = u32::from(self.queued);
+        let levels_queued = self.levels.iter().fold(0u32, |n, l| {
+            n.wrapping_add(
+                l.submitted
+                    .wrapping_sub(l.sent)
+                    .wrapping_sub(l.lost)
+                    .wrapping_sub(l.superseded),
+            )
+        });
         self.submitted
             == self
                 .sent
                 .wrapping_add(self.dropped.total())
                 .wrapping_add(self.evicted.total())
-                .wrapping_add(u32::from(self.queued))
+                .wrapping_add(self.superseded)
+                .wrapping_add(queued)
+            && levels_queued == queued
     }
 
     /// Messages that will never reach the wire (dropped and evicted).

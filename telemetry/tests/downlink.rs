@@ -8,7 +8,7 @@
 //! `Sync` mutex, hence `CriticalSectionRawMutex` throughout.
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use pprz_default::messages::telemetry::{DlValue, Payload};
+use pprz_default::messages::telemetry::{Attitude, DlValue, Payload};
 use pprz_messages::{Decode, Message, VarArray};
 use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, PprzLog, PprzV1, PprzV2, XBee24};
 use pprz_telemetry::{DeviceConfig, DeviceStats, Downlink, DropReason, FrameArena, Port, Targets};
@@ -256,6 +256,10 @@ enum Op {
     Abandon {
         device: u8,
     },
+    /// A state message (ATTITUDE, or DL_VALUE) sent with `send_latest`.
+    Latest {
+        attitude: bool,
+    },
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -267,6 +271,7 @@ fn op() -> impl Strategy<Value = Op> {
         }),
         1 => (0u8..3, prop::bool::weighted(0.9)).prop_map(|(device, ok)| Op::Write { device, ok }),
         1 => (0u8..3).prop_map(|device| Op::Abandon { device }),
+        2 => any::<bool>().prop_map(|attitude| Op::Latest { attitude }),
     ]
 }
 
@@ -294,6 +299,13 @@ proptest! {
                         frame.finish(ok);
                     }
                 }
+                Op::Latest { attitude } => {
+                    let _ = if attitude {
+                        downlink.send_latest(&Attitude { phi: 0.1, psi: 0.2, theta: 0.3 })
+                    } else {
+                        downlink.send_latest(&DlValue { index: 1, value: 2.0 })
+                    };
+                }
                 Op::Abandon { device } => {
                     let before = downlink.stats(usize::from(device)).unwrap().dropped.write_error;
                     if let Some(frame) = ports[usize::from(device)].try_next() {
@@ -308,7 +320,12 @@ proptest! {
                 prop_assert!(s.is_balanced(), "{:?}", s);
             }
             for s in &stats {
-                let per_level: u32 = s.levels.iter().map(|l| l.submitted - l.sent - l.lost).sum();
+                prop_assert_eq!(
+                    s.submitted,
+                    s.sent + s.dropped.total() + s.evicted.total() + s.superseded + u32::from(s.queued)
+                );
+                let per_level: u32 =
+                    s.levels.iter().map(|l| l.submitted - l.sent - l.lost - l.superseded).sum();
                 prop_assert_eq!(per_level, u32::from(s.queued), "levels balance too: {:?}", s);
                 prop_assert_eq!(s.levels.iter().map(|l| l.submitted).sum::<u32>(), s.submitted);
             }
@@ -393,4 +410,77 @@ fn a_message_whose_encode_disagrees_with_its_length_is_dropped_not_panicking() {
         assert_eq!(s.dropped.encode + s.dropped.too_large, 5, "device {d}");
     }
     assert_eq!(downlink.arena_stats().live, 3);
+}
+
+/// State messages: a newer ATTITUDE takes the place of a waiting older one (counted as
+/// superseded), keeping its place in line; the one being written, events sent with
+/// `send`, and other priorities are never superseded.
+#[test]
+fn latest_value_wins_for_state_messages() {
+    let arena = Arena::new();
+    let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2()]);
+    let [mut port] = downlink.ports().unwrap();
+    let attitude = |phi: f32| Attitude {
+        phi,
+        psi: 0.0,
+        theta: 0.0,
+    };
+    let value = |index: u8| DlValue { index, value: 0.0 };
+    downlink.send_latest(&attitude(1.0)).unwrap();
+    downlink.send(&value(1)).unwrap(); // an event of another message
+    downlink.send_latest(&attitude(2.0)).unwrap();
+    downlink.send_latest(&attitude(3.0)).unwrap();
+    // The same message at another priority is another stream.
+    downlink
+        .sender()
+        .send_to(&attitude(9.0), Targets::ALL, Attitude::PRIORITY + 1)
+        .unwrap();
+    let s = downlink.stats(0).unwrap();
+    assert_eq!((s.submitted, s.superseded, s.queued), (5, 2, 3));
+    assert!(s.is_balanced(), "{s:?}");
+    let level = &s.levels[pprz_messages::priority::level(Attitude::PRIORITY)];
+    assert_eq!(level.superseded, 2);
+    assert_eq!(
+        downlink.arena_stats().live,
+        3,
+        "superseded frames are released"
+    );
+
+    let decode_phi = |frame: &[u8]| {
+        let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+        let mut input = frame;
+        let f = decoder.feed(&mut input).unwrap();
+        (
+            f.msg_id(),
+            Attitude::decode(f.payload()).map(|a| a.phi).ok(),
+        )
+    };
+    // Most important first (DL_VALUE, then the ATTITUDE at priority + 1), then the
+    // latest ATTITUDE.
+    let mut order = Vec::new();
+    while let Some(frame) = port.try_next() {
+        order.push(decode_phi(&frame));
+        frame.finish(true);
+    }
+    assert_eq!(
+        order,
+        [
+            (DlValue::ID, None),
+            (Attitude::ID, Some(9.0)),
+            (Attitude::ID, Some(3.0))
+        ]
+    );
+
+    // A frame being written is on the wire already: a newer one queues behind it.
+    downlink.send_latest(&attitude(4.0)).unwrap();
+    let writing = port.try_next().unwrap();
+    downlink.send_latest(&attitude(5.0)).unwrap();
+    let s = downlink.stats(0).unwrap();
+    assert_eq!((s.superseded, s.queued, s.waiting), (2, 2, 1));
+    writing.finish(true);
+    // `send` never supersedes.
+    downlink.send(&attitude(6.0)).unwrap();
+    let s = downlink.stats(0).unwrap();
+    assert_eq!((s.superseded, s.queued), (2, 2));
+    assert!(s.is_balanced(), "{s:?}");
 }
