@@ -72,6 +72,13 @@ fn send<Msg: Message>(downlink: Sender<'_>, msg: &Msg) {
     let _ = downlink.send(msg);
 }
 
+/// Sends the state sample `msg` (attitude, position, status: one stream per message) to
+/// every device: a newer sample takes the place of one still waiting, so a saturated
+/// link carries the latest state. Counted as [`send`] is.
+fn send_state<Msg: Message>(downlink: Sender<'_>, msg: &Msg) {
+    let _ = downlink.send_latest(msg);
+}
+
 /// Runs the aircraft application forever: dynamics at 50 Hz, periodic telemetry to
 /// every device of `radio`'s downlink, the datalink reader on `radio_rx` (replies go to
 /// `radio`), and the payload flood of `config`.
@@ -111,29 +118,30 @@ pub async fn run_aircraft<R: Read>(
     services.subscribe(datalink.registry())?;
 
     // Periodic telemetry callbacks.
-    let alive = || send(downlink, &telemetry::alive());
-    let version = || send(downlink, &telemetry::version());
-    let attitude = || send(downlink, &telemetry::attitude(&v()));
+    let alive = || send_state(downlink, &telemetry::alive());
+    let version = || send_state(downlink, &telemetry::version());
+    let attitude = || send_state(downlink, &telemetry::attitude(&v()));
     let gps_int = || {
         let tow = boot.elapsed().as_millis() as u32;
-        send(downlink, &telemetry::gps_int(&v(), tow));
+        send_state(downlink, &telemetry::gps_int(&v(), tow));
     };
-    let fp = || send(downlink, &telemetry::rotorcraft_fp(&v()));
-    let ins = || send(downlink, &telemetry::ins(&v()));
-    let energy = || send(downlink, &telemetry::energy(&v()));
-    let status = || send(downlink, &telemetry::status(&v()));
-    let gyro = || send(downlink, &telemetry::gyro(&v()));
-    let accel = || send(downlink, &telemetry::accel(&v()));
-    let mag = || send(downlink, &telemetry::mag());
-    let uart_errors = || send(downlink, &UartErrors::default());
+    let fp = || send_state(downlink, &telemetry::rotorcraft_fp(&v()));
+    let ins = || send_state(downlink, &telemetry::ins(&v()));
+    let energy = || send_state(downlink, &telemetry::energy(&v()));
+    let status = || send_state(downlink, &telemetry::status(&v()));
+    let gyro = || send_state(downlink, &telemetry::gyro(&v()));
+    let accel = || send_state(downlink, &telemetry::accel(&v()));
+    let mag = || send_state(downlink, &telemetry::mag());
+    let uart_errors = || send_state(downlink, &UartErrors::default());
     let reporter = Mutex::<M, _>::new(RefCell::new(LinkReporter::new()));
     let report = || {
         let up = datalink.stats();
         let down = radio.stats();
         let report = reporter.lock(|r| r.borrow_mut().report(Instant::now(), &up, &down));
-        send(downlink, &DatalinkReport::from(report));
+        send_state(downlink, &DatalinkReport::from(report));
     };
-    // Cycle through the settings, as the reference firmware's periodic DL_VALUE does.
+    // Cycle through the settings, as the reference firmware's periodic DL_VALUE does
+    // (one message type for several settings: not a single state stream, so `send`).
     let dl_value_index: Mutex<M, Cell<u8>> = Mutex::new(Cell::new(0));
     let dl_value = || {
         let count = settings.len().max(1) as u8;

@@ -44,18 +44,18 @@ fn run_sitl(extra: &[&str]) -> String {
     stdout
 }
 
-/// The summary row of a level: submitted, sent, shed, received.
-fn level_row(out: &str, level: &str) -> [u64; 4] {
+/// The summary row of a level: submitted, sent, shed, superseded, received.
+fn level_row(out: &str, level: &str) -> [u64; 5] {
     let line = out
         .lines()
-        .find(|l| l.trim_start().starts_with(level) && l.split_whitespace().count() == 5)
+        .find(|l| l.trim_start().starts_with(level) && l.split_whitespace().count() == 6)
         .unwrap_or_else(|| panic!("no summary row for {level}:\n{out}"));
     let v: Vec<u64> = line
         .split_whitespace()
         .skip(1)
         .map(|x| x.parse().unwrap())
         .collect();
-    [v[0], v[1], v[2], v[3]]
+    [v[0], v[1], v[2], v[3], v[4]]
 }
 
 #[test]
@@ -94,9 +94,9 @@ fn telemetry_ping_and_setting_over_udp() {
 #[test]
 fn overload_sheds_only_low_priority() {
     let out = run_sitl(&["--overload"]);
-    let [_, _, high_shed, high_received] = level_row(&out, "high");
-    let [_, _, normal_shed, _] = level_row(&out, "normal");
-    let [low_submitted, _, low_shed, _] = level_row(&out, "low");
+    let [_, _, high_shed, _, high_received] = level_row(&out, "high");
+    let [_, _, normal_shed, _, _] = level_row(&out, "normal");
+    let [low_submitted, _, low_shed, _, _] = level_row(&out, "low");
     assert_eq!(high_shed, 0, "{out}");
     assert_eq!(normal_shed, 0, "{out}");
     assert!(high_received >= 3);
@@ -156,7 +156,7 @@ fn ping_flood_is_rate_limited_in_the_summary() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no rate-limit count in the summary:\n{out}"));
     assert!(refused > 1000, "{refused} refused:\n{out}");
-    let [_, _, normal_shed, _] = level_row(&out, "normal");
+    let [_, _, normal_shed, _, _] = level_row(&out, "normal");
     assert_eq!(normal_shed, 0, "{out}");
     let attitudes = out
         .lines()

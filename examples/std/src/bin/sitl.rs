@@ -321,7 +321,8 @@ fn main() -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// Per priority level: submitted to the radio, sent, shed (and received by the ground).
+/// Per priority level: submitted to the radio, sent, shed, superseded (and received by
+/// the ground).
 fn print_summary(downlink: &Dl, monitor: Option<&Monitor>) {
     let mut received = [0u64; 3];
     if let Some(m) = monitor {
@@ -333,8 +334,8 @@ fn print_summary(downlink: &Dl, monitor: Option<&Monitor>) {
     println!();
     println!("Priority shedding on the radio:");
     println!(
-        "  {:<8} {:>10} {:>10} {:>10} {:>10}",
-        "level", "submitted", "sent", "shed", "received"
+        "  {:<8} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "level", "submitted", "sent", "shed", "superseded", "received"
     );
     for (i, level) in stats.levels.iter().enumerate() {
         let received = if monitor.is_some() {
@@ -343,16 +344,17 @@ fn print_summary(downlink: &Dl, monitor: Option<&Monitor>) {
             "-".to_owned()
         };
         println!(
-            "  {:<8} {:>10} {:>10} {:>10} {:>10}",
+            "  {:<8} {:>10} {:>10} {:>10} {:>10} {:>10}",
             priority::LEVEL_NAMES[i],
             level.submitted,
             level.sent,
             level.lost,
+            level.superseded,
             received
         );
     }
     println!(
-        "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug)"
+        "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug;\n   superseded: state samples replaced, while waiting, by a newer sample)"
     );
     println!(
         "  downlink: sent {}, dropped {} (queue full {}, arena full {}, replies over the rate limit {}), evicted {}, still queued {}",
