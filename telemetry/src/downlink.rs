@@ -189,6 +189,49 @@ impl ReplyLimit {
     }
 }
 
+/// The link budget of a radio that does not push back (no hardware flow control): its
+/// air throughput, and how many bytes we let wait inside the modem (and the UART
+/// driver's buffer before it). The device's writer models the modem's occupancy as a
+/// leaky bucket drained at `air_rate` and hands the modem a frame only when the frame
+/// fits in `modem_budget`, so frames wait in our priority queue, where they are
+/// reordered and shed by priority, instead of in the modem's FIFO, where they are sent
+/// in order or lost when it overflows.
+///
+/// Choosing the figures (see the sizing guide): `air_rate` is the throughput the radio
+/// really achieves, not its serial baud rate (a SiK radio at 64 kbit/s air rate with
+/// ECC on carries about half of 8000 B/s, minus its framing and duty cycle; measure it
+/// with a saturating test). `modem_budget` trades latency for link use: one
+/// maximum-size frame plus a margin for clock and throughput error keeps the air busy
+/// and bounds the wait of an acknowledgement to about two frame times; it must stay
+/// well below the modem's real buffer (2048 bytes for a SiK radio).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Pacing {
+    /// Bytes per second the radio carries over the air (at least 1).
+    pub air_rate: u32,
+    /// Bytes we let wait in the modem at most (a frame longer than this goes alone,
+    /// once the modelled modem is empty).
+    pub modem_budget: u16,
+}
+
+impl Pacing {
+    /// `air_rate` bytes per second, at most `modem_budget` bytes in the modem.
+    pub const fn new(air_rate: u32, modem_budget: u16) -> Self {
+        Self {
+            air_rate,
+            modem_budget,
+        }
+    }
+
+    /// Time the air takes to carry `bytes` bytes, in embassy-time ticks (rounded up).
+    pub(crate) fn air_ticks(&self, bytes: usize) -> u64 {
+        let rate = u64::from(self.air_rate.max(1));
+        (bytes as u64)
+            .saturating_mul(embassy_time::TICK_HZ)
+            .div_ceil(rate)
+    }
+}
+
 /// How a device is used by the downlink.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DeviceConfig {
@@ -201,6 +244,9 @@ pub struct DeviceConfig {
     pub flush: bool,
     /// The most replies the device sends (`None`: no limit).
     pub replies: Option<ReplyLimit>,
+    /// The link budget of a radio without flow control (`None`: write frames as fast as
+    /// the device accepts them, for devices that push back or never lose bytes).
+    pub pacing: Option<Pacing>,
 }
 
 impl DeviceConfig {
@@ -212,7 +258,14 @@ impl DeviceConfig {
             depth: 0,
             flush: false,
             replies: Some(ReplyLimit::DEFAULT),
+            pacing: None,
         }
+    }
+
+    /// With this link budget (`None`: no pacing); see [`Pacing`].
+    pub const fn pacing(mut self, pacing: Option<Pacing>) -> Self {
+        self.pacing = pacing;
+        self
     }
 
     /// With this reply rate limit (`None`: replies unlimited).
@@ -663,6 +716,7 @@ trait Core: Sync {
     fn undeliverable(&self) -> u32;
     fn arena_stats(&self) -> ArenaStats;
     fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>>;
+    fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
     fn complete(&self, device: usize, len: usize, written: bool);
 }
 
@@ -702,6 +756,10 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
 
     fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>> {
         self.queues.get(device)?.try_receive(cx)
+    }
+
+    fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize> {
+        self.queues.get(device)?.peek_len(cx)
     }
 
     fn complete(&self, device: usize, len: usize, written: bool) {
@@ -959,6 +1017,23 @@ impl<'d> Port<'d> {
             device: self.device,
             done: false,
         })
+    }
+
+    /// The length of the most important frame waiting, if any, without taking it (a
+    /// more important frame may arrive before the next [`try_next`](Self::try_next)).
+    pub fn peek_len(&self) -> Option<usize> {
+        self.device.core.peek_len(self.device.index(), None)
+    }
+
+    /// Waits until a frame waits, without taking it; returns the length of the most
+    /// important one (as [`peek_len`](Self::peek_len)).
+    pub async fn ready(&self) -> usize {
+        let device = self.device;
+        poll_fn(|cx| match device.core.peek_len(device.index(), Some(cx)) {
+            Some(len) => Poll::Ready(len),
+            None => Poll::Pending,
+        })
+        .await
     }
 
     /// Waits for the most important frame; as [`try_next`](Self::try_next).

@@ -19,8 +19,8 @@ pub use pprz_transports;
 
 pub use arena::{AllocError, FrameArena, FrameBuf};
 pub use downlink::{
-    Device, DeviceConfig, Downlink, FrameAlloc, Outgoing, Port, PortsTaken, ReplyLimit, SendError,
-    Sender, Targets,
+    Device, DeviceConfig, Downlink, FrameAlloc, Outgoing, Pacing, Port, PortsTaken, ReplyLimit,
+    SendError, Sender, Targets,
 };
 pub use link::{Link, LinkMutex, LinkStats};
 pub use stats::{DeviceStats, DropReason};

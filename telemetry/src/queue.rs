@@ -314,6 +314,20 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         evicted.is_some()
     }
 
+    /// The length of the most important frame, without taking it; with a context,
+    /// registers the waker when there is none.
+    pub fn peek_len(&self, cx: Option<&mut Context<'_>>) -> Option<usize> {
+        self.with(|s| match s.entries.last() {
+            Some(entry) => Some(entry.frame.len()),
+            None => {
+                if let Some(cx) = cx {
+                    s.waker.register(cx.waker());
+                }
+                None
+            }
+        })
+    }
+
     /// Takes the most important frame and marks it in flight; with a context, registers
     /// the waker when there is none. For the device's one consumer, which reports the
     /// outcome with [`complete`](Self::complete).

@@ -17,22 +17,105 @@
 //! }
 //! ```
 
+//! # Pacing
+//! A radio without flow control accepts bytes faster than it sends them and drops what
+//! overflows its buffer. For such a device, configured with a [`Pacing`] link budget,
+//! the writer models the modem's occupancy (a leaky bucket drained at the air rate) and
+//! takes the next frame only when it fits in the budget: until then frames wait in the
+//! queue, where a more important one can still overtake them.
+
+use embassy_time::{Instant, Timer};
 use embedded_io_async::Write;
 
-use crate::downlink::Port;
+use crate::downlink::{Pacing, Port};
 
 /// Runs the writer of `port`'s device forever, writing its frames to `io`. (The port is
 /// borrowed, so it outlives a cancelled writer and can be given to the next one.)
 pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
-    let flush = port.device().config().flush;
+    let config = port.device().config();
+    let mut modem = config.pacing.map(ModemModel::new);
     loop {
+        if let Some(model) = &modem {
+            // Wait for room for the most important frame; look again after waiting, as a
+            // more important (perhaps longer) frame may have arrived meanwhile.
+            let len = port.ready().await;
+            let at = model.ready_at(len);
+            if at > Instant::now().as_ticks() {
+                Timer::at(Instant::from_ticks(at)).await;
+                continue;
+            }
+        }
         let frame = port.next().await;
+        if let Some(model) = &mut modem {
+            model.add(frame.len(), Instant::now().as_ticks());
+        }
         let mut written = io.write_all(&frame).await.is_ok();
-        if written && flush {
+        if written && config.flush {
             written = io.flush().await.is_ok();
         }
         // Counted here; if this future is dropped mid-write, `frame` counts itself as a
         // failed write when it drops.
         frame.finish(written);
+    }
+}
+
+/// The modelled occupancy of a radio modem: the time (in embassy-time ticks) at which
+/// it will have sent everything handed to it, draining at the air rate.
+#[derive(Debug, Clone, Copy)]
+struct ModemModel {
+    pacing: Pacing,
+    empty_at: u64,
+}
+
+impl ModemModel {
+    fn new(pacing: Pacing) -> Self {
+        Self {
+            pacing,
+            empty_at: 0,
+        }
+    }
+
+    /// The earliest time a frame of `len` bytes fits: when the bytes still in the modem
+    /// plus the frame are at most the budget (a frame longer than the budget waits for
+    /// an empty modem).
+    fn ready_at(&self, len: usize) -> u64 {
+        let budget = self.pacing.air_ticks(usize::from(self.pacing.modem_budget));
+        let own = self.pacing.air_ticks(len);
+        self.empty_at.saturating_sub(budget.saturating_sub(own))
+    }
+
+    /// `len` bytes handed to the modem at `now`.
+    fn add(&mut self, len: usize, now: u64) {
+        self.empty_at = self
+            .empty_at
+            .max(now)
+            .saturating_add(self.pacing.air_ticks(len));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_modem_model_drains_at_the_air_rate() {
+        let tick = embassy_time::TICK_HZ;
+        // 1000 B/s, 300 bytes of budget.
+        let mut m = ModemModel::new(Pacing::new(1000, 300));
+        assert_eq!(m.ready_at(100), 0, "empty: a frame goes at once");
+        m.add(100, 0);
+        m.add(100, 0);
+        // 200 bytes in: a third frame of 100 fits now, a fourth when 100 have left.
+        assert_eq!(m.ready_at(100), 0);
+        m.add(100, 0);
+        assert_eq!(m.ready_at(100), tick / 10);
+        // Longer than the budget: waits for an empty modem.
+        assert_eq!(m.ready_at(400), 3 * tick / 10);
+        // Idle time is not credited: after a silence the model starts empty.
+        m.add(50, 10 * tick);
+        assert_eq!(m.empty_at, 10 * tick + tick / 20);
+        // An air rate of 0 is taken as 1 B/s rather than dividing by zero.
+        let slow = ModemModel::new(Pacing::new(0, 10));
+        assert_eq!(slow.pacing.air_ticks(2), 2 * tick);
     }
 }
