@@ -234,6 +234,13 @@ mod tests {
         s.evicted.arena_full = 300;
         s.queued = 9;
         s.submitted = s.sent + s.lost() + u32::from(s.queued);
+        assert!(!s.is_balanced(), "the levels must balance too");
+        s.levels[1] = LevelStats {
+            submitted: s.submitted,
+            sent: s.sent,
+            lost: s.lost(),
+            superseded: 0,
+        };
         assert!(s.is_balanced());
         assert_eq!(s.downlink_nb_msgs(), (70_000u32 % 65_536) as u16);
         assert_eq!(s.downlink_ovrn(), 255);
