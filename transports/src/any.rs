@@ -25,7 +25,7 @@
 
 use crate::pprz::{PprzV1, PprzV2};
 use crate::pprzlog::PprzLog;
-use crate::transport::{EncodeError, Encoder, Frame, Framing, RxError, TxMeta};
+use crate::transport::{Control, EncodeError, Encoder, Frame, Framing, RxError, TxMeta};
 use crate::xbee::{XBee24, XBee868};
 
 /// One of the transports of this crate, chosen at run time.
@@ -67,6 +67,61 @@ macro_rules! impl_from {
     )*};
 }
 impl_from!(PprzV1, PprzV2, XBee24, XBee868, PprzLog);
+
+/// Frame ids and transmit statuses, for a writer that keeps at most a few frames
+/// inside the radio module and waits for each one's status.
+///
+/// ```
+/// use pprz_transports::{AnyTransport, Decoder, Encoder, MsgHeader, TxMeta, XBee24, xbee};
+/// let t = AnyTransport::XBee24(XBee24::new());
+/// assert!(t.has_tx_status());
+/// let mut frame = [0u8; pprz_transports::MAX_FRAME_LEN];
+/// let n = t.encode(&TxMeta::new(MsgHeader::new(7, 0, 1, 2)), &[1, 2], &mut frame).unwrap();
+/// assert_eq!(t.frame_id(&frame[..n]), Some(xbee::NO_FRAME_ID));
+/// // Just before writing it: a fresh frame id (checksum rewritten too).
+/// assert!(t.set_frame_id(&mut frame[..n], 42));
+/// assert_eq!(t.frame_id(&frame[..n]), Some(42));
+/// // The module answers with a transmit status, which the decoder keeps aside.
+/// let mut status = [0u8; 16];
+/// let m = xbee::encode_tx_status_24(42, xbee::status::SUCCESS, &mut status).unwrap();
+/// let mut decoder: Decoder<AnyTransport> = Decoder::new(t);
+/// let mut input = &status[..m];
+/// assert!(decoder.feed(&mut input).is_none());
+/// let s = decoder.take_tx_status().unwrap();
+/// assert_eq!((s.frame_id, s.delivered), (42, true));
+/// ```
+impl AnyTransport {
+    /// Whether frames of this transport carry a frame id that the radio module answers
+    /// with a transmit status ([`TxStatus`](crate::TxStatus)): the XBee transports.
+    pub const fn has_tx_status(&self) -> bool {
+        matches!(self, Self::XBee24(_) | Self::XBee868(_))
+    }
+
+    /// The frame id of `frame`, a frame this transport encoded (bytes after it are
+    /// allowed; the checksum is not verified): `None` for transports without frame ids
+    /// (PPRZ, PPRZLOG) or when `frame` does not start with a whole transmit request of
+    /// this transport.
+    pub fn frame_id(&self, frame: &[u8]) -> Option<u8> {
+        match self {
+            Self::XBee24(t) => t.tx_frame_id(frame),
+            Self::XBee868(t) => t.tx_frame_id(frame),
+            Self::PprzV1(_) | Self::PprzV2(_) | Self::PprzLog(_) => None,
+        }
+    }
+
+    /// Rewrites the frame id of `frame`, a frame this transport encoded, to `id`, and
+    /// its checksum, in place: `false` (and `frame` untouched) for transports without
+    /// frame ids or when `frame` does not start with a whole transmit request of this
+    /// transport. A writer gives each frame a fresh id in 1..=255 just before writing
+    /// it (0, [`NO_FRAME_ID`](crate::xbee::NO_FRAME_ID), asks for no status).
+    pub fn set_frame_id(&self, frame: &mut [u8], id: u8) -> bool {
+        match self {
+            Self::XBee24(t) => t.set_tx_frame_id(frame, id),
+            Self::XBee868(t) => t.set_tx_frame_id(frame, id),
+            Self::PprzV1(_) | Self::PprzV2(_) | Self::PprzLog(_) => false,
+        }
+    }
+}
 
 impl Encoder for AnyTransport {
     fn header_len(&self) -> usize {
@@ -110,6 +165,10 @@ impl Framing for AnyTransport {
 
     fn check(&self, frame: &[u8]) -> Result<(), RxError> {
         dispatch!(self, t => t.check(frame))
+    }
+
+    fn control(&self, frame: &[u8]) -> Option<Result<Control, RxError>> {
+        dispatch!(self, t => t.control(frame))
     }
 
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {

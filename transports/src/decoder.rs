@@ -14,6 +14,14 @@
 //!    long frame) is therefore found as soon as its own bytes have arrived.
 //! 4. A complete, verified frame is handed out as a borrowed [`Frame`] and its bytes
 //!    are consumed; scanning goes on after it.
+//! 5. A complete, verified *control* frame ([`Framing::control`]: an XBee transmit
+//!    status) is not handed out: its bytes are consumed (counted in
+//!    [`DecoderStats::control_frames`] and [`DecoderStats::control_bytes`]), the
+//!    [`TxStatus`] it carries goes to a ring of [`TX_STATUS_CAPACITY`] entries, read
+//!    with [`Decoder::take_tx_status`], and scanning goes on after it. An invalid one
+//!    (bad checksum, a length its API id does not have) is rejected as in step 2,
+//!    counted in [`DecoderStats::checksum_errors`] or [`DecoderStats::length_errors`].
+//!    The PPRZ transports and PPRZLOG have no control frames.
 //!
 //! [`Decoder::feed`] copies every byte into the buffer and hands out views of it.
 //! [`Decoder::feed_borrowed`] finds the same frames but reads a frame that arrives whole
@@ -47,14 +55,24 @@
 //! assert_eq!(decoder.stats().dropped_bytes, 1);
 //! ```
 
-use crate::transport::{Frame, Framing, RxError};
+use crate::transport::{Control, Frame, Framing, RxError, TxStatus};
 
 /// Smallest decoder buffer accepted at compile time.
 pub const MIN_BUFFER_LEN: usize = 16;
 
+/// Transmit statuses a [`Decoder`] keeps until [`Decoder::take_tx_status`] takes them;
+/// when the ring is full, a new status drops the oldest one
+/// ([`DecoderStats::tx_status_overflows`]).
+///
+/// A module sends one status per transmit request with a frame id, so a writer that
+/// keeps at most this many such requests in flight, and whose statuses are taken after
+/// every [`feed`](Decoder::feed) call, never loses one.
+pub const TX_STATUS_CAPACITY: usize = 8;
+
 /// Counters of a [`Decoder`]. All wrap around on overflow.
 ///
-/// Invariant (mod 2^32): `bytes_in == frame_bytes + dropped_bytes + buffered()`.
+/// Invariant (mod 2^32):
+/// `bytes_in == frame_bytes + control_bytes + dropped_bytes + buffered()`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DecoderStats {
@@ -78,10 +96,20 @@ pub struct DecoderStats {
     pub unknown_api: u32,
     /// Incomplete candidates abandoned by [`Decoder::flush`].
     pub truncated: u32,
+    /// Verified control frames (XBee transmit statuses) consumed; they are not in
+    /// `frames`.
+    pub control_frames: u32,
+    /// Bytes of the control frames.
+    pub control_bytes: u32,
+    /// Transmit statuses dropped, oldest first, because the ring of
+    /// [`TX_STATUS_CAPACITY`] entries was full (not counted in
+    /// [`errors`](DecoderStats::errors): nothing was rejected).
+    pub tx_status_overflows: u32,
 }
 
 impl DecoderStats {
-    /// Rejected candidates of every kind.
+    /// Rejected candidates of every kind (control frames included: an invalid transmit
+    /// status is a checksum or length error).
     pub const fn errors(&self) -> u32 {
         self.checksum_errors
             .wrapping_add(self.length_errors)
@@ -89,6 +117,14 @@ impl DecoderStats {
             .wrapping_add(self.unknown_api)
             .wrapping_add(self.truncated)
     }
+}
+
+/// What [`Decoder::in_place`] found whole at the front of the input.
+enum InPlace<'i> {
+    /// A message frame, to hand out.
+    Frame(Frame<'i>),
+    /// A control frame and its length, to consume.
+    Control(Control, usize),
 }
 
 /// Incremental decoder for the transport `F`, with an `N`-byte buffer.
@@ -119,7 +155,20 @@ pub struct Decoder<F, const N: usize = { crate::MAX_FRAME_LEN }> {
     start: usize,
     end: usize,
     stats: DecoderStats,
+    /// Ring of transmit statuses: `statuses_len` entries from `statuses_head` (the
+    /// oldest), wrapping at [`TX_STATUS_CAPACITY`]. Invariant: both below the capacity
+    /// (`statuses_len` at most equal).
+    statuses: [TxStatus; TX_STATUS_CAPACITY],
+    statuses_head: usize,
+    statuses_len: usize,
 }
+
+const NO_STATUS: TxStatus = TxStatus {
+    frame_id: 0,
+    delivered: false,
+    status: 0,
+    retries: 0,
+};
 
 impl<F, const N: usize> Decoder<F, N> {
     const VALID: () = assert!(N >= MIN_BUFFER_LEN, "decoder buffer too small");
@@ -143,7 +192,13 @@ impl<F, const N: usize> Decoder<F, N> {
                 too_long: 0,
                 unknown_api: 0,
                 truncated: 0,
+                control_frames: 0,
+                control_bytes: 0,
+                tx_status_overflows: 0,
             },
+            statuses: [NO_STATUS; TX_STATUS_CAPACITY],
+            statuses_head: 0,
+            statuses_len: 0,
         }
     }
 
@@ -167,7 +222,54 @@ impl<F, const N: usize> Decoder<F, N> {
         &self.stats
     }
 
-    /// Drops the buffered bytes (counted as dropped), e.g. after a link reset.
+    /// The oldest transmit status not taken yet (statuses come out in the order they
+    /// were received), or `None`.
+    ///
+    /// Statuses are decoded by [`feed`](Decoder::feed),
+    /// [`feed_borrowed`](Decoder::feed_borrowed) and [`flush`](Decoder::flush), which
+    /// never hand them out as frames; take them after each call (see
+    /// [`TX_STATUS_CAPACITY`]).
+    pub fn take_tx_status(&mut self) -> Option<TxStatus> {
+        if self.statuses_len == 0 {
+            return None;
+        }
+        let status = self.statuses.get(self.statuses_head).copied();
+        self.statuses_head = (self.statuses_head + 1) % TX_STATUS_CAPACITY;
+        self.statuses_len -= 1;
+        status
+    }
+
+    /// Transmit statuses waiting for [`take_tx_status`](Decoder::take_tx_status).
+    pub const fn tx_statuses_pending(&self) -> usize {
+        self.statuses_len
+    }
+
+    /// Keeps a transmit status, dropping the oldest one if the ring is full.
+    fn push_tx_status(&mut self, status: TxStatus) {
+        if self.statuses_len >= TX_STATUS_CAPACITY {
+            self.statuses_head = (self.statuses_head + 1) % TX_STATUS_CAPACITY;
+            self.statuses_len = TX_STATUS_CAPACITY - 1;
+            self.stats.tx_status_overflows = self.stats.tx_status_overflows.wrapping_add(1);
+        }
+        let at = (self.statuses_head + self.statuses_len) % TX_STATUS_CAPACITY;
+        if let Some(slot) = self.statuses.get_mut(at) {
+            *slot = status;
+            self.statuses_len += 1;
+        }
+    }
+
+    /// Counts a verified control frame of `len` bytes (already consumed) and keeps what
+    /// it carries.
+    fn accept_control(&mut self, control: Control, len: usize) {
+        self.stats.control_frames = self.stats.control_frames.wrapping_add(1);
+        self.stats.control_bytes = self.stats.control_bytes.wrapping_add(len as u32);
+        match control {
+            Control::TxStatus(status) => self.push_tx_status(status),
+        }
+    }
+
+    /// Drops the buffered bytes (counted as dropped), e.g. after a link reset. The
+    /// transmit statuses not taken yet stay.
     pub fn clear(&mut self) {
         let n = self.buffered();
         self.drop_bytes(n);
@@ -256,12 +358,21 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
                 self.stats.dropped_bytes = self.stats.dropped_bytes.wrapping_add(skip as u32);
                 let bytes = bytes.get(skip..).unwrap_or_default();
                 *input = bytes;
-                if let Some(frame) = self.in_place(bytes) {
-                    let len = frame.raw().len();
-                    *input = bytes.get(len..).unwrap_or_default();
-                    self.stats.bytes_in = self.stats.bytes_in.wrapping_add(len as u32);
-                    self.count_frame(len);
-                    return Some(frame);
+                match self.in_place(bytes) {
+                    Some(InPlace::Frame(frame)) => {
+                        let len = frame.raw().len();
+                        *input = bytes.get(len..).unwrap_or_default();
+                        self.stats.bytes_in = self.stats.bytes_in.wrapping_add(len as u32);
+                        self.count_frame(len);
+                        return Some(frame);
+                    }
+                    Some(InPlace::Control(control, len)) => {
+                        *input = bytes.get(len..).unwrap_or_default();
+                        self.stats.bytes_in = self.stats.bytes_in.wrapping_add(len as u32);
+                        self.accept_control(control, len);
+                        continue;
+                    }
+                    None => {}
                 }
             }
             if let Some((start, len)) = self.scan() {
@@ -288,17 +399,22 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
         }
     }
 
-    /// The frame at the front of `bytes` (which is empty or starts with the start byte),
-    /// if it is there whole and `feed` would accept it from the buffer.
+    /// The frame or control frame at the front of `bytes` (which is empty or starts with
+    /// the start byte), if it is there whole and `feed` would accept it from the buffer.
     #[inline]
-    fn in_place<'i>(&self, bytes: &'i [u8]) -> Option<Frame<'i>> {
+    fn in_place<'i>(&self, bytes: &'i [u8]) -> Option<InPlace<'i>> {
         let len = match self.framing.rx_frame_len(bytes) {
             Ok(Some(len)) if len > 0 && len <= N => len,
             _ => return None,
         };
         let frame = bytes.get(..len)?;
+        match self.framing.control(frame) {
+            Some(Ok(control)) => return Some(InPlace::Control(control, len)),
+            Some(Err(_)) => return None,
+            None => {}
+        }
         self.framing.check(frame).ok()?;
-        self.framing.view(frame).ok()
+        self.framing.view(frame).ok().map(InPlace::Frame)
     }
 
     fn count_frame(&mut self, len: usize) {
@@ -406,6 +522,18 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
             };
             // Not all of the candidate is here yet.
             let frame = avail.get(..total)?;
+            match self.framing.control(frame) {
+                Some(Ok(control)) => {
+                    self.start += total;
+                    self.accept_control(control, total);
+                    continue;
+                }
+                Some(Err(e)) => {
+                    self.reject(e);
+                    continue;
+                }
+                None => {}
+            }
             // Verified without building the view: `view` builds it once, for the caller.
             match self.framing.check(frame) {
                 Ok(()) => {

@@ -12,13 +12,13 @@ pub mod transport;
 pub mod xbee;
 
 pub use any::AnyTransport;
-pub use decoder::{Decoder, DecoderStats};
+pub use decoder::{Decoder, DecoderStats, TX_STATUS_CAPACITY};
 pub use io::{WriteFrameError, write_frame};
 pub use pprz::{PprzV1, PprzV2};
 pub use pprzlog::PprzLog;
 pub use transport::{
-    BROADCAST_ID, COMPONENT_BROADCAST, EncodeError, Encoder, Extra, Frame, Framing, GROUND_ID,
-    LogInfo, MsgHeader, RxError, TxMeta, XBeeInfo,
+    BROADCAST_ID, COMPONENT_BROADCAST, Control, EncodeError, Encoder, Extra, Frame, Framing,
+    GROUND_ID, LogInfo, MsgHeader, RxError, TxMeta, TxStatus, XBeeInfo,
 };
 pub use xbee::{XBee24, XBee868};
 

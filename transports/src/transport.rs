@@ -12,6 +12,11 @@
 //!   first bytes, integrity check, borrowed view). The incremental
 //!   [`Decoder`](crate::Decoder) drives it.
 //! * [`Frame`]: a received, checksum-verified frame borrowed from a buffer.
+//! * [`Control`]: a received, checksum-verified frame that carries no message but a
+//!   report of the radio module itself (today: an XBee [`TxStatus`]). The
+//!   [`Decoder`](crate::Decoder) keeps transmit statuses aside
+//!   ([`Decoder::take_tx_status`](crate::Decoder::take_tx_status)) and never hands them
+//!   out as message frames.
 
 use core::fmt;
 
@@ -260,6 +265,40 @@ pub struct XBeeInfo {
     pub rssi: Option<u8>,
     /// The options byte of the API frame.
     pub options: u8,
+}
+
+/// The outcome of one transmission, as the radio module reports it: an XBee transmit
+/// status (API id [`0x89`](crate::xbee::API_TX_STATUS) on 802.15.4,
+/// [`0x8B`](crate::xbee::API_TX_STATUS_868) on 868 and the other ZigBee-style modules).
+///
+/// A module answers every transmit request whose frame id is not
+/// [`NO_FRAME_ID`](crate::xbee::NO_FRAME_ID) with exactly one status, once the
+/// transmission is over (delivered, or given up). A broadcast is never acknowledged:
+/// its status always reads delivered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TxStatus {
+    /// Frame id of the transmit request this status answers (1..=255 for a request of
+    /// ours; 0 answers none).
+    pub frame_id: u8,
+    /// Whether the frame was delivered: `status` is
+    /// [`status::SUCCESS`](crate::xbee::status::SUCCESS).
+    pub delivered: bool,
+    /// The raw (delivery) status byte, see [`xbee::status`](crate::xbee::status).
+    pub status: u8,
+    /// Transmission retries the module made (0x8B); always 0 for 802.15.4 (0x89),
+    /// which does not report them.
+    pub retries: u8,
+}
+
+/// A received, checksum-verified frame that carries no message: a report of the radio
+/// module itself. Only XBee transports have any ([`Framing::control`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Control {
+    /// XBee transmit status (API id 0x89 or 0x8B).
+    TxStatus(TxStatus),
 }
 
 /// PPRZLOG details of a logged frame.
@@ -518,6 +557,13 @@ pub trait Encoder {
 
 /// RX syntax of a transport, driven by the incremental [`Decoder`](crate::Decoder).
 ///
+/// A complete candidate (start byte, then as many bytes as
+/// [`rx_frame_len`](Framing::rx_frame_len) announced) is first offered to
+/// [`control`](Framing::control): a control frame ([`Control`], an XBee transmit
+/// status) is accepted or rejected there. Any other candidate is a message frame,
+/// accepted when [`check`](Framing::check) succeeds and handed out as a [`Frame`]
+/// built by [`view`](Framing::view).
+///
 /// Every method is total: any input gives an answer, never a panic.
 pub trait Framing {
     /// The byte every frame starts with.
@@ -532,9 +578,10 @@ pub trait Framing {
     /// `Err(RxError::BadLength)` if the length field is impossible.
     fn rx_frame_len(&self, head: &[u8]) -> Result<Option<usize>, RxError>;
 
-    /// Checks the integrity of exactly one frame (`frame.len()` is the length
+    /// Checks the integrity of exactly one message frame (`frame.len()` is the length
     /// [`rx_frame_len`](Framing::rx_frame_len) gave): start byte, checksum and, for
-    /// XBee, the API id. A frame is accepted when both `verify` and
+    /// XBee, the API id (a control frame's API id is not a message's:
+    /// [`RxError::UnknownApiId`]). A message frame is accepted when both `verify` and
     /// [`view`](Framing::view) succeed (see [`check`](Framing::check)).
     fn verify(&self, frame: &[u8]) -> Result<(), RxError>;
 
@@ -543,8 +590,9 @@ pub trait Framing {
 
     /// Whether a frame is accepted: `Ok` exactly when both [`verify`](Framing::verify)
     /// and [`view`](Framing::view) succeed on `frame`, otherwise the error of the first
-    /// that fails. The [`Decoder`](crate::Decoder) calls it on every complete candidate,
-    /// then builds the view once, for the frame it hands out.
+    /// that fails. The [`Decoder`](crate::Decoder) calls it on every complete candidate
+    /// that is not a control frame ([`control`](Framing::control) gave `None`), then
+    /// builds the view once, for the frame it hands out.
     ///
     /// The default runs both (and drops the view); a transport whose `view` can only fail
     /// on a few things `verify` does not check (a frame too short for its headers)
@@ -554,8 +602,44 @@ pub trait Framing {
         self.view(frame).map(|_| ())
     }
 
-    /// Parses the frame at the start of `buf` (bytes after it are ignored): verifies
-    /// it and returns its view and length. Handy for datagrams and host tools.
+    /// Whether exactly one frame (as for [`verify`](Framing::verify)) is a control
+    /// frame of this transport: `None` when it is not (it is then a message frame,
+    /// for [`check`](Framing::check) and [`view`](Framing::view)); `Some(Ok(_))` for a
+    /// valid control frame; `Some(Err(_))` for a frame whose API id is a control
+    /// frame's but which is not a valid one (bad start byte, length or checksum).
+    ///
+    /// Checked in the same order as [`verify`](Framing::verify): start byte, length,
+    /// checksum, then the layout the API id requires ([`RxError::BadLength`] when the
+    /// length does not fit it).
+    ///
+    /// The default (PPRZ v1/v2, PPRZLOG: no control frames) is `None` for every frame.
+    /// XBee: the transmit statuses, API ids 0x89 and 0x8B, both accepted by both XBee
+    /// transports (an 802.15.4 XBee 3 answers a 0x10 request with 0x8B).
+    fn control(&self, frame: &[u8]) -> Option<Result<Control, RxError>> {
+        let _ = frame;
+        None
+    }
+
+    /// The valid control frame at the start of `buf` (bytes after it are ignored) and
+    /// its length, or `None` if there is none there (no complete frame, or a message
+    /// frame, or an invalid control frame). The counterpart of
+    /// [`parse`](Framing::parse) for control frames.
+    fn parse_control(&self, buf: &[u8]) -> Option<(Control, usize)> {
+        if buf.first() != Some(&self.start_byte()) {
+            return None;
+        }
+        let len = self.rx_frame_len(buf).ok()??;
+        let frame = buf.get(..len)?;
+        match self.control(frame)? {
+            Ok(control) => Some((control, len)),
+            Err(_) => None,
+        }
+    }
+
+    /// Parses the message frame at the start of `buf` (bytes after it are ignored):
+    /// verifies it and returns its view and length. Handy for datagrams and host tools.
+    /// A control frame is not a message: [`RxError::UnknownApiId`] (see
+    /// [`parse_control`](Framing::parse_control)).
     fn parse<'a>(&self, buf: &'a [u8]) -> Result<(Frame<'a>, usize), RxError> {
         if buf.first() != Some(&self.start_byte()) {
             return Err(if buf.is_empty() {

@@ -34,6 +34,37 @@
 //! (251 RF bytes), the PPRZ v2 limit, so every XBee 868 message can be relayed
 //! over PPRZ v2 unchanged. Receive accepts up to the full 256 RF bytes.
 //!
+//! Transmit statuses (both radios): a transmit request whose frame id is not
+//! [`NO_FRAME_ID`] is answered by the local module with one status frame once the
+//! transmission is over:
+//!
+//! ```text
+//! 0x89 (802.15.4):  | 0x89 | frame_id | status |
+//! 0x8B (868, ...):  | 0x8B | frame_id | FF FE (reserved) | retries | delivery | discovery |
+//! ```
+//!
+//! Status / delivery 0 is success (constants in [`status`]). Both XBee transports
+//! accept both layouts (an 802.15.4 XBee 3 answers a 0x10 request with 0x8B). A status
+//! is a control frame ([`Control`]): the [`Decoder`](crate::Decoder) keeps it aside as
+//! a [`TxStatus`] ([`Decoder::take_tx_status`](crate::Decoder::take_tx_status)) and
+//! never hands it out as a message. A status frame of another length, or with a bad
+//! checksum, is rejected like any bad candidate (counted as a length or checksum
+//! error). Frame ids are written at send time with
+//! [`AnyTransport::set_frame_id`](crate::AnyTransport::set_frame_id) (or
+//! [`XBee24::set_tx_frame_id`], [`XBee868::set_tx_frame_id`]);
+//! [`encode_tx_status_24`] and [`encode_tx_status_868`] build status frames for
+//! simulated modems and tests.
+//!
+//! | API id | direction | frame | [`XBee24`] | [`XBee868`] |
+//! |--------|-----------|-------|------------|-------------|
+//! | 0x01 | sent | TX16 request | sent, received (loopback) | unknown API |
+//! | 0x81 | received | RX16 packet | message frame | unknown API |
+//! | 0x10 | sent | transmit request | unknown API | sent, received (loopback) |
+//! | 0x90 | received | receive packet | unknown API | message frame |
+//! | 0x89 | received | 802.15.4 transmit status | [`TxStatus`] | [`TxStatus`] |
+//! | 0x8B | received | transmit status | [`TxStatus`] | [`TxStatus`] |
+//! | other | | | unknown API | unknown API |
+//!
 //! Address mapping (both radios): receiver 0 (ground) -> `0x0100`, 0xFF (broadcast)
 //! -> `0xFFFF`, any other id -> the id itself. On 868 the same 16-bit value is the
 //! low half of the 64-bit destination (`0x000000000000FFFF` is the 868 broadcast
@@ -46,7 +77,8 @@
 
 use crate::checksum;
 use crate::transport::{
-    EncodeError, Encoder, Extra, Frame, Framing, MsgHeader, RxError, TxMeta, XBeeInfo,
+    Control, EncodeError, Encoder, Extra, Frame, Framing, MsgHeader, RxError, TxMeta, TxStatus,
+    XBeeInfo,
 };
 
 /// Start delimiter of every API frame.
@@ -59,6 +91,11 @@ pub const API_RX16: u8 = 0x81;
 pub const API_TX_868: u8 = 0x10;
 /// 868 receive packet.
 pub const API_RX_868: u8 = 0x90;
+/// 802.15.4 transmit status: `| 0x89 | frame_id | status |`.
+pub const API_TX_STATUS: u8 = 0x89;
+/// 868 (and ZigBee, DigiMesh, XBee 3) transmit status:
+/// `| 0x8B | frame_id | FF FE | retries | delivery | discovery |`.
+pub const API_TX_STATUS_868: u8 = 0x8B;
 /// Frame id 0: the module sends no transmit status.
 pub const NO_FRAME_ID: u8 = 0;
 /// 16-bit address of the ground station's module.
@@ -73,6 +110,50 @@ pub const MAX_RF_PAYLOAD_868: usize = 256;
 pub const CHECKSUM_LEN: usize = 1;
 /// Bytes of framing around `FRAME_DATA`: start, length (2), checksum.
 pub const OVERHEAD: usize = 3 + CHECKSUM_LEN;
+/// Length of a whole 802.15.4 transmit status frame (0x89): 7 bytes.
+pub const TX_STATUS_FRAME_LEN: usize = field::tx_status::LEN + OVERHEAD;
+/// Length of a whole 868 transmit status frame (0x8B): 11 bytes.
+pub const TX_STATUS_868_FRAME_LEN: usize = field::tx_status_868::LEN + OVERHEAD;
+
+/// Transmit status codes: the status byte of 0x89 and the delivery status byte of
+/// 0x8B ([`TxStatus::status`]), and the discovery status byte of 0x8B.
+///
+/// Values 0..=3 are shared by both frames (802.15.4 calls 1 "no ACK", the others
+/// "MAC ACK failure"); the others are 0x8B delivery statuses. Modules may report codes
+/// not listed here: anything but [`SUCCESS`](status::SUCCESS) is a failure.
+pub mod status {
+    /// Delivered (a broadcast always reports it).
+    pub const SUCCESS: u8 = 0x00;
+    /// No acknowledgement from the destination after the MAC retries (802.15.4 "no
+    /// ACK", 0x8B "MAC ACK failure").
+    pub const NO_ACK: u8 = 0x01;
+    /// The channel was never clear (802.15.4 CCA failure, 868 LBT failure).
+    pub const CCA_FAILURE: u8 = 0x02;
+    /// 802.15.4: the indirect (coordinator) transmission was purged; 868: no spectrum
+    /// available.
+    pub const PURGED: u8 = 0x03;
+    /// 0x8B: no network acknowledgement from the destination.
+    pub const NETWORK_ACK_FAILURE: u8 = 0x21;
+    /// 0x8B: no route to the destination.
+    pub const ROUTE_NOT_FOUND: u8 = 0x25;
+    /// 0x8B: internal resource error.
+    pub const INTERNAL_ERROR: u8 = 0x31;
+    /// 0x8B: lack of free buffers, timers...
+    pub const RESOURCE_ERROR: u8 = 0x32;
+    /// 0x8B: RF payload too large for the module.
+    pub const PAYLOAD_TOO_LARGE: u8 = 0x74;
+    /// 0x8B: indirect message unrequested.
+    pub const INDIRECT_UNREQUESTED: u8 = 0x75;
+
+    /// 0x8B discovery status: no discovery overhead.
+    pub const DISCOVERY_NONE: u8 = 0x00;
+    /// 0x8B discovery status: address discovery.
+    pub const DISCOVERY_ADDRESS: u8 = 0x01;
+    /// 0x8B discovery status: route discovery.
+    pub const DISCOVERY_ROUTE: u8 = 0x02;
+    /// 0x8B discovery status: address and route discovery.
+    pub const DISCOVERY_ADDRESS_AND_ROUTE: u8 = 0x03;
+}
 
 /// Byte offsets in an API frame.
 pub mod field {
@@ -143,6 +224,37 @@ pub mod field {
         pub const OPTIONS: usize = 13;
         /// RF data.
         pub const DATA: usize = 14;
+    }
+
+    /// 802.15.4 transmit status (0x89) offsets in `FRAME_DATA`.
+    pub mod tx_status {
+        /// API id, 0x89.
+        pub const API_ID: usize = 0;
+        /// Frame id of the request this status answers.
+        pub const FRAME_ID: usize = 1;
+        /// Status (0: success).
+        pub const STATUS: usize = 2;
+        /// `FRAME_DATA` length (the `LEN` field) of every 0x89 frame.
+        pub const LEN: usize = 3;
+    }
+
+    /// Transmit status (0x8B) offsets in `FRAME_DATA`.
+    pub mod tx_status_868 {
+        use super::Field;
+        /// API id, 0x8B.
+        pub const API_ID: usize = 0;
+        /// Frame id of the request this status answers.
+        pub const FRAME_ID: usize = 1;
+        /// Reserved (`FF FE` on 868; the 16-bit destination on ZigBee).
+        pub const RESERVED: Field = 2..4;
+        /// Transmission retries.
+        pub const RETRIES: usize = 4;
+        /// Delivery status (0: success).
+        pub const DELIVERY: usize = 5;
+        /// Discovery status.
+        pub const DISCOVERY: usize = 6;
+        /// `FRAME_DATA` length (the `LEN` field) of every 0x8B frame.
+        pub const LEN: usize = 7;
     }
 
     /// 868 receive packet (0x90) offsets in `FRAME_DATA`.
@@ -354,13 +466,148 @@ fn verify(frame: &[u8], accepted: [u8; 2]) -> Result<(), RxError> {
     }
 }
 
+/// [`Framing::control`] of both XBee transports: the transmit statuses.
+fn control(frame: &[u8]) -> Option<Result<Control, RxError>> {
+    match frame.get(field::API_ID) {
+        Some(&(API_TX_STATUS | API_TX_STATUS_868)) => Some(tx_status(frame)),
+        _ => None,
+    }
+}
+
+/// A transmit status frame (0x89 or 0x8B), checked as [`verify`] checks messages:
+/// start, exact length, checksum, then the layout of its API id.
+fn tx_status(frame: &[u8]) -> Result<Control, RxError> {
+    let packet = Packet::new_checked(frame)?;
+    if packet.start() != START {
+        return Err(RxError::BadStart);
+    }
+    if packet.frame_len() != frame.len() {
+        return Err(RxError::BadLength);
+    }
+    if !packet.verify_checksum() {
+        return Err(RxError::Checksum);
+    }
+    let report = match *packet.frame_data() {
+        [API_TX_STATUS, frame_id, code] => TxStatus {
+            frame_id,
+            delivered: code == status::SUCCESS,
+            status: code,
+            retries: 0,
+        },
+        [
+            API_TX_STATUS_868,
+            frame_id,
+            _,
+            _,
+            retries,
+            delivery,
+            _discovery,
+        ] => TxStatus {
+            frame_id,
+            delivered: delivery == status::SUCCESS,
+            status: delivery,
+            retries,
+        },
+        [API_TX_STATUS | API_TX_STATUS_868, ..] => return Err(RxError::BadLength),
+        [api, ..] => return Err(RxError::UnknownApiId(api)),
+        [] => return Err(RxError::BadLength),
+    };
+    Ok(Control::TxStatus(report))
+}
+
+/// Writes the API frame whose `FRAME_DATA` is `data` to the start of `out`.
+fn encode_api_frame<const L: usize>(data: [u8; L], out: &mut [u8]) -> Result<usize, EncodeError> {
+    let len = L + OVERHEAD;
+    let available = out.len();
+    let too_small = EncodeError::BufferTooSmall {
+        needed: len,
+        available,
+    };
+    let frame = out.get_mut(..len).ok_or(too_small)?;
+    let mut packet = Packet::new_unchecked(frame);
+    packet.set_start(START);
+    packet.set_length(u16::try_from(L).map_err(|_| too_small)?);
+    packet.frame_data_mut().copy_from_slice(&data);
+    packet.fill_checksum();
+    Ok(len)
+}
+
+/// Builds the 802.15.4 transmit status frame (0x89) a module sends for the request
+/// `frame_id`, with status byte `status` ([`status`] codes), at the start of `out`;
+/// returns its length, [`TX_STATUS_FRAME_LEN`]. For simulated modems and tests.
+///
+/// ```
+/// use pprz_transports::{Framing, XBee24, xbee};
+/// let mut out = [0u8; 16];
+/// let n = xbee::encode_tx_status_24(0x47, xbee::status::NO_ACK, &mut out).unwrap();
+/// assert_eq!(&out[..n], &[0x7E, 0x00, 0x03, 0x89, 0x47, 0x01, 0x2E]);
+/// let (control, len) = XBee24::new().parse_control(&out).unwrap();
+/// # let _ = (control, len);
+/// ```
+pub fn encode_tx_status_24(frame_id: u8, status: u8, out: &mut [u8]) -> Result<usize, EncodeError> {
+    encode_api_frame([API_TX_STATUS, frame_id, status], out)
+}
+
+/// Builds the transmit status frame (0x8B) a module sends for the request `frame_id`
+/// after `retries` retries, with delivery status `delivery` and discovery status
+/// `discovery` ([`status`] codes), reserved bytes `FF FE`, at the start of `out`;
+/// returns its length, [`TX_STATUS_868_FRAME_LEN`]. For simulated modems and tests.
+pub fn encode_tx_status_868(
+    frame_id: u8,
+    retries: u8,
+    delivery: u8,
+    discovery: u8,
+    out: &mut [u8],
+) -> Result<usize, EncodeError> {
+    encode_api_frame(
+        [
+            API_TX_STATUS_868,
+            frame_id,
+            0xFF,
+            0xFE,
+            retries,
+            delivery,
+            discovery,
+        ],
+        out,
+    )
+}
+
+/// The `FRAME_DATA` of a transmit request `frame` with API id `api` whose header
+/// (`header_len` `FRAME_DATA` bytes) is whole; bytes after the frame are allowed.
+fn tx_request(frame: &[u8], api: u8, header_len: usize) -> Option<&[u8]> {
+    let packet = Packet::new_checked(frame).ok()?;
+    let data = packet.frame_data();
+    (packet.start() == START && packet.api_id() == api && data.len() >= header_len).then_some(data)
+}
+
+/// Frame id of the transmit request `frame` (API id `api`, header `header_len` bytes).
+fn tx_frame_id(frame: &[u8], api: u8, header_len: usize, at: usize) -> Option<u8> {
+    tx_request(frame, api, header_len)?.get(at).copied()
+}
+
+/// Rewrites the frame id of the transmit request `frame` and its checksum.
+fn set_tx_frame_id(frame: &mut [u8], id: u8, api: u8, header_len: usize, at: usize) -> bool {
+    if tx_request(frame, api, header_len).is_none() {
+        return false;
+    }
+    let mut packet = Packet::new_unchecked(frame);
+    match packet.frame_data_mut().get_mut(at) {
+        Some(byte) => *byte = id,
+        None => return false,
+    }
+    packet.fill_checksum();
+    true
+}
+
 fn be_u64(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0u64, |acc, &b| (acc << 8) | u64::from(b))
 }
 
 /// XBee 802.15.4 ("XBee 2.4", series 1) in API mode 1.
 ///
-/// Sends TX16 (0x01); receives RX16 (0x81) and TX16 (0x01, cable loopback).
+/// Sends TX16 (0x01); receives RX16 (0x81) and TX16 (0x01, cable loopback) as
+/// messages, and transmit statuses (0x89, 0x8B) as control frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct XBee24 {
@@ -382,6 +629,23 @@ impl XBee24 {
             frame_id: NO_FRAME_ID,
             options: 0,
         }
+    }
+
+    /// The frame id of a TX16 frame (API id 0x01, as this encoder writes it), or `None`
+    /// if `frame` does not start with a whole one. Bytes after the frame are allowed;
+    /// the checksum is not verified.
+    pub fn tx_frame_id(&self, frame: &[u8]) -> Option<u8> {
+        use field::tx16;
+        tx_frame_id(frame, API_TX16, tx16::DATA, tx16::FRAME_ID)
+    }
+
+    /// Rewrites the frame id of the TX16 frame at the start of `frame` to `id`, and its
+    /// checksum (recomputed over the whole `FRAME_DATA`); `false` (and `frame`
+    /// untouched) if `frame` does not start with a whole TX16 frame. `id`
+    /// [`NO_FRAME_ID`] asks the module for no status.
+    pub fn set_tx_frame_id(&self, frame: &mut [u8], id: u8) -> bool {
+        use field::tx16;
+        set_tx_frame_id(frame, id, API_TX16, tx16::DATA, tx16::FRAME_ID)
     }
 }
 
@@ -433,6 +697,10 @@ impl Framing for XBee24 {
         verify(frame, [API_RX16, API_TX16])
     }
 
+    fn control(&self, frame: &[u8]) -> Option<Result<Control, RxError>> {
+        control(frame)
+    }
+
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
         use field::{rx16, tx16};
         let packet = Packet::new_checked(frame)?;
@@ -461,7 +729,7 @@ impl Framing for XBee24 {
 /// XBee 868 MHz modules in API mode 1.
 ///
 /// Sends 0x10 (transmit request, 64-bit destination); receives 0x90 and 0x10
-/// (cable loopback).
+/// (cable loopback) as messages, and transmit statuses (0x8B, 0x89) as control frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct XBee868 {
@@ -483,6 +751,23 @@ impl XBee868 {
             frame_id: NO_FRAME_ID,
             options: 0,
         }
+    }
+
+    /// The frame id of a transmit request (API id 0x10, as this encoder writes it), or
+    /// `None` if `frame` does not start with a whole one. Bytes after the frame are
+    /// allowed; the checksum is not verified.
+    pub fn tx_frame_id(&self, frame: &[u8]) -> Option<u8> {
+        use field::tx868;
+        tx_frame_id(frame, API_TX_868, tx868::DATA, tx868::FRAME_ID)
+    }
+
+    /// Rewrites the frame id of the transmit request (0x10) at the start of `frame` to
+    /// `id`, and its checksum (recomputed over the whole `FRAME_DATA`); `false` (and
+    /// `frame` untouched) if `frame` does not start with a whole 0x10 frame. `id`
+    /// [`NO_FRAME_ID`] asks the module for no status.
+    pub fn set_tx_frame_id(&self, frame: &mut [u8], id: u8) -> bool {
+        use field::tx868;
+        set_tx_frame_id(frame, id, API_TX_868, tx868::DATA, tx868::FRAME_ID)
     }
 }
 
@@ -534,6 +819,10 @@ impl Framing for XBee868 {
 
     fn verify(&self, frame: &[u8]) -> Result<(), RxError> {
         verify(frame, [API_RX_868, API_TX_868])
+    }
+
+    fn control(&self, frame: &[u8]) -> Option<Result<Control, RxError>> {
+        control(frame)
     }
 
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {

@@ -5,9 +5,9 @@ mod common;
 
 use common::{Owned, all_transports, decode_chunked};
 use pprz_transports::{
-    AnyTransport, Decoder, EncodeError, Encoder, Extra, Framing, LogInfo, MAX_FRAME_LEN, MsgHeader,
-    PprzLog, PprzV1, PprzV2, RxError, TxMeta, WriteFrameError, XBee24, XBee868, XBeeInfo,
-    write_frame,
+    AnyTransport, Control, Decoder, EncodeError, Encoder, Extra, Framing, LogInfo, MAX_FRAME_LEN,
+    MsgHeader, PprzLog, PprzV1, PprzV2, RxError, TxMeta, TxStatus, WriteFrameError, XBee24,
+    XBee868, XBeeInfo, write_frame,
 };
 
 /// The worked v2 example of `docs/wire-formats.md`: telemetry ALIVE (class 1, id 2) from
@@ -277,11 +277,23 @@ fn parse_errors() {
         XBee24::new().parse(&[0x7E, 0, 106]).unwrap_err(),
         RxError::BadLength
     );
-    // A transmit status frame (0x89) is well formed but not ours.
+    // A transmit status frame (0x89) is well formed but not a message: a control frame.
     let status = [0x7E, 0x00, 0x03, 0x89, 0x01, 0x00, 0x75];
     assert_eq!(
         XBee24::new().parse(&status).unwrap_err(),
         RxError::UnknownApiId(0x89)
+    );
+    assert_eq!(
+        XBee24::new().parse_control(&status),
+        Some((
+            Control::TxStatus(TxStatus {
+                frame_id: 1,
+                delivered: true,
+                status: 0,
+                retries: 0
+            }),
+            7
+        ))
     );
     // PPRZLOG DATA shorter than the message header.
     assert_eq!(
@@ -304,12 +316,18 @@ fn decoder_counts_error_kinds() {
     assert_eq!(s.checksum_errors, 1);
     assert_eq!(s.length_errors, 1);
 
-    let status = [0x7E, 0x00, 0x03, 0x89, 0x01, 0x00, 0x75];
-    let mut stream = status.to_vec();
+    // A modem status (0x8A: `8A 00`, hardware reset) is well formed but not carried; a
+    // transmit status (0x89) is a control frame, neither an error nor a message.
+    let modem_status = [0x7E, 0x00, 0x02, 0x8A, 0x00, 0x75];
+    let tx_status = [0x7E, 0x00, 0x03, 0x89, 0x01, 0x00, 0x75];
+    let mut stream = modem_status.to_vec();
+    stream.extend_from_slice(&tx_status);
     stream.extend_from_slice(&XBEE24_RX);
     let (frames, s) = decode_chunked::<MAX_FRAME_LEN>(XBee24::new().into(), &stream, &[3]);
     assert_eq!(frames.len(), 1);
     assert_eq!(s.unknown_api, 1);
+    assert_eq!((s.control_frames, s.control_bytes), (1, 7));
+    assert_eq!(s.dropped_bytes, 6);
 
     let (frames, s) = decode_chunked::<32>(PprzV2::new().into(), &[0x99, 200, 1, 2], &[4]);
     assert!(frames.is_empty());

@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use pprz_transports::{
-    AnyTransport, Decoder, Encoder, Extra, Frame, Framing, MsgHeader, PprzLog, PprzV1, PprzV2,
-    TxMeta, XBee24, XBee868, xbee,
+    AnyTransport, Control, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, MsgHeader,
+    PprzLog, PprzV1, PprzV2, TxMeta, TxStatus, XBee24, XBee868, xbee,
 };
 
 /// Every transport, with the configuration the tests use.
@@ -104,9 +104,23 @@ pub fn decode_chunked<const N: usize>(
     t: AnyTransport,
     stream: &[u8],
     sizes: &[usize],
-) -> (Vec<Owned>, pprz_transports::DecoderStats) {
+) -> (Vec<Owned>, DecoderStats) {
+    let (frames, _, stats) = decode_with_statuses::<N>(t, stream, sizes, false);
+    (frames, stats)
+}
+
+/// [`decode_chunked`], through `feed_borrowed` when `borrowed`, also returning the
+/// transmit statuses, taken after every call. Checks that every control frame's status
+/// was taken or counted as an overflow.
+pub fn decode_with_statuses<const N: usize>(
+    t: AnyTransport,
+    stream: &[u8],
+    sizes: &[usize],
+    borrowed: bool,
+) -> (Vec<Owned>, Vec<TxStatus>, DecoderStats) {
     let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
     let mut out = Vec::new();
+    let mut statuses = Vec::new();
     let mut rest = stream;
     let mut i = 0;
     while !rest.is_empty() {
@@ -119,18 +133,34 @@ pub fn decode_chunked<const N: usize>(
         let (chunk, tail) = rest.split_at(size.min(rest.len()));
         rest = tail;
         let mut input = chunk;
-        while let Some(f) = d.feed(&mut input) {
+        loop {
+            let frame = if borrowed {
+                d.feed_borrowed(&mut input)
+            } else {
+                d.feed(&mut input)
+            };
+            let Some(f) = frame else { break };
             out.push(Owned::from(f));
+            statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
         }
+        statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
         assert!(input.is_empty(), "feed returned None with input left");
         check_invariant(&d);
     }
     while let Some(f) = d.flush() {
         out.push(Owned::from(f));
+        statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
     }
+    statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
     assert_eq!(d.buffered(), 0);
     check_invariant(&d);
-    (out, *d.stats())
+    let s = *d.stats();
+    assert_eq!(s.frames as usize, out.len());
+    assert_eq!(
+        s.control_frames as usize,
+        statuses.len() + s.tx_status_overflows as usize
+    );
+    (out, statuses, s)
 }
 
 pub fn check_invariant<const N: usize>(d: &Decoder<AnyTransport, N>) {
@@ -138,6 +168,7 @@ pub fn check_invariant<const N: usize>(d: &Decoder<AnyTransport, N>) {
     assert_eq!(
         s.bytes_in,
         s.frame_bytes
+            .wrapping_add(s.control_bytes)
             .wrapping_add(s.dropped_bytes)
             .wrapping_add(d.buffered() as u32),
         "stats invariant: {s:?}, buffered {}",
@@ -146,13 +177,33 @@ pub fn check_invariant<const N: usize>(d: &Decoder<AnyTransport, N>) {
 }
 
 /// Reference model: a whole-stream, non-incremental scan with the same acceptance
-/// rule (a valid frame no longer than `n` bytes at the current position is taken
-/// whole; anything else advances one byte). Returns `(offset, frame)`.
+/// rule (a valid control frame or frame no longer than `n` bytes at the current
+/// position is taken whole; anything else advances one byte). Returns `(offset, frame)`.
 pub fn oracle(t: &AnyTransport, n: usize, stream: &[u8]) -> Vec<(usize, Owned)> {
+    oracle_with_statuses(t, n, stream).0
+}
+
+/// [`oracle`], also returning the transmit statuses of the control frames taken.
+pub fn oracle_with_statuses(
+    t: &AnyTransport,
+    n: usize,
+    stream: &[u8],
+) -> (Vec<(usize, Owned)>, Vec<TxStatus>) {
     let mut out = Vec::new();
+    let mut statuses = Vec::new();
     let mut pos = 0;
     while pos < stream.len() {
         let here = &stream[pos..];
+        if let Some((control, len)) = t.parse_control(here)
+            && len <= n
+        {
+            match control {
+                Control::TxStatus(s) => statuses.push(s),
+                other => panic!("unexpected control frame {other:?}"),
+            }
+            pos += len;
+            continue;
+        }
         if let Ok((frame, len)) = t.parse(here)
             && len <= n
         {
@@ -162,7 +213,7 @@ pub fn oracle(t: &AnyTransport, n: usize, stream: &[u8]) -> Vec<(usize, Owned)> 
         }
         pos += 1;
     }
-    out
+    (out, statuses)
 }
 
 /// A tiny deterministic PRNG (xorshift64*), so randomized tests that are not
