@@ -1,53 +1,172 @@
 //! A simulated radio link for tests and host runs (feature `sim`).
 //!
-//! [`SimLink`] is a pair of connected endpoints. Each direction models a transparent
-//! serial radio modem:
+//! [`SimLink`] is a pair of connected endpoints, A (the aircraft) and B (the ground).
+//! Each direction models a radio modem behind a UART, as SiK/3DR radios, XBee modules
+//! and serial-to-LoRa bridges are:
 //!
 //! ```text
-//!  write ──> [ radio TX buffer: `buffer` bytes ] ──> air at `byte_rate` ──> + `latency` ──> read
-//!                 full? Drop (counted) or Wait          bit errors (seeded)
+//!          serial_rate                          byte_rate   bit_error_rate   latency
+//! write ──> [ UART ] ──> [ modem buffer ] ──> [  air  ] ──> (seeded) ──> + latency ──> [ receiver ring ] ──> read
+//!             ▲           `buffer` bytes                                                  N bytes
+//!             │           full: Drop: the modem drops (counted)
+//!             └── CTS ─── full: Wait: the UART stops until there is room
 //! ```
 //!
-//! * **Byte rate**: bytes leave the TX buffer one after the other, one every
-//!   `1 / byte_rate` s (`byte_rate = 0`: no serialisation delay).
-//! * **Latency**: a byte can be read `latency` after its last bit was sent.
-//! * **Buffer**: at most `buffer` bytes wait to be sent (the byte being sent counts).
-//!   When it is full, [`Overflow::Drop`] (what a radio modem does) drops the written
-//!   bytes and counts them in [`SimStats::dropped_bytes`], while the write still
-//!   "succeeds", as a UART write to a modem does; [`Overflow::Wait`] makes the write
-//!   wait for room, modelling hardware flow control (CTS), so that the telemetry
-//!   queue behind the writer sheds low-priority messages instead of the radio
-//!   dropping random bytes.
-//! * **Bit errors**: every bit is flipped with probability `bit_error_rate`, drawn from
-//!   a SplitMix64 generator seeded with [`SimConfig::seed`] (the other direction uses
-//!   a derived seed), so a run is reproducible. Flipped bits are counted.
-//! * **Receiver storage**: bytes in the air and bytes arrived but not yet read share
-//!   one ring of `N` bytes per direction (the const parameter). If the receiver does
-//!   not read and the ring fills, further bytes are lost as receiver overruns
-//!   ([`SimStats::overrun_bytes`]) with `Drop`, or the writer waits with `Wait`.
+//! * **Serial rate** ([`SimConfig::serial_rate`], bytes/s; 0, the default: instant): a
+//!   byte enters the modem when its last bit has crossed the UART, one every
+//!   `1 / serial_rate` s, so a long write fills the modem buffer while it is under way.
+//!   The `write` future completes when its last byte has crossed the UART (cancelling
+//!   it keeps the bytes that already crossed, like a UART DMA transfer stopped half-way).
+//!   For a UART with 8N1 framing, `serial_rate = baud / 10`.
+//! * **Air rate** ([`SimConfig::byte_rate`], bytes/s; 0: instant): the modem sends
+//!   the bytes of its buffer one after the other, one every `1 / byte_rate` s.
+//! * **Modem buffer** ([`SimConfig::buffer`]): at most `buffer` bytes wait in the modem
+//!   (the byte on the air counts). A real modem does not push back on its UART: when it
+//!   is full, [`Overflow::Drop`] (the default) drops the bytes that arrive and counts
+//!   them in [`SimStats::dropped_bytes`]; the write still completes, as a UART write to
+//!   a modem does. [`Overflow::Wait`] models hardware flow control (CTS): the UART
+//!   stops while the buffer is full, so nothing is dropped and the backlog stays in the
+//!   writer's queue, where it can be shed by priority. With a serial rate above the air
+//!   rate and `Drop`, a sustained writer overfills the modem: the bytes it drops are
+//!   the writer's problem, which is why the writer must pace itself.
+//! * **Bit errors** ([`SimConfig::bit_error_rate`]): every bit sent is flipped with that
+//!   probability, drawn from a SplitMix64 generator seeded with [`SimConfig::seed`]
+//!   (the other direction uses a derived seed), so a run is reproducible. Flipped bits
+//!   are counted.
+//! * **Latency** ([`SimConfig::latency`]): a byte can be read `latency` after its last
+//!   bit was sent. The receiving modem's UART is not modelled: a byte (or an API frame)
+//!   is readable as soon as it has arrived.
+//! * **Receiver ring** (`N`, the const parameter): the bytes accepted by the modem,
+//!   those in the air and those arrived but not yet read share one ring of `N` bytes per
+//!   direction. If the receiver does not read and the ring fills, further bytes are lost
+//!   as receiver overruns ([`SimStats::overrun_bytes`]) with `Drop`, or the writer waits
+//!   with `Wait`.
+//!
+//! The UART and air time are measured ([`SimStats::serial_busy_us`],
+//! [`SimStats::air_busy_us`]): divided by the elapsed time they give the utilisation of
+//! the UART and of the radio channel.
+//!
+//! # XBee API modem
+//!
+//! [`SimConfig::xbee`] turns the modem into an XBee in API mode (API 1, no escaping),
+//! 802.15.4 ([`XBeeVariant::XBee24`]) or 868 MHz ([`XBeeVariant::XBee868`]):
+//!
+//! ```text
+//! A write: TX request ──> [ UART ] ──> API parser ──> [ modem: whole frames ] ──> air: RF data ──> B read: RX frame
+//!                                      malformed:       full: Drop (whole frame)    + air_overhead,
+//!                                      counted, dropped       or Wait (CTS)         retries
+//! A read:  TX status (frame id != 0) <──── ack_delay after the last attempt ───────────┘
+//! ```
+//!
+//! * Endpoint A writes API transmit requests: 802.15.4 TX16
+//!   `7E len | 01 frame_id dest_hi dest_lo options RF-data | ck`, 868
+//!   `7E len | 10 frame_id dest64(8) FF FE radius options RF-data | ck`, with
+//!   `ck = 0xFF - sum(FRAME_DATA)`. Bytes outside a frame, frames with a bad length or
+//!   checksum, other API ids and RF data longer than the module's maximum (100 bytes
+//!   for 802.15.4, 256 for 868) are dropped and counted
+//!   ([`SimStats::malformed_frames`], [`SimStats::discarded_bytes`]).
+//! * Only the RF data goes over the air, plus [`XBeeModem::air_overhead`] bytes per
+//!   transmission (MAC header, preamble, acknowledgement). Endpoint B reads it as an RX
+//!   frame: 802.15.4 `81 src_hi src_lo rssi options RF-data`, 868
+//!   `90 src64(8) FF FE options RF-data`, with a valid checksum. The source is
+//!   [`XBeeModem::address_a`]; the options say "broadcast" (0x02) when the destination
+//!   was the broadcast address (and, on 868, "acknowledged" (0x01) otherwise). The
+//!   destination address is not otherwise checked: B receives every frame.
+//! * A unicast frame is acknowledged: each transmission fails with probability
+//!   [`XBeeModem::failure_rate`] (seeded, reproducible) or when a bit error hits it (a
+//!   real receiver drops a frame whose CRC fails), and is then retried up to
+//!   [`XBeeModem::retries`] times. Each attempt occupies the air again, and after each
+//!   attempt the modem waits [`XBeeModem::ack_delay`] for the acknowledgement, sending
+//!   nothing meanwhile. A frame that failed every attempt is lost. A broadcast, or a
+//!   frame with the "disable ACK" option (0x01), is sent once, and may be lost.
+//! * When the last attempt is over (plus the ACK wait for an acknowledged frame), the
+//!   modem writes a transmit status back to A's reader if the frame id is not 0:
+//!   802.15.4 `89 frame_id status` (0 delivered, 1 no ACK; a broadcast always reports
+//!   0), 868 `8B frame_id FF FE retries delivery discovery` (delivery 0x00 or 0x21).
+//!   The status codes are in [`xbee`].
+//! * The modem buffer holds whole frames: `buffer` counts the API bytes of the frame
+//!   being received from the UART and of every frame not yet sent (until its last
+//!   attempt and ACK wait are over), and is at least one frame of the largest size
+//!   ([`XBeeVariant::max_api_frame`]); the modem holds at most 16 frames. A frame that
+//!   does not fit is dropped whole with `Drop` ([`SimStats::frames_dropped`]; a real
+//!   module loses bytes and then rejects the broken frame). With
+//!   [`XBeeModem::purge_status`], the modem also answers such a frame with a status
+//!   (802.15.4 3 "purged", 868 0x32 "no free buffers") so a test can see it. With `Wait`
+//!   the UART stops (CTS) while the buffer cannot take the next byte.
+//! * The uplink (B to A) carries plain bytes, as without XBee, unless
+//!   [`XBeeModem::api_uplink`] is set: B then writes API frames too, A reads RX frames
+//!   (source [`XBeeModem::address_b`]) and B reads the statuses of its frames. With a
+//!   plain uplink, A's statuses come in between the plain bytes.
+//!
+//! # Choosing the parameters
+//!
+//! * **SiK / 3DR radios** (transparent): `serial_rate` is `SERIAL_SPEED` (57 for 57600
+//!   baud: 5760 bytes/s). The air rate is `AIR_SPEED` kbit/s over 8 bits, halved by
+//!   `ECC` (Golay coding doubles every byte), and shared by both directions in TDM
+//!   (each gets about half when both are busy), minus framing: `AIR_SPEED = 64`, ECC off
+//!   gives about 8000 bytes/s at best, 4000 in each direction when both are busy, 2000
+//!   with ECC. The serial port is usually faster than the air, so without flow control
+//!   (`RTSCTS=0`) a writer that does not pace itself overfills the modem. The buffer is
+//!   the firmware's serial receive FIFO (1850 bytes in the Si1000 firmware; CTS is
+//!   deasserted at 17 bytes free).
+//! * **XBee 802.15.4** (API): the air carries 250 kbit/s (`byte_rate = 31_250`), so at
+//!   57600 baud (`serial_rate = 5760`) the UART, not the air, is the bottleneck; the
+//!   serial receive buffer of an XBee (Series 1) holds about 202 bytes. Per transmission
+//!   add about 20 bytes of `air_overhead` (PHY preamble and header, MAC header and CRC,
+//!   the acknowledgement frame) and an `ack_delay` of about 1 ms (802.15.4 waits 864 µs
+//!   for an acknowledgement); the MAC retries 3 times.
+//! * **XBee 868**: the air rate is 10 kbit/s or 80 kbit/s depending on the model and
+//!   channel settings; RF payloads up to 256 bytes.
+//!
+//! # Time and memory
 //!
 //! Time is embassy-time's: under the mock driver (`embassy-time/mock-driver`) a
 //! simulation is deterministic and runs as fast as the test advances the clock; on
 //! the host with the `std` driver it runs in real time. The crate does not pick a
-//! driver: the final binary does.
+//! driver: the final binary does. The model keeps its own clock in fractions of a
+//! tick (ticks x `byte_rate` x `serial_rate`), so rates that do not divide the tick
+//! rate stay exact: a byte's entry time into the modem does not depend on when its
+//! writer happened to be polled.
 //!
-//! Memory: `9 * N` bytes per direction (each byte carries its arrival time).
+//! Memory: `9 * N` bytes per direction for the receiver ring (each byte carries its
+//! arrival time), plus about 1.1 KiB per direction for the XBee modem (a 270-byte
+//! frame buffer and 16 frame slots), present whether XBee is used or not. No
+//! allocation, no `unsafe`.
 //!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 //! use embassy_time::Duration;
 //! use pprz_devices::sim::{SimConfig, SimLink};
 //!
-//! // A 57600-baud radio (5760 bytes/s), 20 ms latency, 256-byte modem buffer, BER 1e-5.
-//! let config = SimConfig::new(5760)
+//! // A SiK radio at 57600 baud (5760 bytes/s on the UART), 4000 bytes/s on the air,
+//! // 20 ms latency, 1850-byte modem buffer, BER 1e-5.
+//! let config = SimConfig::new(4000)
+//!     .serial_rate(5760)
 //!     .latency(Duration::from_millis(20))
-//!     .buffer(256)
+//!     .buffer(1850)
 //!     .bit_error_rate(1e-5)
 //!     .seed(42);
-//! let link = SimLink::<NoopRawMutex, 1024>::new(config);
+//! let link = SimLink::<NoopRawMutex, 4096>::new(config);
 //! let (aircraft, ground) = link.endpoints();
 //! let (uplink_rx, downlink_tx) = aircraft.split(); // for a reader task and a writer task
 //! # let _ = (ground, uplink_rx, downlink_tx);
+//! ```
+//!
+//! An XBee 802.15.4 at 57600 baud:
+//!
+//! ```
+//! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+//! use embassy_time::Duration;
+//! use pprz_devices::sim::{SimConfig, SimLink, XBeeModem, XBeeVariant};
+//!
+//! let modem = XBeeModem::new(XBeeVariant::XBee24)
+//!     .air_overhead(20)
+//!     .ack_delay(Duration::from_millis(1))
+//!     .failure_rate(0.05)
+//!     .retries(3);
+//! let config = SimConfig::new(31_250).serial_rate(5760).buffer(202).xbee(modem);
+//! let link = SimLink::<NoopRawMutex, 2048>::new(config);
+//! # let _ = link.endpoints();
 //! ```
 
 use core::cell::RefCell;
@@ -61,14 +180,15 @@ use embassy_sync::waitqueue::WakerRegistration;
 use embassy_time::{Duration, Instant, TICK_HZ, Timer};
 use embedded_io_async::{ErrorType, Read, Write};
 
-/// What a direction does with written bytes when its TX buffer is full.
+/// What a direction does with written bytes when its modem buffer is full.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Overflow {
-    /// Drop them and count them (a radio modem without flow control). Writes never wait.
+    /// Drop them and count them (a radio modem without flow control). Writes never wait
+    /// for room.
     #[default]
     Drop,
-    /// Make the write wait for room (hardware flow control).
+    /// Stop the UART until there is room (hardware flow control, CTS).
     Wait,
 }
 
@@ -80,19 +200,25 @@ pub struct SimConfig {
     pub byte_rate: u32,
     /// Delay from the end of a byte's transmission to its arrival.
     pub latency: Duration,
-    /// Bytes the TX buffer holds (values below 1 count as 1).
+    /// Bytes the modem buffer holds (values below 1 count as 1; in XBee API mode, at
+    /// least one frame of the largest size).
     pub buffer: usize,
     /// Probability that a bit is flipped (0 to 1).
     pub bit_error_rate: f64,
-    /// Seed of the bit-error generator.
+    /// Seed of the bit-error (and XBee failure) generator.
     pub seed: u64,
-    /// Behaviour when the TX buffer (or the receiver's ring) is full.
+    /// Behaviour when the modem buffer (or the receiver's ring) is full.
     pub overflow: Overflow,
+    /// Bytes per second on the UART between the writer and its modem; 0 (the default)
+    /// for instant transfers.
+    pub serial_rate: u32,
+    /// The XBee API modem, or `None` (the default) for a transparent modem.
+    pub xbee: Option<XBeeModem>,
 }
 
 impl SimConfig {
-    /// `byte_rate` bytes/s, no latency, a 256-byte buffer, no bit errors, seed 1,
-    /// [`Overflow::Drop`].
+    /// `byte_rate` bytes/s on the air, an instant UART, no latency, a 256-byte buffer,
+    /// no bit errors, seed 1, [`Overflow::Drop`], a transparent modem.
     pub const fn new(byte_rate: u32) -> Self {
         Self {
             byte_rate,
@@ -101,6 +227,8 @@ impl SimConfig {
             bit_error_rate: 0.0,
             seed: 1,
             overflow: Overflow::Drop,
+            serial_rate: 0,
+            xbee: None,
         }
     }
 
@@ -133,15 +261,241 @@ impl SimConfig {
         self.overflow = overflow;
         self
     }
+
+    /// Sets [`serial_rate`](Self::serial_rate), in bytes per second (baud / 10 for 8N1).
+    pub const fn serial_rate(mut self, bytes_per_s: u32) -> Self {
+        self.serial_rate = bytes_per_s;
+        self
+    }
+
+    /// Makes the modem an XBee in API mode; see [`xbee`](Self::xbee).
+    pub const fn xbee(mut self, modem: XBeeModem) -> Self {
+        self.xbee = Some(modem);
+        self
+    }
+}
+
+/// The XBee module family, which sets the API frame layouts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum XBeeVariant {
+    /// 802.15.4 ("Series 1", 2.4 GHz): TX16 (0x01), RX16 (0x81), status 0x89; RF
+    /// payload up to 100 bytes.
+    #[default]
+    XBee24,
+    /// 868 MHz: transmit request 0x10, receive packet 0x90, status 0x8B; RF payload up
+    /// to 256 bytes.
+    XBee868,
+}
+
+impl XBeeVariant {
+    /// The largest RF payload of a frame.
+    pub const fn max_rf_payload(self) -> usize {
+        match self {
+            Self::XBee24 => 100,
+            Self::XBee868 => 256,
+        }
+    }
+
+    /// Length of the transmit request's `FRAME_DATA` before the RF data.
+    const fn tx_header(self) -> usize {
+        match self {
+            Self::XBee24 => 5,
+            Self::XBee868 => 14,
+        }
+    }
+
+    /// Length of the receive packet's `FRAME_DATA` before the RF data.
+    const fn rx_header(self) -> usize {
+        match self {
+            Self::XBee24 => 5,
+            Self::XBee868 => 12,
+        }
+    }
+
+    /// The largest transmit request, framing included (109 bytes for 802.15.4, 274
+    /// for 868).
+    pub const fn max_api_frame(self) -> usize {
+        self.tx_header() + self.max_rf_payload() + xbee::FRAMING
+    }
+}
+
+/// An XBee module in API mode; see the [module docs](self#xbee-api-modem).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct XBeeModem {
+    /// The module family.
+    pub variant: XBeeVariant,
+    /// Time from the end of a transmission to its acknowledgement (or to giving up on
+    /// it); the modem sends nothing meanwhile. Statuses are written at its end.
+    pub ack_delay: Duration,
+    /// Probability that a transmission is not acknowledged (lost), 0 to 1.
+    pub failure_rate: f64,
+    /// Retries after a transmission that was not acknowledged.
+    pub retries: u8,
+    /// Bytes that each transmission adds on the air to the RF data.
+    pub air_overhead: u16,
+    /// Address of endpoint A's module, the source of the frames B receives (802.15.4:
+    /// the low 16 bits, `MY`; 868: the 64-bit serial number).
+    pub address_a: u64,
+    /// Address of endpoint B's module, the source of the frames A receives.
+    pub address_b: u64,
+    /// The RSSI byte of 802.15.4 RX frames (minus dBm: 40 is -40 dBm).
+    pub rssi: u8,
+    /// B writes API frames too (otherwise plain bytes, delivered unchanged).
+    pub api_uplink: bool,
+    /// Answer a frame dropped because the modem is full with a status (802.15.4 3
+    /// "purged", 868 0x32 "no free buffers"), if its frame id is not 0.
+    pub purge_status: bool,
+}
+
+impl XBeeModem {
+    /// A module of `variant`: 1 ms ACK delay, no failures, 3 retries, no air overhead,
+    /// address A 0x0001, address B 0x0100 (the ground's, in Paparazzi), RSSI 40, a
+    /// plain uplink, no purge status.
+    pub const fn new(variant: XBeeVariant) -> Self {
+        Self {
+            variant,
+            ack_delay: Duration::from_millis(1),
+            failure_rate: 0.0,
+            retries: 3,
+            air_overhead: 0,
+            address_a: 0x0001,
+            address_b: 0x0100,
+            rssi: 40,
+            api_uplink: false,
+            purge_status: false,
+        }
+    }
+
+    /// Sets [`ack_delay`](Self::ack_delay).
+    pub const fn ack_delay(mut self, delay: Duration) -> Self {
+        self.ack_delay = delay;
+        self
+    }
+
+    /// Sets [`failure_rate`](Self::failure_rate).
+    pub const fn failure_rate(mut self, probability: f64) -> Self {
+        self.failure_rate = probability;
+        self
+    }
+
+    /// Sets [`retries`](Self::retries).
+    pub const fn retries(mut self, retries: u8) -> Self {
+        self.retries = retries;
+        self
+    }
+
+    /// Sets [`air_overhead`](Self::air_overhead).
+    pub const fn air_overhead(mut self, bytes: u16) -> Self {
+        self.air_overhead = bytes;
+        self
+    }
+
+    /// Sets [`address_a`](Self::address_a) and [`address_b`](Self::address_b).
+    pub const fn addresses(mut self, a: u64, b: u64) -> Self {
+        self.address_a = a;
+        self.address_b = b;
+        self
+    }
+
+    /// Sets [`rssi`](Self::rssi).
+    pub const fn rssi(mut self, rssi: u8) -> Self {
+        self.rssi = rssi;
+        self
+    }
+
+    /// Sets [`api_uplink`](Self::api_uplink).
+    pub const fn api_uplink(mut self, on: bool) -> Self {
+        self.api_uplink = on;
+        self
+    }
+
+    /// Sets [`purge_status`](Self::purge_status).
+    pub const fn purge_status(mut self, on: bool) -> Self {
+        self.purge_status = on;
+        self
+    }
+}
+
+/// XBee API constants of the simulated modem, and [`api_frame`](xbee::api_frame) to
+/// frame `FRAME_DATA`.
+pub mod xbee {
+    /// Start delimiter of an API frame.
+    pub const START: u8 = 0x7E;
+    /// Bytes around `FRAME_DATA`: start, length (2), checksum.
+    pub const FRAMING: usize = 4;
+    /// 802.15.4 transmit request (16-bit destination).
+    pub const API_TX16: u8 = 0x01;
+    /// 802.15.4 receive packet (16-bit source).
+    pub const API_RX16: u8 = 0x81;
+    /// 802.15.4 transmit status: `89 frame_id status`.
+    pub const API_TX_STATUS: u8 = 0x89;
+    /// 868 transmit request.
+    pub const API_TX_868: u8 = 0x10;
+    /// 868 receive packet.
+    pub const API_RX_868: u8 = 0x90;
+    /// 868 transmit status: `8B frame_id FF FE retries delivery discovery`.
+    pub const API_TX_STATUS_868: u8 = 0x8B;
+    /// Transmit option "disable ACK" (both variants).
+    pub const OPTION_DISABLE_ACK: u8 = 0x01;
+    /// Receive option "acknowledged" (868).
+    pub const RX_OPTION_ACKED: u8 = 0x01;
+    /// Receive option "broadcast" (both variants).
+    pub const RX_OPTION_BROADCAST: u8 = 0x02;
+    /// 802.15.4 broadcast address.
+    pub const BROADCAST_16: u16 = 0xFFFF;
+    /// 868 broadcast address.
+    pub const BROADCAST_64: u64 = 0xFFFF;
+    /// Status (802.15.4) and delivery status (868): delivered.
+    pub const STATUS_SUCCESS: u8 = 0x00;
+    /// 802.15.4 status: no acknowledgement after the retries.
+    pub const STATUS_NO_ACK: u8 = 0x01;
+    /// 802.15.4 status: the channel was never clear (not simulated).
+    pub const STATUS_CCA_FAILURE: u8 = 0x02;
+    /// 802.15.4 status: purged (here: dropped because the modem was full).
+    pub const STATUS_PURGED: u8 = 0x03;
+    /// 868 delivery status: no acknowledgement after the retries.
+    pub const DELIVERY_NO_ACK: u8 = 0x21;
+    /// 868 delivery status: no free buffers (here: dropped because the modem was full).
+    pub const DELIVERY_NO_BUFFERS: u8 = 0x32;
+    /// 868 discovery status: no discovery overhead.
+    pub const DISCOVERY_NONE: u8 = 0x00;
+
+    /// The checksum of `frame_data`: `0xFF - sum`.
+    pub fn checksum(frame_data: &[u8]) -> u8 {
+        0xFF - frame_data.iter().fold(0u8, |sum, &b| sum.wrapping_add(b))
+    }
+
+    /// Writes the API frame `7E len frame_data ck` to `out`; returns its length, or
+    /// `None` if `out` is too short or `frame_data` longer than 65535 bytes.
+    pub fn api_frame(frame_data: &[u8], out: &mut [u8]) -> Option<usize> {
+        let len = u16::try_from(frame_data.len()).ok()?;
+        let total = frame_data.len() + FRAMING;
+        let out = out.get_mut(..total)?;
+        out[0] = START;
+        out[1..3].copy_from_slice(&len.to_be_bytes());
+        out[3..total - 1].copy_from_slice(frame_data);
+        out[total - 1] = checksum(frame_data);
+        Some(total)
+    }
+
+    /// Frames `out[3..3 + len]` in place; returns the frame's length.
+    pub(super) fn frame_in_place(out: &mut [u8], len: usize) -> usize {
+        out[0] = START;
+        out[1..3].copy_from_slice(&(len as u16).to_be_bytes());
+        out[3 + len] = checksum(&out[3..3 + len]);
+        len + FRAMING
+    }
 }
 
 /// A direction of a [`SimLink`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Direction {
-    /// Written on endpoint A, read on endpoint B.
+    /// Written on endpoint A (the aircraft), read on endpoint B.
     AToB,
-    /// Written on endpoint B, read on endpoint A.
+    /// Written on endpoint B (the ground), read on endpoint A.
     BToA,
 }
 
@@ -152,28 +506,76 @@ impl Direction {
             Self::BToA => 1,
         }
     }
+
+    const fn other(self) -> Self {
+        match self {
+            Self::AToB => Self::BToA,
+            Self::BToA => Self::AToB,
+        }
+    }
 }
 
-/// Counters of one direction of a [`SimLink`]. All wrap around.
+/// Counters of one direction of a [`SimLink`]. The `u32` counters wrap around.
 ///
-/// `bytes_written == bytes_sent + dropped_bytes + overrun_bytes`.
+/// Transparent modem: `bytes_written == bytes_sent + dropped_bytes + overrun_bytes`.
+/// XBee API modem: `bytes_written == bytes_sent + dropped_bytes + overrun_bytes +
+/// discarded_bytes + ` the bytes of a frame still being received, the byte counters
+/// counting the API bytes of whole frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SimStats {
-    /// Bytes handed to `write` and accounted for (sent or dropped).
+    /// Bytes that crossed the UART into the modem.
     pub bytes_written: u32,
-    /// Bytes accepted into the TX buffer (they will arrive).
+    /// Bytes the modem accepted for transmission (API mode: the API bytes of accepted
+    /// frames).
     pub bytes_sent: u32,
-    /// Bytes returned by `read`.
+    /// Bytes returned by `read` on this direction (RX frames and statuses included).
     pub bytes_delivered: u32,
-    /// Bytes dropped because the TX buffer was full ([`Overflow::Drop`]).
+    /// Bytes dropped because the modem buffer was full ([`Overflow::Drop`]).
     pub dropped_bytes: u32,
-    /// Bytes dropped because the receiver's ring was full ([`Overflow::Drop`]).
+    /// Bytes dropped because the receiver's ring was full ([`Overflow::Drop`], or a
+    /// frame larger than the ring).
     pub overrun_bytes: u32,
     /// Bits flipped.
     pub bit_errors: u32,
-    /// Bytes with at least one flipped bit.
+    /// Bytes with at least one flipped bit (API mode: such a transmission fails).
     pub corrupted_bytes: u32,
+    /// Time the UART spent transferring bytes into the modem, in µs (rounded down).
+    pub serial_busy_us: u64,
+    /// Time the air spent carrying this direction's bytes, in µs (rounded down), up to
+    /// now (transmissions scheduled for later are not counted yet).
+    pub air_busy_us: u64,
+    /// API frames accepted by the modem.
+    pub frames_sent: u32,
+    /// API frames dropped whole because the modem buffer was full.
+    pub frames_dropped: u32,
+    /// API frames dropped because the receiver's ring could not hold them.
+    pub frames_overrun: u32,
+    /// Malformed API frames (bad length or checksum, unexpected API id, RF data too
+    /// long), dropped.
+    pub malformed_frames: u32,
+    /// Bytes the API parser dropped: malformed frames and bytes outside frames.
+    pub discarded_bytes: u32,
+    /// Transmissions of API frames that failed (random failure or bit error).
+    pub failed_attempts: u32,
+    /// API frames that failed every attempt (never received).
+    pub frames_lost: u32,
+    /// Transmit statuses written back to this direction's writer.
+    pub statuses: u32,
+    /// Transmit statuses lost because the writer's receiver ring was full.
+    pub statuses_lost: u32,
+}
+
+impl SimStats {
+    /// [`serial_busy_us`](Self::serial_busy_us) as a [`Duration`].
+    pub const fn serial_busy(&self) -> Duration {
+        Duration::from_micros(self.serial_busy_us)
+    }
+
+    /// [`air_busy_us`](Self::air_busy_us) as a [`Duration`].
+    pub const fn air_busy(&self) -> Duration {
+        Duration::from_micros(self.air_busy_us)
+    }
 }
 
 /// SplitMix64 (Steele, Lea, Flood 2014): tiny, fast, every seed is good.
@@ -190,18 +592,229 @@ impl SplitMix64 {
     }
 }
 
-/// One direction: the radio's TX buffer plus the bytes in the air and at the receiver.
+/// Largest `FRAME_DATA` of a transmit request (868: 14-byte header + 256 bytes).
+const MAX_FRAME_DATA: usize = 14 + 256;
+/// Largest RX frame, framing included (868: 12-byte header + 256 bytes).
+const MAX_RX_FRAME: usize = 12 + 256 + xbee::FRAMING;
+/// Frames the XBee modem holds.
+const MODEM_FRAMES: usize = 16;
+
+/// Derived constants. Times are in units of `1 / (TICK_HZ * scale)` s.
+#[derive(Clone, Copy, Debug)]
+struct Timing {
+    /// Units per tick: `max(byte_rate, 1) * max(serial_rate, 1)`.
+    scale: u128,
+    /// Units per byte on the air (0: instant).
+    air_byte: u128,
+    /// Units per byte on the UART (0: instant).
+    uart_byte: u128,
+    /// Latency in ticks.
+    latency: u64,
+    /// XBee ACK wait in units.
+    ack_wait: u128,
+    /// Bit-flip probability as a fraction of 2^64.
+    ber: u64,
+    /// XBee failure probability as a fraction of 2^64.
+    failure: u64,
+}
+
+impl Timing {
+    const fn new(config: &SimConfig) -> Self {
+        let air = config.byte_rate as u128;
+        let serial = config.serial_rate as u128;
+        let air1 = if air == 0 { 1 } else { air };
+        let serial1 = if serial == 0 { 1 } else { serial };
+        let hz = TICK_HZ as u128;
+        let scale = air1 * serial1;
+        let (ack_wait, failure) = match &config.xbee {
+            Some(x) => (
+                x.ack_delay.as_ticks() as u128 * scale,
+                probability_threshold(x.failure_rate),
+            ),
+            None => (0, 0),
+        };
+        Self {
+            scale,
+            air_byte: if air == 0 { 0 } else { hz * serial1 },
+            uart_byte: if serial == 0 { 0 } else { hz * air1 },
+            latency: config.latency.as_ticks(),
+            ack_wait,
+            ber: probability_threshold(config.bit_error_rate),
+            failure,
+        }
+    }
+
+    /// The first tick at or after `units`.
+    fn ticks_ceil(&self, units: u128) -> u64 {
+        u64::try_from(units.div_ceil(self.scale)).unwrap_or(u64::MAX)
+    }
+
+    fn micros(&self, units: u128) -> u64 {
+        let per_us = self.scale * u128::from(TICK_HZ);
+        u64::try_from(units.saturating_mul(1_000_000) / per_us).unwrap_or(u64::MAX)
+    }
+}
+
+/// A probability as a fraction of 2^64.
+const fn probability_threshold(p: f64) -> u64 {
+    // `as` saturates (and maps NaN to 0), so any input is safe.
+    (p * 18_446_744_073_709_551_616.0) as u64
+}
+
+/// A frame in the XBee modem, from its acceptance to the end of its last attempt (and
+/// ACK wait).
+#[derive(Clone, Copy, Debug)]
+struct InModem {
+    /// Start of the first attempt.
+    start: u128,
+    /// Air time of one attempt.
+    air: u128,
+    attempts: u16,
+    /// The modem waits for an acknowledgement after each attempt.
+    acked: bool,
+    /// API bytes it occupies in the buffer.
+    weight: u16,
+}
+
+impl InModem {
+    const EMPTY: Self = Self {
+        start: 0,
+        air: 0,
+        attempts: 0,
+        acked: false,
+        weight: 0,
+    };
+
+    fn period(&self, ack_wait: u128) -> u128 {
+        self.air + if self.acked { ack_wait } else { 0 }
+    }
+
+    fn end(&self, ack_wait: u128) -> u128 {
+        self.start + u128::from(self.attempts) * self.period(ack_wait)
+    }
+
+    /// Air time after `now`.
+    fn air_after(&self, now: u128, ack_wait: u128) -> u128 {
+        let period = self.period(ack_wait);
+        (0..u128::from(self.attempts))
+            .map(|i| {
+                let from = self.start + i * period;
+                (from + self.air).saturating_sub(from.max(now))
+            })
+            .sum()
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Parse {
+    /// Looking for the start delimiter.
+    Idle,
+    LengthHigh,
+    LengthLow,
+    Data,
+    Checksum,
+}
+
+/// The XBee modem's API parser.
+struct Parser {
+    state: Parse,
+    /// `FRAME_DATA` length announced.
+    length: usize,
+    /// `FRAME_DATA` bytes received.
+    got: usize,
+    /// API bytes of the current frame received so far.
+    bytes: u32,
+    data: [u8; MAX_FRAME_DATA],
+}
+
+/// A valid transmit request in the parser.
+#[derive(Clone, Copy, Debug)]
+struct TxRequest {
+    frame_id: u8,
+    broadcast: bool,
+    acked: bool,
+    /// RF data: `data[rf_start..]`.
+    rf_start: usize,
+}
+
+impl Parser {
+    const fn new() -> Self {
+        Self {
+            state: Parse::Idle,
+            length: 0,
+            got: 0,
+            bytes: 0,
+            data: [0; MAX_FRAME_DATA],
+        }
+    }
+
+    /// API bytes of a frame being received.
+    fn in_progress(&self) -> u32 {
+        if self.state == Parse::Idle {
+            0
+        } else {
+            self.bytes
+        }
+    }
+
+    /// The transmit request completed by `checksum`, if it is one and valid.
+    fn request(&self, variant: XBeeVariant, checksum: u8) -> Option<TxRequest> {
+        let data = &self.data[..self.length];
+        if self.state != Parse::Checksum || xbee::checksum(data) != checksum {
+            return None;
+        }
+        let header = variant.tx_header();
+        if data.len() < header || data.len() - header > variant.max_rf_payload() {
+            return None;
+        }
+        let broadcast = match variant {
+            XBeeVariant::XBee24 if data[0] == xbee::API_TX16 => {
+                u16::from_be_bytes([data[2], data[3]]) == xbee::BROADCAST_16
+            }
+            XBeeVariant::XBee868 if data[0] == xbee::API_TX_868 => {
+                let mut dest = [0u8; 8];
+                dest.copy_from_slice(&data[2..10]);
+                u64::from_be_bytes(dest) == xbee::BROADCAST_64
+            }
+            _ => return None,
+        };
+        let options = data[header - 1];
+        Some(TxRequest {
+            frame_id: data[1],
+            broadcast,
+            acked: !broadcast && options & xbee::OPTION_DISABLE_ACK == 0,
+            rf_start: header,
+        })
+    }
+}
+
+/// One direction: the UART, the modem and the receiver's ring.
 ///
-/// Invariants: `len <= N`, `head < N` (when `N > 0`); `data`/`due` hold the bytes in
-/// order from `head`, with non-decreasing `due`.
+/// Ring invariants: `len <= N`, `head < N`; `data`/`due` hold the bytes in delivery
+/// order from `head`, with non-decreasing `due` (except right after a partly read run,
+/// see `insert`).
 struct Dir<const N: usize> {
     data: [u8; N],
     /// Arrival tick of each byte.
     due: [u64; N],
     head: usize,
     len: usize,
-    /// End of transmission of the last accepted byte, in ticks x `byte_rate`.
+    /// The run of equal arrival times at `head` has been partly read: nothing is
+    /// inserted before its end (an RX frame is never split).
+    partial: bool,
+    /// When the last byte crossed the UART.
+    uart_end: u128,
+    /// UART time used.
+    uart_busy: u128,
+    /// When the modem is done with everything it accepted.
     tx_end: u128,
+    /// Air time scheduled.
+    air_total: u128,
+    /// Frames in the XBee modem, oldest first, from `frames_head`.
+    frames: [InModem; MODEM_FRAMES],
+    frames_head: usize,
+    frames_len: usize,
+    parser: Parser,
     rng: SplitMix64,
     stats: SimStats,
     rx_waker: WakerRegistration,
@@ -213,8 +826,18 @@ enum Step {
     Done(usize),
     /// Try again at this tick.
     At(u64),
-    /// Try again when the other side made progress.
+    /// Try again when the reader has freed this many bytes of the ring.
+    Room(usize),
+    /// Try again when the writer made progress.
     Peer,
+}
+
+/// Progress of one `write` call.
+struct Cursor {
+    /// Bytes that crossed the UART.
+    done: usize,
+    /// The UART (re)starts now: at the beginning and after waiting for the reader.
+    fresh: bool,
 }
 
 /// A simulated radio link; see the [module docs](self).
@@ -224,14 +847,8 @@ enum Step {
 /// `new` is `const`, so a link can be a `static`.
 pub struct SimLink<M: RawMutex, const N: usize> {
     config: SimConfig,
-    /// Bit-flip probability as a fraction of 2^64.
-    ber_threshold: u64,
+    timing: Timing,
     dirs: [Mutex<M, RefCell<Dir<N>>>; 2],
-}
-
-const fn ber_threshold(ber: f64) -> u64 {
-    // `as` saturates (and maps NaN to 0), so any input is safe.
-    (ber * 18_446_744_073_709_551_616.0) as u64
 }
 
 impl<M: RawMutex, const N: usize> SimLink<M, N> {
@@ -243,7 +860,7 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         let () = Self::VALID;
         Self {
             config,
-            ber_threshold: ber_threshold(config.bit_error_rate),
+            timing: Timing::new(&config),
             dirs: [
                 Mutex::new(RefCell::new(Dir::new(config.seed))),
                 Mutex::new(RefCell::new(Dir::new(config.seed ^ 0x5DEE_CE66_D1CE_4E5B))),
@@ -265,96 +882,363 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         )
     }
 
-    /// Counters of one direction.
+    /// Counters of one direction, busy times up to now.
     pub fn stats(&self, direction: Direction) -> SimStats {
-        self.with(direction, |d| d.stats)
+        let t = &self.timing;
+        let now = Self::now_units(t);
+        let api = self.modem(direction).is_some();
+        self.with(direction, |d| {
+            let mut stats = d.stats;
+            stats.serial_busy_us = t.micros(d.uart_busy);
+            let ahead = if api {
+                d.frames_iter().map(|f| f.air_after(now, t.ack_wait)).sum()
+            } else {
+                d.tx_end.saturating_sub(now)
+            };
+            stats.air_busy_us = t.micros(d.air_total.saturating_sub(ahead));
+            stats
+        })
     }
 
     fn with<R>(&self, direction: Direction, f: impl FnOnce(&mut Dir<N>) -> R) -> R {
         self.dirs[direction.index()].lock(|d| f(&mut d.borrow_mut()))
     }
 
-    fn now_ticks() -> u64 {
-        Instant::now().as_ticks()
+    fn now_units(t: &Timing) -> u128 {
+        u128::from(Instant::now().as_ticks()) * t.scale
     }
 
-    /// Ticks at which `scaled` (ticks x byte_rate) is reached.
-    fn ticks_of(&self, scaled: u128) -> u64 {
-        let rate = u128::from(self.config.byte_rate.max(1));
-        u64::try_from(scaled.div_ceil(rate)).unwrap_or(u64::MAX)
+    /// The XBee modem of `direction`, if it speaks API.
+    fn modem(&self, direction: Direction) -> Option<&XBeeModem> {
+        match (&self.config.xbee, direction) {
+            (Some(x), Direction::AToB) => Some(x),
+            (Some(x), Direction::BToA) if x.api_uplink => Some(x),
+            _ => None,
+        }
     }
 
-    fn push(&self, direction: Direction, buf: &[u8]) -> Step {
-        let now = Self::now_ticks();
-        let rate = u128::from(self.config.byte_rate);
-        let hz = u128::from(TICK_HZ);
-        let now_scaled = u128::from(now) * rate;
-        let buffer = self.config.buffer.max(1) as u128;
-        let latency = self.config.latency.as_ticks();
+    /// The modem buffer, in bytes.
+    fn buffer(&self, modem: Option<&XBeeModem>) -> u128 {
+        let min = modem.map_or(1, |x| x.variant.max_api_frame());
+        self.config.buffer.max(min) as u128
+    }
+
+    fn push(&self, direction: Direction, buf: &[u8], cursor: &mut Cursor) -> Step {
+        let t = &self.timing;
+        let now = Self::now_units(t);
+        let modem = self.modem(direction);
         let wait = self.config.overflow == Overflow::Wait;
         self.with(direction, |d| {
-            let mut accepted = 0;
-            let mut step = None;
-            for &byte in buf {
-                let queued = if rate == 0 {
-                    0
-                } else {
-                    d.tx_end.saturating_sub(now_scaled).div_ceil(hz)
-                };
-                let full = if queued >= buffer {
-                    // Room again once the queue has drained to `buffer - 1` bytes.
-                    Some(Step::At(self.ticks_of(d.tx_end - (buffer - 1) * hz)))
-                } else if d.len >= N {
-                    Some(Step::Peer)
-                } else {
-                    None
-                };
-                if let Some(full) = full {
-                    if wait {
-                        step = Some(full);
+            if cursor.fresh {
+                d.uart_end = d.uart_end.max(now);
+                cursor.fresh = false;
+            }
+            let before = cursor.done;
+            let mut step = Step::Done(buf.len());
+            while let Some(&byte) = buf.get(cursor.done) {
+                let mut start = d.uart_end;
+                if wait {
+                    match self.room(d, start, modem) {
+                        Ok(at) => start = start.max(at),
+                        Err(need) => {
+                            step = Step::Room(need);
+                            break;
+                        }
+                    }
+                }
+                let end = start + t.uart_byte;
+                if end > now {
+                    step = Step::At(t.ticks_ceil(end));
+                    break;
+                }
+                if wait
+                    && let Some(x) = modem
+                    && let Some(req) = d.parser.request(x.variant, byte)
+                {
+                    let need = rx_frame_len(x.variant, d.parser.length - req.rf_start);
+                    if need <= N && N - d.len < need {
+                        step = Step::Room(need);
                         break;
                     }
-                    d.stats.bytes_written = d.stats.bytes_written.wrapping_add(1);
-                    let counter = match full {
-                        Step::Peer => &mut d.stats.overrun_bytes,
-                        _ => &mut d.stats.dropped_bytes,
-                    };
-                    *counter = counter.wrapping_add(1);
-                    accepted += 1;
-                    continue;
                 }
-                let sent_at = if rate == 0 {
-                    now
-                } else {
-                    d.tx_end = d.tx_end.max(now_scaled) + hz;
-                    self.ticks_of(d.tx_end)
-                };
-                let byte = d.corrupt(byte, self.ber_threshold);
-                d.enqueue(byte, sent_at.saturating_add(latency));
+                d.uart_end = end;
+                d.uart_busy += t.uart_byte;
                 d.stats.bytes_written = d.stats.bytes_written.wrapping_add(1);
-                d.stats.bytes_sent = d.stats.bytes_sent.wrapping_add(1);
-                accepted += 1;
+                cursor.done += 1;
+                match modem {
+                    Some(x) => self.api_byte(direction, d, x, byte, end),
+                    None => self.transparent_byte(d, byte, end),
+                }
             }
-            if accepted > 0 {
+            if matches!(step, Step::Room(_)) {
+                cursor.fresh = true;
+            }
+            if cursor.done > before {
                 d.rx_waker.wake();
-                Step::Done(accepted)
-            } else {
-                step.unwrap_or(Step::Done(0))
             }
+            step
         })
     }
 
+    /// When (at or after `at`) the modem can take the next byte, or `Err(bytes)` if
+    /// the receiver must first free that many bytes of the ring.
+    fn room(&self, d: &Dir<N>, at: u128, modem: Option<&XBeeModem>) -> Result<u128, usize> {
+        let t = &self.timing;
+        let buffer = self.buffer(modem);
+        if modem.is_none() {
+            if d.len >= N {
+                return Err(1);
+            }
+            if t.air_byte == 0 || d.queued(at, t.air_byte) < buffer {
+                return Ok(at);
+            }
+            // Room again once the queue has drained to `buffer - 1` bytes.
+            return Ok(d.tx_end - (buffer - 1) * t.air_byte);
+        }
+        let mut bytes = u128::from(d.parser.in_progress());
+        let mut count = 0;
+        for f in d.frames_iter().filter(|f| f.end(t.ack_wait) > at) {
+            bytes += u128::from(f.weight);
+            count += 1;
+        }
+        if bytes < buffer && count < MODEM_FRAMES {
+            return Ok(at);
+        }
+        for f in d.frames_iter().filter(|f| f.end(t.ack_wait) > at) {
+            bytes -= u128::from(f.weight);
+            count -= 1;
+            if bytes < buffer && count < MODEM_FRAMES {
+                return Ok(f.end(t.ack_wait));
+            }
+        }
+        // Unreachable: the buffer holds the largest frame.
+        Ok(at)
+    }
+
+    /// A byte enters the transparent modem at `at`.
+    fn transparent_byte(&self, d: &mut Dir<N>, byte: u8, at: u128) {
+        let t = &self.timing;
+        let full = t.air_byte > 0 && d.queued(at, t.air_byte) >= self.buffer(None);
+        let s = &mut d.stats;
+        if full {
+            s.dropped_bytes = s.dropped_bytes.wrapping_add(1);
+            return;
+        }
+        if d.len >= N {
+            s.overrun_bytes = s.overrun_bytes.wrapping_add(1);
+            return;
+        }
+        d.tx_end = d.tx_end.max(at) + t.air_byte;
+        d.air_total += t.air_byte;
+        let due = t.ticks_ceil(d.tx_end).saturating_add(t.latency);
+        let byte = d.corrupt(byte, t.ber);
+        d.insert(&[byte], due);
+        d.stats.bytes_sent = d.stats.bytes_sent.wrapping_add(1);
+    }
+
+    /// A byte enters the XBee modem's API parser at `at`.
+    fn api_byte(&self, direction: Direction, d: &mut Dir<N>, x: &XBeeModem, byte: u8, at: u128) {
+        let p = &mut d.parser;
+        p.bytes += 1;
+        match p.state {
+            Parse::Idle => {
+                if byte == xbee::START {
+                    p.state = Parse::LengthHigh;
+                    p.bytes = 1;
+                } else {
+                    d.stats.discarded_bytes = d.stats.discarded_bytes.wrapping_add(1);
+                }
+            }
+            Parse::LengthHigh => {
+                p.length = usize::from(byte) << 8;
+                p.state = Parse::LengthLow;
+            }
+            Parse::LengthLow => {
+                p.length |= usize::from(byte);
+                p.got = 0;
+                if p.length == 0 || p.length > MAX_FRAME_DATA {
+                    let bytes = p.bytes;
+                    p.state = Parse::Idle;
+                    d.malformed(bytes);
+                } else {
+                    p.state = Parse::Data;
+                }
+            }
+            Parse::Data => {
+                p.data[p.got] = byte;
+                p.got += 1;
+                if p.got == p.length {
+                    p.state = Parse::Checksum;
+                }
+            }
+            Parse::Checksum => {
+                let request = p.request(x.variant, byte);
+                let bytes = p.bytes;
+                p.state = Parse::Idle;
+                match request {
+                    Some(req) => self.send_frame(direction, d, x, req, bytes, at),
+                    None => d.malformed(bytes),
+                }
+            }
+        }
+    }
+
+    /// A valid transmit request of `bytes` API bytes is complete at `at`.
+    fn send_frame(
+        &self,
+        direction: Direction,
+        d: &mut Dir<N>,
+        x: &XBeeModem,
+        req: TxRequest,
+        bytes: u32,
+        at: u128,
+    ) {
+        let t = &self.timing;
+        d.prune(at, t.ack_wait);
+        let occupied: u128 = d.frames_iter().map(|f| u128::from(f.weight)).sum();
+        if occupied + u128::from(bytes) > self.buffer(Some(x)) || d.frames_len == MODEM_FRAMES {
+            d.stats.frames_dropped = d.stats.frames_dropped.wrapping_add(1);
+            d.stats.dropped_bytes = d.stats.dropped_bytes.wrapping_add(bytes);
+            if x.purge_status && req.frame_id != 0 {
+                let status = match x.variant {
+                    XBeeVariant::XBee24 => xbee::STATUS_PURGED,
+                    XBeeVariant::XBee868 => xbee::DELIVERY_NO_BUFFERS,
+                };
+                self.status(direction, d, x, req.frame_id, 0, status, t.ticks_ceil(at));
+            }
+            return;
+        }
+        let rf_len = d.parser.length - req.rf_start;
+        if N - d.len < rx_frame_len(x.variant, rf_len) {
+            d.stats.frames_overrun = d.stats.frames_overrun.wrapping_add(1);
+            d.stats.overrun_bytes = d.stats.overrun_bytes.wrapping_add(bytes);
+            return;
+        }
+        // Transmit, retrying until acknowledged.
+        let air_bytes = rf_len + usize::from(x.air_overhead);
+        let max_attempts = if req.acked {
+            u16::from(x.retries) + 1
+        } else {
+            1
+        };
+        let mut attempts = 0;
+        let mut received = false;
+        while attempts < max_attempts && !received {
+            attempts += 1;
+            received = d.attempt(air_bytes, t);
+        }
+        let frame = InModem {
+            start: d.tx_end.max(at),
+            air: air_bytes as u128 * t.air_byte,
+            attempts,
+            acked: req.acked,
+            weight: bytes as u16,
+        };
+        let end = frame.end(t.ack_wait);
+        d.tx_end = end;
+        d.air_total += u128::from(attempts) * frame.air;
+        d.frames[(d.frames_head + d.frames_len) % MODEM_FRAMES] = frame;
+        d.frames_len += 1;
+        let s = &mut d.stats;
+        s.frames_sent = s.frames_sent.wrapping_add(1);
+        s.bytes_sent = s.bytes_sent.wrapping_add(bytes);
+        s.failed_attempts = s
+            .failed_attempts
+            .wrapping_add(u32::from(attempts - u16::from(received)));
+        if received {
+            let last = frame.start + u128::from(attempts - 1) * frame.period(t.ack_wait);
+            let due = t.ticks_ceil(last + frame.air).saturating_add(t.latency);
+            let source = match direction {
+                Direction::AToB => x.address_a,
+                Direction::BToA => x.address_b,
+            };
+            let mut rx = [0u8; MAX_RX_FRAME];
+            let n = rx_frame(x, source, &req, &d.parser.data[..d.parser.length], &mut rx);
+            d.insert(&rx[..n], due);
+        } else {
+            s.frames_lost = s.frames_lost.wrapping_add(1);
+        }
+        if req.frame_id != 0 {
+            let status = match (received || !req.acked, x.variant) {
+                (true, _) => xbee::STATUS_SUCCESS,
+                (false, XBeeVariant::XBee24) => xbee::STATUS_NO_ACK,
+                (false, XBeeVariant::XBee868) => xbee::DELIVERY_NO_ACK,
+            };
+            let retries = u8::try_from(attempts - 1).unwrap_or(u8::MAX);
+            self.status(
+                direction,
+                d,
+                x,
+                req.frame_id,
+                retries,
+                status,
+                t.ticks_ceil(end),
+            );
+        }
+    }
+
+    /// Queues a transmit status for the writer of `direction` (its own reader, on the
+    /// other direction's ring), readable at `due`.
+    #[allow(clippy::too_many_arguments)]
+    fn status(
+        &self,
+        direction: Direction,
+        d: &mut Dir<N>,
+        x: &XBeeModem,
+        frame_id: u8,
+        retries: u8,
+        status: u8,
+        due: u64,
+    ) {
+        let mut frame = [0u8; 7 + xbee::FRAMING];
+        let len = match x.variant {
+            XBeeVariant::XBee24 => {
+                frame[3..6].copy_from_slice(&[xbee::API_TX_STATUS, frame_id, status]);
+                3
+            }
+            XBeeVariant::XBee868 => {
+                frame[3..10].copy_from_slice(&[
+                    xbee::API_TX_STATUS_868,
+                    frame_id,
+                    0xFF,
+                    0xFE,
+                    retries,
+                    status,
+                    xbee::DISCOVERY_NONE,
+                ]);
+                7
+            }
+        };
+        let n = xbee::frame_in_place(&mut frame, len);
+        let stored = self.with(direction.other(), |o| {
+            let stored = o.insert(&frame[..n], due);
+            if stored {
+                o.rx_waker.wake();
+            }
+            stored
+        });
+        let s = &mut d.stats;
+        if stored {
+            s.statuses = s.statuses.wrapping_add(1);
+        } else {
+            s.statuses_lost = s.statuses_lost.wrapping_add(1);
+        }
+    }
+
     fn pop(&self, direction: Direction, buf: &mut [u8]) -> Step {
-        let now = Self::now_ticks();
+        let now = Instant::now().as_ticks();
         self.with(direction, |d| {
             let mut n = 0;
+            let mut last = 0;
             while n < buf.len() && d.len > 0 && d.due[d.head] <= now {
                 buf[n] = d.data[d.head];
+                last = d.due[d.head];
                 d.head = (d.head + 1) % N;
                 d.len -= 1;
                 n += 1;
             }
             if n > 0 {
+                d.partial = d.len > 0 && d.due[d.head] == last;
                 d.stats.bytes_delivered = d.stats.bytes_delivered.wrapping_add(crate::len_u32(n));
                 d.tx_waker.wake();
                 Step::Done(n)
@@ -366,19 +1250,19 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         })
     }
 
-    /// When the last accepted byte will have left the TX buffer.
+    /// When the modem will be done with everything it accepted.
     fn drained_at(&self, direction: Direction) -> Option<u64> {
-        let now_scaled = u128::from(Self::now_ticks()) * u128::from(self.config.byte_rate);
+        let now = Self::now_units(&self.timing);
         self.with(direction, |d| {
-            (self.config.byte_rate > 0 && d.tx_end > now_scaled).then(|| self.ticks_of(d.tx_end))
+            (d.tx_end > now).then(|| self.timing.ticks_ceil(d.tx_end))
         })
     }
 
-    /// Waits until the reader of `direction` freed room in the ring.
-    async fn wait_reader(&self, direction: Direction) {
+    /// Waits until the reader of `direction` freed `need` bytes of the ring.
+    async fn wait_reader(&self, direction: Direction, need: usize) {
         poll_fn(|cx| {
             self.with(direction, |d| {
-                if d.len < N {
+                if N - d.len >= need {
                     Poll::Ready(())
                 } else {
                     d.tx_waker.register(cx.waker());
@@ -389,7 +1273,7 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         .await;
     }
 
-    /// Waits until the writer of `direction` put a byte in the ring.
+    /// Waits until something was put in the ring of `direction`.
     async fn wait_writer(&self, direction: Direction) {
         poll_fn(|cx| {
             self.with(direction, |d| {
@@ -405,11 +1289,16 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
     }
 
     async fn write(&self, direction: Direction, buf: &[u8]) -> usize {
+        let mut cursor = Cursor {
+            done: 0,
+            fresh: true,
+        };
         loop {
-            match self.push(direction, buf) {
+            match self.push(direction, buf, &mut cursor) {
                 Step::Done(n) => return n,
                 Step::At(tick) => Timer::at(Instant::from_ticks(tick)).await,
-                Step::Peer => self.wait_reader(direction).await,
+                Step::Room(need) => self.wait_reader(direction, need).await,
+                Step::Peer => unreachable!("push never waits for a writer"),
             }
         }
     }
@@ -422,10 +1311,55 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
             match self.pop(direction, buf) {
                 Step::Done(n) => return n,
                 Step::At(tick) => Timer::at(Instant::from_ticks(tick)).await,
-                Step::Peer => self.wait_writer(direction).await,
+                Step::Peer | Step::Room(_) => self.wait_writer(direction).await,
             }
         }
     }
+}
+
+/// Length of the RX frame carrying `rf_len` bytes of RF data.
+const fn rx_frame_len(variant: XBeeVariant, rf_len: usize) -> usize {
+    variant.rx_header() + rf_len + xbee::FRAMING
+}
+
+/// Writes the RX frame of `req` (whose `FRAME_DATA` is `data`) to `out`; returns its
+/// length.
+fn rx_frame(
+    x: &XBeeModem,
+    source: u64,
+    req: &TxRequest,
+    data: &[u8],
+    out: &mut [u8; MAX_RX_FRAME],
+) -> usize {
+    let rf = &data[req.rf_start..];
+    let header = x.variant.rx_header();
+    let fd = &mut out[3..];
+    match x.variant {
+        XBeeVariant::XBee24 => {
+            fd[0] = xbee::API_RX16;
+            fd[1..3].copy_from_slice(&(source as u16).to_be_bytes());
+            fd[3] = x.rssi;
+            fd[4] = if req.broadcast {
+                xbee::RX_OPTION_BROADCAST
+            } else {
+                0
+            };
+        }
+        XBeeVariant::XBee868 => {
+            fd[0] = xbee::API_RX_868;
+            fd[1..9].copy_from_slice(&source.to_be_bytes());
+            fd[9..11].copy_from_slice(&[0xFF, 0xFE]);
+            fd[11] = if req.broadcast {
+                xbee::RX_OPTION_BROADCAST
+            } else if req.acked {
+                xbee::RX_OPTION_ACKED
+            } else {
+                0
+            };
+        }
+    }
+    fd[header..header + rf.len()].copy_from_slice(rf);
+    xbee::frame_in_place(out, header + rf.len())
 }
 
 impl<const N: usize> Dir<N> {
@@ -435,7 +1369,15 @@ impl<const N: usize> Dir<N> {
             due: [0; N],
             head: 0,
             len: 0,
+            partial: false,
+            uart_end: 0,
+            uart_busy: 0,
             tx_end: 0,
+            air_total: 0,
+            frames: [InModem::EMPTY; MODEM_FRAMES],
+            frames_head: 0,
+            frames_len: 0,
+            parser: Parser::new(),
             rng: SplitMix64(seed),
             stats: SimStats {
                 bytes_written: 0,
@@ -445,18 +1387,92 @@ impl<const N: usize> Dir<N> {
                 overrun_bytes: 0,
                 bit_errors: 0,
                 corrupted_bytes: 0,
+                serial_busy_us: 0,
+                air_busy_us: 0,
+                frames_sent: 0,
+                frames_dropped: 0,
+                frames_overrun: 0,
+                malformed_frames: 0,
+                discarded_bytes: 0,
+                failed_attempts: 0,
+                frames_lost: 0,
+                statuses: 0,
+                statuses_lost: 0,
             },
             rx_waker: WakerRegistration::new(),
             tx_waker: WakerRegistration::new(),
         }
     }
 
-    /// Appends a byte; the caller checked `len < N`.
-    fn enqueue(&mut self, byte: u8, due: u64) {
-        let tail = (self.head + self.len) % N;
-        self.data[tail] = byte;
-        self.due[tail] = due;
-        self.len += 1;
+    /// Bytes in the transparent modem at `at` (the one on the air counts): they leave
+    /// back to back until `tx_end`.
+    fn queued(&self, at: u128, air_byte: u128) -> u128 {
+        self.tx_end.saturating_sub(at).div_ceil(air_byte)
+    }
+
+    /// Inserts `bytes`, arriving at `due`, after every byte arriving at or before
+    /// `due` (and never into a partly read run). Returns `false` if they do not fit.
+    fn insert(&mut self, bytes: &[u8], due: u64) -> bool {
+        let k = bytes.len();
+        if k > N - self.len {
+            return false;
+        }
+        let at = |i: usize| (self.head + i) % N;
+        let mut min = 0;
+        if self.partial {
+            let run = self.due[self.head];
+            while min < self.len && self.due[at(min)] == run {
+                min += 1;
+            }
+        }
+        let mut pos = self.len;
+        while pos > min && self.due[at(pos - 1)] > due {
+            pos -= 1;
+        }
+        let mut i = self.len;
+        while i > pos {
+            i -= 1;
+            let (from, to) = (at(i), at(i + k));
+            self.data[to] = self.data[from];
+            self.due[to] = self.due[from];
+        }
+        for (j, &b) in bytes.iter().enumerate() {
+            let to = at(pos + j);
+            self.data[to] = b;
+            self.due[to] = due;
+        }
+        self.len += k;
+        true
+    }
+
+    fn frames_iter(&self) -> impl Iterator<Item = &InModem> {
+        (0..self.frames_len).map(|i| &self.frames[(self.frames_head + i) % MODEM_FRAMES])
+    }
+
+    /// Forgets the frames the modem is done with at `at`.
+    fn prune(&mut self, at: u128, ack_wait: u128) {
+        while self.frames_len > 0 && self.frames[self.frames_head].end(ack_wait) <= at {
+            self.frames_head = (self.frames_head + 1) % MODEM_FRAMES;
+            self.frames_len -= 1;
+        }
+    }
+
+    fn malformed(&mut self, bytes: u32) {
+        let s = &mut self.stats;
+        s.malformed_frames = s.malformed_frames.wrapping_add(1);
+        s.discarded_bytes = s.discarded_bytes.wrapping_add(bytes);
+    }
+
+    /// One transmission of `air_bytes` bytes: `true` if it is received and
+    /// acknowledged (no bit error, no random failure).
+    fn attempt(&mut self, air_bytes: usize, t: &Timing) -> bool {
+        let mut clean = true;
+        if t.ber > 0 {
+            for _ in 0..air_bytes {
+                clean &= self.corrupt(0, t.ber) == 0;
+            }
+        }
+        clean && (t.failure == 0 || self.rng.next() >= t.failure)
     }
 
     fn corrupt(&mut self, byte: u8, threshold: u64) -> u8 {
@@ -545,14 +1561,17 @@ impl<M: RawMutex, const N: usize> ErrorType for SimEnd<'_, M, N> {
 }
 
 impl<M: RawMutex, const N: usize> Write for SimTx<'_, M, N> {
-    /// Accepts bytes into the TX buffer. With [`Overflow::Drop`] it never waits and
-    /// reports every byte written (dropped ones are counted); with [`Overflow::Wait`]
-    /// it waits until at least one byte fits.
+    /// Sends `buf` over the UART into the modem, one byte every `1 / serial_rate` s,
+    /// and completes when the last byte has crossed: it always reports the whole of
+    /// `buf`. With [`Overflow::Drop`] the UART never stops (bytes the modem has no room
+    /// for are dropped and counted); with [`Overflow::Wait`] it stops while the modem
+    /// (or the receiver's ring) is full.
     async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
         Ok(self.link.write(self.direction, buf).await)
     }
 
-    /// Waits until every accepted byte has left the TX buffer (is in the air).
+    /// Waits until the modem is done with every byte it accepted (in the air; XBee:
+    /// every attempt and ACK wait over).
     async fn flush(&mut self) -> Result<(), Infallible> {
         while let Some(tick) = self.link.drained_at(self.direction) {
             Timer::at(Instant::from_ticks(tick)).await;
@@ -590,12 +1609,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn ber_threshold_saturates() {
-        assert_eq!(ber_threshold(0.0), 0);
-        assert_eq!(ber_threshold(-1.0), 0);
-        assert_eq!(ber_threshold(f64::NAN), 0);
-        assert_eq!(ber_threshold(1.0), u64::MAX);
-        assert_eq!(ber_threshold(0.5), 1 << 63);
+    fn probability_threshold_saturates() {
+        assert_eq!(probability_threshold(0.0), 0);
+        assert_eq!(probability_threshold(-1.0), 0);
+        assert_eq!(probability_threshold(f64::NAN), 0);
+        assert_eq!(probability_threshold(1.0), u64::MAX);
+        assert_eq!(probability_threshold(0.5), 1 << 63);
     }
 
     #[test]
@@ -604,5 +1623,39 @@ mod tests {
         let mut rng = SplitMix64(1_234_567);
         assert_eq!(rng.next(), 6_457_827_717_110_365_317);
         assert_eq!(rng.next(), 3_203_168_211_198_807_973);
+    }
+
+    #[test]
+    fn api_frame_checksum() {
+        // TX16 to 0x0100, frame id 1, no options, RF data "hi".
+        let mut out = [0u8; 16];
+        let n = xbee::api_frame(&[0x01, 0x01, 0x01, 0x00, 0x00, b'h', b'i'], &mut out);
+        assert_eq!(n, Some(11));
+        let sum: u8 = out[3..11].iter().fold(0, |a, &b| a.wrapping_add(b));
+        assert_eq!(sum, 0xFF, "FRAME_DATA plus checksum sums to 0xFF");
+        assert_eq!(&out[..3], &[0x7E, 0x00, 0x07]);
+        assert_eq!(xbee::api_frame(&[1, 2], &mut out[..5]), None);
+    }
+
+    #[test]
+    fn insert_keeps_arrival_order_and_runs_whole() {
+        let mut d = Dir::<16>::new(1);
+        assert!(d.insert(&[1], 10));
+        assert!(d.insert(&[2], 30));
+        assert!(d.insert(&[7, 7, 7], 20));
+        assert!(d.insert(&[3], 30));
+        let order: std::vec::Vec<_> = (0..d.len).map(|i| (d.data[i], d.due[i])).collect();
+        assert_eq!(
+            order,
+            [(1, 10), (7, 20), (7, 20), (7, 20), (2, 30), (3, 30)]
+        );
+        // A partly read run is not split, even by an earlier arrival.
+        d.head = 2;
+        d.len = 4;
+        d.partial = true;
+        assert!(d.insert(&[9], 5));
+        let order: std::vec::Vec<_> = (0..d.len).map(|i| d.data[(d.head + i) % 16]).collect();
+        assert_eq!(order, [7, 7, 9, 2, 3]);
+        assert!(!d.insert(&[0; 12], 40), "does not fit");
     }
 }
