@@ -526,8 +526,8 @@ impl Direction {
 pub struct SimStats {
     /// Bytes that crossed the UART into the modem.
     pub bytes_written: u32,
-    /// Bytes the modem accepted for transmission (API mode: the API bytes of accepted
-    /// frames).
+    /// Bytes the modem accepted for transmission (API mode: the API bytes of the frames
+    /// sent, except those lost to a receiver overrun).
     pub bytes_sent: u32,
     /// Bytes returned by `read` on this direction (RX frames and statuses included).
     pub bytes_delivered: u32,
@@ -545,11 +545,12 @@ pub struct SimStats {
     /// Time the air spent carrying this direction's bytes, in µs (rounded down), up to
     /// now (transmissions scheduled for later are not counted yet).
     pub air_busy_us: u64,
-    /// API frames accepted by the modem.
+    /// API frames accepted by the modem and transmitted.
     pub frames_sent: u32,
     /// API frames dropped whole because the modem buffer was full.
     pub frames_dropped: u32,
-    /// API frames dropped because the receiver's ring could not hold them.
+    /// API frames sent (and acknowledged) but lost because the receiver's ring could
+    /// not hold them (their API bytes are in `overrun_bytes`).
     pub frames_overrun: u32,
     /// Malformed API frames (bad length or checksum, unexpected API id, RF data too
     /// long), dropped.
@@ -1109,11 +1110,6 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
             return;
         }
         let rf_len = d.parser.length - req.rf_start;
-        if N - d.len < rx_frame_len(x.variant, rf_len) {
-            d.stats.frames_overrun = d.stats.frames_overrun.wrapping_add(1);
-            d.stats.overrun_bytes = d.stats.overrun_bytes.wrapping_add(bytes);
-            return;
-        }
         // Transmit, retrying until acknowledged.
         let air_bytes = rf_len + usize::from(x.air_overhead);
         let max_attempts = if req.acked {
@@ -1141,10 +1137,10 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         d.frames_len += 1;
         let s = &mut d.stats;
         s.frames_sent = s.frames_sent.wrapping_add(1);
-        s.bytes_sent = s.bytes_sent.wrapping_add(bytes);
         s.failed_attempts = s
             .failed_attempts
             .wrapping_add(u32::from(attempts - u16::from(received)));
+        let mut stored = true;
         if received {
             let last = frame.start + u128::from(attempts - 1) * frame.period(t.ack_wait);
             let due = t.ticks_ceil(last + frame.air).saturating_add(t.latency);
@@ -1154,9 +1150,17 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
             };
             let mut rx = [0u8; MAX_RX_FRAME];
             let n = rx_frame(x, source, &req, &d.parser.data[..d.parser.length], &mut rx);
-            d.insert(&rx[..n], due);
+            stored = d.insert(&rx[..n], due);
         } else {
             s.frames_lost = s.frames_lost.wrapping_add(1);
+        }
+        let s = &mut d.stats;
+        if stored {
+            s.bytes_sent = s.bytes_sent.wrapping_add(bytes);
+        } else {
+            // Received over the air (and acknowledged), lost at the receiver's UART.
+            s.frames_overrun = s.frames_overrun.wrapping_add(1);
+            s.overrun_bytes = s.overrun_bytes.wrapping_add(bytes);
         }
         if req.frame_id != 0 {
             let status = match (received || !req.acked, x.variant) {
