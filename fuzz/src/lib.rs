@@ -5,16 +5,23 @@
 //! and with a 32-byte buffer); the harness checks:
 //!
 //! * no panic, and `feed` returns `None` only once its chunk is used up;
-//! * the stats invariant `bytes_in == frame_bytes + dropped_bytes + buffered`;
+//! * the stats invariant
+//!   `bytes_in == frame_bytes + control_bytes + dropped_bytes + buffered`;
+//! * every control frame (XBee transmit status) is taken with `take_tx_status` or
+//!   counted as a ring overflow; none on the PPRZ transports; each status taken is a
+//!   valid status frame's (re-encodes to a frame that `parse_control` reads back);
 //! * every frame re-parses to itself, fits the transport's receive limit, and its
 //!   payload is a suffix of its data, which lies inside the raw frame;
 //! * PPRZ v1/v2 and PPRZLOG frames re-encode to their exact bytes;
-//! * chunking does not change the frames found;
+//! * chunking does not change the frames and statuses found (statuses are compared
+//!   when the ring did not overflow; otherwise those taken are in the model's order);
 //! * a 32-byte decoder finds exactly the frames of at most 32 bytes that the model
-//!   (a whole-stream scan) finds.
+//!   (a whole-stream scan taking a valid status or frame at each offset, else
+//!   skipping one byte) finds.
 
 use pprz_transports::{
-    AnyTransport, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, PprzLog, MAX_FRAME_LEN,
+    xbee, AnyTransport, Control, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, PprzLog,
+    TxStatus, MAX_FRAME_LEN, TX_STATUS_CAPACITY,
 };
 
 fn check_frame(t: &AnyTransport, f: &Frame<'_>) {
@@ -47,22 +54,76 @@ fn check_stats<const N: usize>(d: &Decoder<AnyTransport, N>) {
     assert_eq!(
         s.bytes_in,
         s.frame_bytes
+            .wrapping_add(s.control_bytes)
             .wrapping_add(s.dropped_bytes)
             .wrapping_add(d.buffered() as u32)
     );
     assert!(d.buffered() <= N);
+    assert!(d.tx_statuses_pending() <= TX_STATUS_CAPACITY);
+    if !d.framing().has_tx_status() {
+        assert_eq!((s.control_frames, s.control_bytes), (0, 0));
+    }
+}
+
+/// A status taken from the decoder must be a valid status frame's: re-encoded in
+/// either layout, it parses back to itself.
+fn check_status(t: &AnyTransport, s: &TxStatus) {
+    assert!(t.has_tx_status());
+    assert_eq!(s.delivered, s.status == xbee::status::SUCCESS);
+    let mut buf = [0u8; 16];
+    let n = xbee::encode_tx_status_868(s.frame_id, s.retries, s.status, 0, &mut buf)
+        .expect("a status frame fits 16 bytes");
+    assert_eq!(t.parse_control(&buf), Some((Control::TxStatus(*s), n)));
+    if s.retries == 0 {
+        let n = xbee::encode_tx_status_24(s.frame_id, s.status, &mut buf)
+            .expect("a status frame fits 16 bytes");
+        assert_eq!(t.parse_control(&buf), Some((Control::TxStatus(*s), n)));
+    }
+}
+
+/// What one decoding run found.
+#[derive(Debug, PartialEq)]
+struct Found {
+    frames: Vec<Vec<u8>>,
+    statuses: Vec<TxStatus>,
+    overflows: u32,
+}
+
+impl Found {
+    /// Chunking changes only where statuses are taken from the ring, so what is taken
+    /// is the same unless the ring overflowed.
+    fn same_as(&self, other: &Found) {
+        assert_eq!(self.frames, other.frames);
+        if self.overflows == 0 && other.overflows == 0 {
+            assert_eq!(self.statuses, other.statuses);
+        }
+    }
+
+    /// Against the model: the same frames; the same statuses, or, after an overflow,
+    /// the model's statuses less as many as were dropped, in order.
+    fn matches_model(&self, model: &Found) {
+        assert_eq!(self.frames, model.frames);
+        assert_eq!(
+            self.statuses.len() + self.overflows as usize,
+            model.statuses.len()
+        );
+        let mut it = model.statuses.iter();
+        assert!(self.statuses.iter().all(|s| it.any(|m| m == s)));
+    }
 }
 
 /// Decodes `stream` in chunks drawn from `seed` (0: one chunk), with `feed` or, when
 /// `borrowed`, with the zero-copy `feed_borrowed`.
-fn decode<const N: usize>(
-    t: AnyTransport,
-    stream: &[u8],
-    seed: u8,
-    borrowed: bool,
-) -> Vec<Vec<u8>> {
+fn decode<const N: usize>(t: AnyTransport, stream: &[u8], seed: u8, borrowed: bool) -> Found {
     let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
     let mut out = Vec::new();
+    let mut statuses = Vec::new();
+    let mut take = |d: &mut Decoder<AnyTransport, N>| {
+        while let Some(s) = d.take_tx_status() {
+            check_status(&t, &s);
+            statuses.push(s);
+        }
+    };
     let mut state = u32::from(seed);
     let mut rest = stream;
     while !rest.is_empty() {
@@ -84,26 +145,50 @@ fn decode<const N: usize>(
             let Some(f) = frame else { break };
             check_frame(&t, &f);
             out.push(f.raw().to_vec());
+            take(&mut d);
         }
         assert!(input.is_empty());
         check_stats(&d);
+        take(&mut d);
     }
     while let Some(f) = d.flush() {
         check_frame(&t, &f);
         out.push(f.raw().to_vec());
+        take(&mut d);
     }
+    take(&mut d);
     assert_eq!(d.buffered(), 0);
     check_stats(&d);
-    assert_eq!(d.stats().bytes_in as usize, stream.len());
-    assert_eq!(d.stats().frames as usize, out.len());
-    out
+    let s = *d.stats();
+    assert_eq!(s.bytes_in as usize, stream.len());
+    assert_eq!(s.frames as usize, out.len());
+    assert_eq!(
+        s.control_frames as usize,
+        statuses.len() + s.tx_status_overflows as usize
+    );
+    Found {
+        frames: out,
+        statuses,
+        overflows: s.tx_status_overflows,
+    }
 }
 
 /// Whole-stream reference scan (see the module doc).
-fn model(t: &AnyTransport, n: usize, stream: &[u8]) -> Vec<Vec<u8>> {
+fn model(t: &AnyTransport, n: usize, stream: &[u8]) -> Found {
     let mut out = Vec::new();
+    let mut statuses = Vec::new();
     let mut pos = 0;
     while pos < stream.len() {
+        if let Some((control, len)) = t.parse_control(&stream[pos..]) {
+            if len <= n {
+                match control {
+                    Control::TxStatus(s) => statuses.push(s),
+                    other => panic!("unexpected control frame {other:?}"),
+                }
+                pos += len;
+                continue;
+            }
+        }
         if let Ok((f, len)) = t.parse(&stream[pos..]) {
             if len <= n {
                 out.push(f.raw().to_vec());
@@ -113,7 +198,11 @@ fn model(t: &AnyTransport, n: usize, stream: &[u8]) -> Vec<Vec<u8>> {
         }
         pos += 1;
     }
-    out
+    Found {
+        frames: out,
+        statuses,
+        overflows: 0,
+    }
 }
 
 /// Runs every check on `data` with transport `t`.
@@ -123,11 +212,14 @@ pub fn run(t: AnyTransport, data: &[u8]) {
     };
     let chunked = decode::<MAX_FRAME_LEN>(t, stream, seed, false);
     let whole = decode::<MAX_FRAME_LEN>(t, stream, 0, false);
-    assert_eq!(chunked, whole);
-    assert_eq!(whole, model(&t, MAX_FRAME_LEN, stream));
-    // The zero-copy path finds exactly the same frames.
-    assert_eq!(decode::<MAX_FRAME_LEN>(t, stream, seed, true), whole);
+    chunked.same_as(&whole);
+    let reference = model(&t, MAX_FRAME_LEN, stream);
+    chunked.matches_model(&reference);
+    whole.matches_model(&reference);
+    // The zero-copy path finds exactly the same frames and statuses, taken at the same
+    // points (it returns at the same frames).
+    assert_eq!(decode::<MAX_FRAME_LEN>(t, stream, seed, true), chunked);
     let small = decode::<32>(t, stream, seed, false);
-    assert_eq!(small, model(&t, 32, stream));
+    small.matches_model(&model(&t, 32, stream));
     assert_eq!(decode::<32>(t, stream, seed, true), small);
 }

@@ -299,7 +299,9 @@ impl<F, const N: usize> Decoder<F, N> {
 
 impl<F: Framing, const N: usize> Decoder<F, N> {
     /// Takes bytes from the front of `input` and returns the next verified frame,
-    /// or `None` once `input` is empty and no complete frame is buffered.
+    /// or `None` once `input` is empty and no complete frame is buffered. Control
+    /// frames met on the way are consumed, not returned (their statuses wait for
+    /// [`take_tx_status`](Decoder::take_tx_status)).
     ///
     /// `feed` returns `None` only with `input` empty, so
     /// `while let Some(f) = d.feed(&mut input) { .. }` uses up a whole chunk. The
@@ -613,7 +615,7 @@ mod tests {
     }
 
     extern crate std;
-    use crate::{AnyTransport, Frame, PprzLog, PprzV1, XBee24, XBee868};
+    use crate::{AnyTransport, Frame, PprzLog, PprzV1, TxStatus, XBee24, XBee868};
     use proptest::prelude::*;
     use std::vec::Vec;
 
@@ -634,22 +636,37 @@ mod tests {
         assert_eq!(
             s.bytes_in,
             s.frame_bytes
+                .wrapping_add(s.control_bytes)
                 .wrapping_add(s.dropped_bytes)
                 .wrapping_add(d.buffered() as u32)
         );
+        assert!(d.tx_statuses_pending() <= TX_STATUS_CAPACITY);
     }
 
     /// Decodes `stream` in chunks of `sizes` (cycled) with `feed` or `feed_borrowed`,
     /// then flushes; checks the stats invariant after every call, and that the frames
-    /// `feed_borrowed` hands out from the input are views of the input.
+    /// `feed_borrowed` hands out from the input are views of the input. The transmit
+    /// statuses left in the decoder are taken at the end.
     fn decode<const N: usize>(
         t: AnyTransport,
         stream: &[u8],
         sizes: &[usize],
         borrowed: bool,
     ) -> (Vec<Owned>, DecoderStats, usize) {
+        let (frames, stats, in_place, _) = decode_statuses::<N>(t, stream, sizes, borrowed);
+        (frames, stats, in_place)
+    }
+
+    /// [`decode`], also returning the transmit statuses, taken at the end of every chunk
+    /// (so that a chunk full of statuses overflows the ring).
+    fn decode_statuses<const N: usize>(
+        t: AnyTransport,
+        stream: &[u8],
+        sizes: &[usize],
+        borrowed: bool,
+    ) -> (Vec<Owned>, DecoderStats, usize, Vec<TxStatus>) {
         let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
-        let (mut out, mut in_place) = (Vec::new(), 0);
+        let (mut out, mut in_place, mut statuses) = (Vec::new(), 0, Vec::new());
         let mut rest = stream;
         for &size in sizes.iter().cycle() {
             if rest.is_empty() {
@@ -674,13 +691,21 @@ mod tests {
             }
             assert!(input.is_empty());
             invariant(&d);
+            statuses.extend(core::iter::from_fn(|| d.take_tx_status()));
         }
         while let Some(f) = d.flush() {
             out.push(owned(&f));
         }
+        statuses.extend(core::iter::from_fn(|| d.take_tx_status()));
         assert_eq!(d.buffered(), 0);
+        assert_eq!(d.tx_statuses_pending(), 0);
         invariant(&d);
-        (out, *d.stats(), in_place)
+        let s = *d.stats();
+        assert_eq!(
+            s.control_frames as usize,
+            statuses.len() + s.tx_status_overflows as usize
+        );
+        (out, s, in_place, statuses)
     }
 
     fn transports() -> [AnyTransport; 5] {
@@ -695,7 +720,8 @@ mod tests {
 
     /// A stream of `parts`: `(kind, payload length, seed)` with kind 0..=3 a valid frame,
     /// 4 noise, 5 a false start announcing a long frame, 6 a frame with a flipped bit,
-    /// 7 a frame cut short.
+    /// 7 a frame cut short, 8 an XBee 802.15.4 transmit status, 9 an 868 one, 10 one of
+    /// them with a flipped bit (the status frames are noise to the PPRZ transports).
     fn stream_of(t: &AnyTransport, parts: &[(u8, u8, u8)]) -> Vec<u8> {
         let mut stream = Vec::new();
         for &(kind, len, seed) in parts {
@@ -717,7 +743,20 @@ mod tests {
                     buf[usize::from(seed) % n] ^= 1 << (len % 8);
                     stream.extend_from_slice(&buf[..n]);
                 }
-                _ => stream.extend_from_slice(&buf[..n / 2]),
+                7 => stream.extend_from_slice(&buf[..n / 2]),
+                8..=10 => {
+                    let n = if seed % 2 == 0 {
+                        crate::xbee::encode_tx_status_24(len, seed, &mut buf)
+                    } else {
+                        crate::xbee::encode_tx_status_868(len, seed, seed >> 4, seed & 3, &mut buf)
+                    }
+                    .unwrap();
+                    if kind == 10 {
+                        buf[usize::from(seed) % n] ^= 1 << (len % 8);
+                    }
+                    stream.extend_from_slice(&buf[..n]);
+                }
+                _ => {}
             }
         }
         stream
@@ -729,20 +768,26 @@ mod tests {
         /// holds after every call.
         #[test]
         fn feed_borrowed_finds_what_feed_finds(
-            parts in proptest::collection::vec((0u8..8, 0u8..80, any::<u8>()), 0..40),
+            parts in proptest::collection::vec((0u8..11, 0u8..80, any::<u8>()), 0..40),
             sizes in proptest::collection::vec(1usize..300, 1..8),
         ) {
             for t in transports() {
                 let stream = stream_of(&t, &parts);
-                let fed = decode::<{ crate::MAX_FRAME_LEN }>(t, &stream, &sizes, false);
-                let borrowed = decode::<{ crate::MAX_FRAME_LEN }>(t, &stream, &sizes, true);
+                let fed = decode_statuses::<{ crate::MAX_FRAME_LEN }>(t, &stream, &sizes, false);
+                let borrowed =
+                    decode_statuses::<{ crate::MAX_FRAME_LEN }>(t, &stream, &sizes, true);
                 prop_assert_eq!(&fed.0, &borrowed.0);
                 prop_assert_eq!(fed.1, borrowed.1);
+                prop_assert_eq!(&fed.3, &borrowed.3);
                 prop_assert_eq!(fed.1.bytes_in as usize, stream.len());
-                let fed = decode::<32>(t, &stream, &sizes, false);
-                let borrowed = decode::<32>(t, &stream, &sizes, true);
+                if !matches!(t, AnyTransport::XBee24(_) | AnyTransport::XBee868(_)) {
+                    prop_assert_eq!(fed.1.control_frames, 0);
+                }
+                let fed = decode_statuses::<32>(t, &stream, &sizes, false);
+                let borrowed = decode_statuses::<32>(t, &stream, &sizes, true);
                 prop_assert_eq!(&fed.0, &borrowed.0);
                 prop_assert_eq!(fed.1, borrowed.1);
+                prop_assert_eq!(&fed.3, &borrowed.3);
             }
         }
     }
@@ -837,6 +882,80 @@ mod tests {
         assert!(PprzV2.view(&short).is_err());
         assert_eq!(PprzV2.check(&short), Err(RxError::BadLength));
         assert_eq!(PprzV1::new(1).check(&short), Ok(()));
+    }
+
+    #[test]
+    fn tx_status_ring_keeps_the_newest() {
+        // Ten statuses in one chunk, no frame: `feed` does not return in between, so the
+        // ring of 8 drops the two oldest.
+        let mut stream = Vec::new();
+        let mut buf = [0u8; 16];
+        for id in 1..=10u8 {
+            let n = if id % 2 == 0 {
+                crate::xbee::encode_tx_status_24(id, id % 3, &mut buf)
+            } else {
+                crate::xbee::encode_tx_status_868(id, id, 0, 0, &mut buf)
+            }
+            .unwrap();
+            stream.extend_from_slice(&buf[..n]);
+        }
+        for borrowed in [false, true] {
+            let mut d: Decoder<XBee868> = Decoder::new(XBee868::new());
+            let mut input = &stream[..];
+            assert!(next(&mut d, &mut input, borrowed).is_none());
+            assert_eq!(d.tx_statuses_pending(), TX_STATUS_CAPACITY);
+            let s = *d.stats();
+            assert_eq!((s.control_frames, s.tx_status_overflows), (10, 2));
+            assert_eq!((s.frames, s.errors(), s.dropped_bytes), (0, 0, 0));
+            assert_eq!(s.control_bytes as usize, stream.len());
+            let ids: Vec<u8> = core::iter::from_fn(|| d.take_tx_status())
+                .map(|s| s.frame_id)
+                .collect();
+            assert_eq!(ids, (3..=10).collect::<Vec<u8>>());
+            assert_eq!(d.take_tx_status(), None);
+            // Emptied, the ring takes new statuses again, without overflow.
+            let mut input = &stream[..2 * 11 + 7];
+            assert!(next(&mut d, &mut input, borrowed).is_none());
+            let ids: Vec<u8> = core::iter::from_fn(|| d.take_tx_status())
+                .map(|s| s.frame_id)
+                .collect();
+            assert_eq!(ids, [1, 2, 3]);
+            assert_eq!(d.stats().tx_status_overflows, 2);
+            // `clear` drops bytes, not statuses.
+            let mut input = &stream[..11 + 3];
+            assert!(next(&mut d, &mut input, borrowed).is_none());
+            d.clear();
+            assert_eq!(d.take_tx_status().map(|s| s.frame_id), Some(1));
+        }
+    }
+
+    #[test]
+    fn tx_status_between_frames_through_flush() {
+        // A status behind a false start that announces a long frame: found by `flush`
+        // (it is not handed out, but the frame after it is).
+        let mut stream = std::vec![0x7E, 0x00, 0x60, 0x01];
+        let mut buf = [0u8; crate::MAX_FRAME_LEN];
+        let n = crate::xbee::encode_tx_status_24(0x33, 0, &mut buf).unwrap();
+        stream.extend_from_slice(&buf[..n]);
+        let m = XBee24::new()
+            .encode(
+                &TxMeta::new(MsgHeader::new(5, 0, 1, 2)),
+                &[1, 2, 3],
+                &mut buf,
+            )
+            .unwrap();
+        stream.extend_from_slice(&buf[..m]);
+        let mut d: Decoder<XBee24> = Decoder::new(XBee24::new());
+        let mut input = &stream[..];
+        assert!(d.feed(&mut input).is_none());
+        assert_eq!(d.take_tx_status(), None);
+        assert_eq!(d.flush().map(|f| f.source()), Some(5));
+        let status = d.take_tx_status().unwrap();
+        assert_eq!((status.frame_id, status.delivered), (0x33, true));
+        assert!(d.flush().is_none());
+        let s = *d.stats();
+        assert_eq!((s.truncated, s.control_frames, s.frames), (1, 1, 1));
+        invariant(&d);
     }
 
     #[test]

@@ -537,12 +537,12 @@ fn encode_api_frame<const L: usize>(data: [u8; L], out: &mut [u8]) -> Result<usi
 /// returns its length, [`TX_STATUS_FRAME_LEN`]. For simulated modems and tests.
 ///
 /// ```
-/// use pprz_transports::{Framing, XBee24, xbee};
+/// use pprz_transports::{Control, Framing, TxStatus, XBee24, xbee};
 /// let mut out = [0u8; 16];
 /// let n = xbee::encode_tx_status_24(0x47, xbee::status::NO_ACK, &mut out).unwrap();
 /// assert_eq!(&out[..n], &[0x7E, 0x00, 0x03, 0x89, 0x47, 0x01, 0x2E]);
-/// let (control, len) = XBee24::new().parse_control(&out).unwrap();
-/// # let _ = (control, len);
+/// let status = TxStatus { frame_id: 0x47, delivered: false, status: 1, retries: 0 };
+/// assert_eq!(XBee24::new().parse_control(&out), Some((Control::TxStatus(status), 7)));
 /// ```
 pub fn encode_tx_status_24(frame_id: u8, status: u8, out: &mut [u8]) -> Result<usize, EncodeError> {
     encode_api_frame([API_TX_STATUS, frame_id, status], out)
@@ -996,6 +996,241 @@ mod tests {
             XBee868::new().parse(&RX16_FRAME).unwrap_err(),
             RxError::UnknownApiId(0x81)
         );
+    }
+
+    /// 802.15.4 transmit status for frame id 0x47, no ACK (status 1):
+    ///   FRAME_DATA = 89 47 01, sum = 0xD1, CK = 0xFF - 0xD1 = 0x2E
+    static TX_STATUS_24: [u8; 7] = [0x7E, 0x00, 0x03, 0x89, 0x47, 0x01, 0x2E];
+
+    /// 868 transmit status for frame id 0x47, success, route discovery:
+    ///   FRAME_DATA = 8B 47 FF FE 00 00 02, sum = 8B+47+FF+FE+02 = 0x2D1 -> 0xD1,
+    ///   CK = 0xFF - 0xD1 = 0x2E
+    static TX_STATUS_868: [u8; 11] = [
+        0x7E, 0x00, 0x07, 0x8B, 0x47, 0xFF, 0xFE, 0x00, 0x00, 0x02, 0x2E,
+    ];
+
+    /// 868 transmit status for frame id 0x47 after 2 retries, network ACK failure:
+    ///   FRAME_DATA = 8B 47 FF FE 02 21 00, sum = 0x2CF + 02 + 21 = 0x2F2 -> 0xF2,
+    ///   CK = 0xFF - 0xF2 = 0x0D
+    static TX_STATUS_868_FAILED: [u8; 11] = [
+        0x7E, 0x00, 0x07, 0x8B, 0x47, 0xFF, 0xFE, 0x02, 0x21, 0x00, 0x0D,
+    ];
+
+    fn tx_status(frame_id: u8, delivered: bool, status: u8, retries: u8) -> Control {
+        Control::TxStatus(TxStatus {
+            frame_id,
+            delivered,
+            status,
+            retries,
+        })
+    }
+
+    #[test]
+    fn tx_status_emit() {
+        let mut out = [0u8; 16];
+        let n = encode_tx_status_24(0x47, status::NO_ACK, &mut out).unwrap();
+        assert_eq!((&out[..n], n), (&TX_STATUS_24[..], TX_STATUS_FRAME_LEN));
+        let n = encode_tx_status_868(0x47, 0, status::SUCCESS, status::DISCOVERY_ROUTE, &mut out)
+            .unwrap();
+        assert_eq!(
+            (&out[..n], n),
+            (&TX_STATUS_868[..], TX_STATUS_868_FRAME_LEN)
+        );
+        let n = encode_tx_status_868(
+            0x47,
+            2,
+            status::NETWORK_ACK_FAILURE,
+            status::DISCOVERY_NONE,
+            &mut out,
+        )
+        .unwrap();
+        assert_eq!(&out[..n], &TX_STATUS_868_FAILED);
+        // Too small a buffer is a typed error and writes nothing.
+        let mut small = [0u8; 10];
+        assert_eq!(
+            encode_tx_status_868(1, 0, 0, 0, &mut small),
+            Err(EncodeError::BufferTooSmall {
+                needed: 11,
+                available: 10
+            })
+        );
+        assert_eq!(small, [0; 10]);
+        assert_eq!(
+            encode_tx_status_24(1, 0, &mut small[..6]),
+            Err(EncodeError::BufferTooSmall {
+                needed: 7,
+                available: 6
+            })
+        );
+    }
+
+    #[test]
+    fn tx_status_parse() {
+        let t24 = XBee24::new();
+        let t868 = XBee868::new();
+        // Both transports read both layouts.
+        for t in [&t24 as &dyn Framing, &t868] {
+            assert_eq!(
+                t.control(&TX_STATUS_24),
+                Some(Ok(tx_status(0x47, false, status::NO_ACK, 0)))
+            );
+            assert_eq!(
+                t.control(&TX_STATUS_868),
+                Some(Ok(tx_status(0x47, true, status::SUCCESS, 0)))
+            );
+            assert_eq!(
+                t.control(&TX_STATUS_868_FAILED),
+                Some(Ok(tx_status(0x47, false, status::NETWORK_ACK_FAILURE, 2)))
+            );
+            // Bytes after the frame: parse_control, like parse, ignores them.
+            let mut longer = TX_STATUS_868.to_vec();
+            longer.extend_from_slice(&RX16_FRAME);
+            assert_eq!(
+                t.parse_control(&longer),
+                Some((tx_status(0x47, true, 0, 0), 11))
+            );
+            // Not messages.
+            assert_eq!(
+                t.parse(&TX_STATUS_24).unwrap_err(),
+                RxError::UnknownApiId(API_TX_STATUS)
+            );
+            assert_eq!(
+                t.parse(&TX_STATUS_868).unwrap_err(),
+                RxError::UnknownApiId(API_TX_STATUS_868)
+            );
+            // Messages are not control frames.
+            for frame in [&RX16_FRAME[..], &TX16_FRAME, &RX868_FRAME, &TX868_FRAME] {
+                assert_eq!(t.control(frame), None);
+                assert_eq!(t.parse_control(frame), None);
+            }
+            // Too short to have an API id: not a control frame either.
+            for short in [&[][..], &[0x7E], &[0x7E, 0x00], &[0x7E, 0x00, 0x03]] {
+                assert_eq!(t.control(short), None);
+                assert_eq!(t.parse_control(short), None);
+            }
+        }
+        // PPRZ has no control frames, even on the same bytes.
+        assert_eq!(crate::PprzV2::new().control(&TX_STATUS_24), None);
+        assert_eq!(crate::PprzV2::new().parse_control(&TX_STATUS_24), None);
+    }
+
+    #[test]
+    fn tx_status_malformed() {
+        let t = XBee24::new();
+        // Bad checksum.
+        let mut bad = TX_STATUS_24;
+        bad[6] ^= 0x01;
+        assert_eq!(t.control(&bad), Some(Err(RxError::Checksum)));
+        assert_eq!(t.parse_control(&bad), None);
+        let mut bad = TX_STATUS_868;
+        bad[8] ^= 0x40;
+        assert_eq!(t.control(&bad), Some(Err(RxError::Checksum)));
+        // Wrong length for the API id, good checksum: 0x89 with 4 bytes, 0x8B with 3
+        // and with 8.
+        let mut out = [0u8; 16];
+        for data in [
+            &[API_TX_STATUS, 0x47, 0x00, 0x00][..],
+            &[API_TX_STATUS, 0x47][..],
+            &[API_TX_STATUS_868, 0x47, 0x00][..],
+            &[API_TX_STATUS_868, 0x47, 0xFF, 0xFE, 0, 0, 0, 0][..],
+        ] {
+            let n = data.len() + OVERHEAD;
+            let mut p = Packet::new_unchecked(&mut out[..n]);
+            p.set_start(START);
+            p.set_length(data.len() as u16);
+            p.frame_data_mut().copy_from_slice(data);
+            p.fill_checksum();
+            assert_eq!(
+                t.control(&out[..n]),
+                Some(Err(RxError::BadLength)),
+                "{data:02x?}"
+            );
+            assert_eq!(t.parse_control(&out[..n]), None);
+        }
+        // Truncated, or bytes past the announced length (`control` takes exactly one
+        // frame), or a bad start byte.
+        assert_eq!(t.control(&TX_STATUS_24[..6]), Some(Err(RxError::Truncated)));
+        let mut longer = TX_STATUS_24.to_vec();
+        longer.push(0);
+        assert_eq!(t.control(&longer), Some(Err(RxError::BadLength)));
+        let mut bad = TX_STATUS_24;
+        bad[0] = 0x7D;
+        assert_eq!(t.control(&bad), Some(Err(RxError::BadStart)));
+        assert_eq!(t.parse_control(&bad), None);
+        // LEN 0 with the API id byte present.
+        assert_eq!(
+            t.control(&[0x7E, 0x00, 0x00, API_TX_STATUS]),
+            Some(Err(RxError::BadLength))
+        );
+    }
+
+    #[test]
+    fn frame_id_rewrite() {
+        let (t24, t868) = (XBee24::new(), XBee868::new());
+        let mut f24 = TX16_FRAME;
+        let mut f868 = TX868_FRAME;
+        assert_eq!(t24.tx_frame_id(&f24), Some(NO_FRAME_ID));
+        assert_eq!(t868.tx_frame_id(&f868), Some(NO_FRAME_ID));
+        for id in 0..=255u8 {
+            assert!(t24.set_tx_frame_id(&mut f24, id));
+            assert!(t868.set_tx_frame_id(&mut f868, id));
+            assert_eq!(t24.tx_frame_id(&f24), Some(id));
+            assert_eq!(t868.tx_frame_id(&f868), Some(id));
+            assert_eq!(f24[3 + field::tx16::FRAME_ID], id);
+            assert_eq!(f868[3 + field::tx868::FRAME_ID], id);
+            // Checksum rewritten: the frame still parses (loopback) to the same message.
+            let (f, _) = t24.parse(&f24).unwrap();
+            assert_eq!((f.source(), f.payload()), (7, &FIELDS[..]));
+            let (f, _) = t868.parse(&f868).unwrap();
+            assert_eq!((f.source(), f.payload()), (7, &FIELDS[..]));
+            // Only the frame id and the checksum changed.
+            assert_eq!(f24[..4], TX16_FRAME[..4]);
+            assert_eq!(f24[5..16], TX16_FRAME[5..16]);
+            assert_eq!(f868[5..25], TX868_FRAME[5..25]);
+        }
+        // The encoder's own frame id is read back.
+        let mut out = [0u8; 64];
+        let n = XBee24 {
+            frame_id: 9,
+            options: 1,
+        }
+        .encode(&meta(), &FIELDS, &mut out)
+        .unwrap();
+        assert_eq!(t24.tx_frame_id(&out[..n]), Some(9));
+        // Bytes after the frame are allowed (and left alone).
+        out[n] = 0xAA;
+        assert!(t24.set_tx_frame_id(&mut out, 10));
+        assert_eq!((t24.tx_frame_id(&out), out[n]), (Some(10), 0xAA));
+        assert!(t24.parse(&out).is_ok());
+        // Not a transmit request of this radio, or not whole: None, false, untouched.
+        for (frame, len) in [
+            (&RX16_FRAME[..], 17),
+            (&TX868_FRAME[..], 26),
+            (&TX16_FRAME[..16], 16),
+            (&TX_STATUS_24[..], 7),
+            (&[][..], 0),
+        ] {
+            let mut copy = [0u8; 32];
+            copy[..len].copy_from_slice(frame);
+            assert_eq!(t24.tx_frame_id(&copy[..len]), None);
+            assert!(!t24.set_tx_frame_id(&mut copy[..len], 5));
+            assert_eq!(&copy[..len], frame);
+        }
+        for (frame, len) in [
+            (&RX868_FRAME[..], 24),
+            (&TX16_FRAME[..], 17),
+            (&TX868_FRAME[..25], 25),
+        ] {
+            let mut copy = [0u8; 32];
+            copy[..len].copy_from_slice(frame);
+            assert_eq!(t868.tx_frame_id(&copy[..len]), None);
+            assert!(!t868.set_tx_frame_id(&mut copy[..len], 5));
+            assert_eq!(&copy[..len], frame);
+        }
+        // A 0x01 frame too short for the TX16 header (LEN 2: API id and frame id only).
+        let mut short = [0x7E, 0x00, 0x02, API_TX16, 0x00, 0xFE];
+        assert_eq!(t24.tx_frame_id(&short), None);
+        assert!(!t24.set_tx_frame_id(&mut short, 1));
     }
 
     #[test]
