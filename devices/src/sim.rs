@@ -93,6 +93,10 @@
 //!   [`XBeeModem::purge_status`], the modem also answers such a frame with a status
 //!   (802.15.4 3 "purged", 868 0x32 "no free buffers") so a test can see it. With `Wait`
 //!   the UART stops (CTS) while the buffer cannot take the next byte.
+//! * An RX frame that the receiver's ring cannot hold is lost with `Drop`
+//!   ([`SimStats::frames_overrun`]): it was sent and acknowledged, the far modem's UART
+//!   output overflowed. With `Wait`, the frame's last byte waits on the UART until the
+//!   reader has made room.
 //! * The uplink (B to A) carries plain bytes, as without XBee, unless
 //!   [`XBeeModem::api_uplink`] is set: B then writes API frames too, A reads RX frames
 //!   (source [`XBeeModem::address_b`]) and B reads the statuses of its frames. With a
@@ -128,10 +132,10 @@
 //! rate stay exact: a byte's entry time into the modem does not depend on when its
 //! writer happened to be polled.
 //!
-//! Memory: `9 * N` bytes per direction for the receiver ring (each byte carries its
-//! arrival time), plus about 1.1 KiB per direction for the XBee modem (a 270-byte
-//! frame buffer and 16 frame slots), present whether XBee is used or not. No
-//! allocation, no `unsafe`.
+//! Memory per direction: `9 * N` bytes for the receiver ring (each byte carries its
+//! arrival time) plus at most 1.3 KiB of state, most of it the XBee modem's (a
+//! 270-byte frame buffer and 16 frame slots of 48 bytes), present whether XBee is used
+//! or not; a [`SimLink`] is twice that. No allocation, no `unsafe`.
 //!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
@@ -1040,7 +1044,9 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
     /// A byte enters the XBee modem's API parser at `at`.
     fn api_byte(&self, direction: Direction, d: &mut Dir<N>, x: &XBeeModem, byte: u8, at: u128) {
         let p = &mut d.parser;
-        p.bytes += 1;
+        if p.state != Parse::Idle {
+            p.bytes += 1;
+        }
         match p.state {
             Parse::Idle => {
                 if byte == xbee::START {
@@ -1627,6 +1633,12 @@ mod tests {
         let mut rng = SplitMix64(1_234_567);
         assert_eq!(rng.next(), 6_457_827_717_110_365_317);
         assert_eq!(rng.next(), 3_203_168_211_198_807_973);
+    }
+
+    #[test]
+    fn memory_per_direction_is_as_documented() {
+        assert!(core::mem::size_of::<Dir<1>>() <= 9 + 1300);
+        assert!(core::mem::size_of::<Dir<4096>>() <= 9 * 4096 + 1300);
     }
 
     #[test]
