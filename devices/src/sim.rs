@@ -27,8 +27,8 @@
 //!   a modem does. [`Overflow::Wait`] models hardware flow control (CTS): the UART
 //!   stops while the buffer is full, so nothing is dropped and the backlog stays in the
 //!   writer's queue, where it can be shed by priority. With a serial rate above the air
-//!   rate and `Drop`, a sustained writer overfills the modem: the bytes it drops are
-//!   the writer's problem, which is why the writer must pace itself.
+//!   rate and `Drop`, a sustained writer overfills the modem and loses bytes at random,
+//!   unless it paces itself to the air rate.
 //! * **Bit errors** ([`SimConfig::bit_error_rate`]): every bit sent is flipped with that
 //!   probability, drawn from a SplitMix64 generator seeded with [`SimConfig::seed`]
 //!   (the other direction uses a derived seed), so a run is reproducible. Flipped bits
@@ -107,20 +107,21 @@
 //! * **SiK / 3DR radios** (transparent): `serial_rate` is `SERIAL_SPEED` (57 for 57600
 //!   baud: 5760 bytes/s). The air rate is `AIR_SPEED` kbit/s over 8 bits, halved by
 //!   `ECC` (Golay coding doubles every byte), and shared by both directions in TDM
-//!   (each gets about half when both are busy), minus framing: `AIR_SPEED = 64`, ECC off
-//!   gives about 8000 bytes/s at best, 4000 in each direction when both are busy, 2000
-//!   with ECC. The serial port is usually faster than the air, so without flow control
-//!   (`RTSCTS=0`) a writer that does not pace itself overfills the modem. The buffer is
-//!   the firmware's serial receive FIFO (1850 bytes in the Si1000 firmware; CTS is
-//!   deasserted at 17 bytes free).
+//!   (each gets about half when both are busy), minus framing: `AIR_SPEED = 64` gives
+//!   at most 8000 bytes/s, about 4000 in each direction when both are busy, 2000 with
+//!   ECC. So at 57600 baud the UART outruns the air as soon as ECC is on or the uplink
+//!   is busy, and without flow control (`RTSCTS=0`, the usual wiring) a writer that does
+//!   not pace itself overfills the modem. The buffer is the firmware's serial receive
+//!   FIFO (1850 bytes in the Si1000 firmware, which deasserts CTS at 17 bytes free).
 //! * **XBee 802.15.4** (API): the air carries 250 kbit/s (`byte_rate = 31_250`), so at
 //!   57600 baud (`serial_rate = 5760`) the UART, not the air, is the bottleneck; the
 //!   serial receive buffer of an XBee (Series 1) holds about 202 bytes. Per transmission
 //!   add about 20 bytes of `air_overhead` (PHY preamble and header, MAC header and CRC,
 //!   the acknowledgement frame) and an `ack_delay` of about 1 ms (802.15.4 waits 864 µs
 //!   for an acknowledgement); the MAC retries 3 times.
-//! * **XBee 868**: the air rate is 10 kbit/s or 80 kbit/s depending on the model and
-//!   channel settings; RF payloads up to 256 bytes.
+//! * **XBee 868**: the air is much slower (24 kbit/s for the XBee-PRO 868, 10 or
+//!   80 kbit/s for the 868LP), so with RF payloads up to 256 bytes the air, not the
+//!   UART, is the bottleneck.
 //!
 //! # Time and memory
 //!
@@ -905,6 +906,28 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         })
     }
 
+    /// Bytes in the modem of `direction` now: waiting or on the air (transparent), or
+    /// the API bytes of the frames not yet done and of a frame being received (XBee).
+    pub fn modem_occupancy(&self, direction: Direction) -> usize {
+        let t = &self.timing;
+        let now = Self::now_units(t);
+        let api = self.modem(direction).is_some();
+        self.with(direction, |d| {
+            let bytes = if api {
+                d.frames_iter()
+                    .filter(|f| f.end(t.ack_wait) > now)
+                    .map(|f| u128::from(f.weight))
+                    .sum::<u128>()
+                    + u128::from(d.parser.in_progress())
+            } else if t.air_byte == 0 {
+                0
+            } else {
+                d.queued(now, t.air_byte)
+            };
+            usize::try_from(bytes).unwrap_or(usize::MAX)
+        })
+    }
+
     fn with<R>(&self, direction: Direction, f: impl FnOnce(&mut Dir<N>) -> R) -> R {
         self.dirs[direction.index()].lock(|d| f(&mut d.borrow_mut()))
     }
@@ -1428,16 +1451,18 @@ impl<const N: usize> Dir<N> {
             return false;
         }
         let at = |i: usize| (self.head + i) % N;
-        let mut min = 0;
-        if self.partial {
-            let run = self.due[self.head];
-            while min < self.len && self.due[at(min)] == run {
-                min += 1;
-            }
-        }
         let mut pos = self.len;
-        while pos > min && self.due[at(pos - 1)] > due {
+        while pos > 0 && self.due[at(pos - 1)] > due {
             pos -= 1;
+        }
+        if self.partial && pos < self.len {
+            // Not before the end of the partly read run.
+            let run = self.due[self.head];
+            let mut end = 0;
+            while end < self.len && self.due[at(end)] == run {
+                end += 1;
+            }
+            pos = pos.max(end);
         }
         let mut i = self.len;
         while i > pos {

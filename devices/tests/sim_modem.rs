@@ -198,6 +198,7 @@ fn drop_mode_overfills_the_modem_and_counts_every_byte() {
                 // (500 ms): the UART was always busy, the air 499.5 ms of 500.
                 assert_eq!((s.serial_busy_us, s.air_busy_us), (500_000, 499_500));
                 assert!(s.air_busy_us as f64 >= 0.95 * 500_000.0);
+                assert_eq!(link.modem_occupancy(Direction::AToB), 100, "full");
                 done
             },
             read_until(&mut b, at_us(700_000)),
@@ -239,7 +240,9 @@ fn wait_mode_stops_the_uart_and_never_drops() {
         join(
             async {
                 let done = write_at(&mut a, &data).await;
+                assert_eq!(link.modem_occupancy(Direction::AToB), 100, "full");
                 a.flush().await.unwrap();
+                assert_eq!(link.modem_occupancy(Direction::AToB), 0);
                 (done, Instant::now())
             },
             read_until(&mut b, at_us(1_100_000)),
@@ -735,6 +738,8 @@ fn xbee_wait_mode_holds_the_uart_instead_of_dropping() {
         join(
             async {
                 let done = write_at(&mut air_tx, &data).await;
+                // Frame 28 was done 0.32 ms ago; frame 29 is the only one in.
+                assert_eq!(link.modem_occupancy(Direction::AToB), 109);
                 air_tx.flush().await.unwrap();
                 (done, Instant::now())
             },
