@@ -287,6 +287,32 @@ fn wait_mode_waits_for_the_reader_when_the_ring_is_full() {
     assert_eq!((s.overrun_bytes, s.serial_busy_us), (0, 20_000));
 }
 
+#[test]
+fn a_cancelled_write_keeps_the_bytes_that_crossed() {
+    let _t = mock_time();
+    let link = SimLink::<NoopRawMutex, 64>::new(SimConfig::new(0).serial_rate(1000));
+    let (mut a, mut b) = link.endpoints();
+    let (cut, got) = run(
+        async {
+            let write = a.write(&[1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+            let cut = matches!(
+                select(write, Timer::at(at_us(5_500))).await,
+                Either::Second(())
+            );
+            // The UART restarts with the next write.
+            a.write_all(&[11]).await.unwrap();
+            assert_eq!(Instant::now(), at_us(6_500));
+            (cut, read_until(&mut b, at_us(10_000)).await)
+        },
+        STEP,
+        1000,
+    );
+    assert!(cut);
+    assert_eq!(bytes(&got), [1, 2, 3, 4, 5, 11]);
+    let s = link.stats(Direction::AToB);
+    assert_eq!((s.bytes_written, s.serial_busy_us), (6, 6_000));
+}
+
 // --- XBee API modem ---
 
 /// A TX16 request (802.15.4).
