@@ -184,6 +184,7 @@ use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_sync::waitqueue::WakerRegistration;
 use embassy_time::{Duration, Instant, TICK_HZ, Timer};
 use embedded_io_async::{ErrorType, Read, Write};
+use pprz_transports::xbee as api;
 
 /// What a direction does with written bytes when its modem buffer is full.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -297,24 +298,24 @@ impl XBeeVariant {
     /// The largest RF payload of a frame.
     pub const fn max_rf_payload(self) -> usize {
         match self {
-            Self::XBee24 => 100,
-            Self::XBee868 => 256,
+            Self::XBee24 => api::MAX_RF_PAYLOAD_24,
+            Self::XBee868 => api::MAX_RF_PAYLOAD_868,
         }
     }
 
     /// Length of the transmit request's `FRAME_DATA` before the RF data.
     const fn tx_header(self) -> usize {
         match self {
-            Self::XBee24 => 5,
-            Self::XBee868 => 14,
+            Self::XBee24 => api::field::tx16::DATA,
+            Self::XBee868 => api::field::tx868::DATA,
         }
     }
 
     /// Length of the receive packet's `FRAME_DATA` before the RF data.
     const fn rx_header(self) -> usize {
         match self {
-            Self::XBee24 => 5,
-            Self::XBee868 => 12,
+            Self::XBee24 => api::field::rx16::DATA,
+            Self::XBee868 => api::field::rx868::DATA,
         }
     }
 
@@ -423,73 +424,51 @@ impl XBeeModem {
     }
 }
 
-/// XBee API constants of the simulated modem, and [`api_frame`](xbee::api_frame) to
-/// frame `FRAME_DATA`.
+/// XBee API facts of the simulated modem.
+///
+/// Frame layouts, API ids and status codes are those of [`pprz_transports::xbee`],
+/// re-exported here under the modem's names; this module adds the option bits the
+/// modem reads and writes and [`api_frame`](xbee::api_frame) to frame `FRAME_DATA`.
 pub mod xbee {
-    /// Start delimiter of an API frame.
-    pub const START: u8 = 0x7E;
-    /// Bytes around `FRAME_DATA`: start, length (2), checksum.
-    pub const FRAMING: usize = 4;
-    /// 802.15.4 transmit request (16-bit destination).
-    pub const API_TX16: u8 = 0x01;
-    /// 802.15.4 receive packet (16-bit source).
-    pub const API_RX16: u8 = 0x81;
-    /// 802.15.4 transmit status: `89 frame_id status`.
-    pub const API_TX_STATUS: u8 = 0x89;
-    /// 868 transmit request.
-    pub const API_TX_868: u8 = 0x10;
-    /// 868 receive packet.
-    pub const API_RX_868: u8 = 0x90;
-    /// 868 transmit status: `8B frame_id FF FE retries delivery discovery`.
-    pub const API_TX_STATUS_868: u8 = 0x8B;
+    use pprz_transports::xbee::{HEADER_LEN, Packet};
+
+    pub use pprz_transports::checksum::xbee as checksum;
+    pub use pprz_transports::xbee::status::{
+        CCA_FAILURE as STATUS_CCA_FAILURE, DISCOVERY_NONE, NETWORK_ACK_FAILURE as DELIVERY_NO_ACK,
+        NO_ACK as STATUS_NO_ACK, PURGED as STATUS_PURGED, RESOURCE_ERROR as DELIVERY_NO_BUFFERS,
+        SUCCESS as STATUS_SUCCESS,
+    };
+    pub use pprz_transports::xbee::{
+        API_RX_868, API_RX16, API_TX_868, API_TX_STATUS, API_TX_STATUS_868, API_TX16,
+        BROADCAST_ADDRESS as BROADCAST_16, OVERHEAD as FRAMING, START,
+    };
+
     /// Transmit option "disable ACK" (both variants).
     pub const OPTION_DISABLE_ACK: u8 = 0x01;
     /// Receive option "acknowledged" (868).
     pub const RX_OPTION_ACKED: u8 = 0x01;
     /// Receive option "broadcast" (both variants).
     pub const RX_OPTION_BROADCAST: u8 = 0x02;
-    /// 802.15.4 broadcast address.
-    pub const BROADCAST_16: u16 = 0xFFFF;
-    /// 868 broadcast address.
-    pub const BROADCAST_64: u64 = 0xFFFF;
-    /// Status (802.15.4) and delivery status (868): delivered.
-    pub const STATUS_SUCCESS: u8 = 0x00;
-    /// 802.15.4 status: no acknowledgement after the retries.
-    pub const STATUS_NO_ACK: u8 = 0x01;
-    /// 802.15.4 status: the channel was never clear (not simulated).
-    pub const STATUS_CCA_FAILURE: u8 = 0x02;
-    /// 802.15.4 status: purged (here: dropped because the modem was full).
-    pub const STATUS_PURGED: u8 = 0x03;
-    /// 868 delivery status: no acknowledgement after the retries.
-    pub const DELIVERY_NO_ACK: u8 = 0x21;
-    /// 868 delivery status: no free buffers (here: dropped because the modem was full).
-    pub const DELIVERY_NO_BUFFERS: u8 = 0x32;
-    /// 868 discovery status: no discovery overhead.
-    pub const DISCOVERY_NONE: u8 = 0x00;
-
-    /// The checksum of `frame_data`: `0xFF - sum`.
-    pub fn checksum(frame_data: &[u8]) -> u8 {
-        0xFF - frame_data.iter().fold(0u8, |sum, &b| sum.wrapping_add(b))
-    }
+    /// 868 broadcast address: [`BROADCAST_16`] in the low bits.
+    pub const BROADCAST_64: u64 = pprz_transports::xbee::address64(pprz_transports::BROADCAST_ID);
 
     /// Writes the API frame `7E len frame_data ck` to `out`; returns its length, or
     /// `None` if `out` is too short or `frame_data` longer than 65535 bytes.
     pub fn api_frame(frame_data: &[u8], out: &mut [u8]) -> Option<usize> {
-        let len = u16::try_from(frame_data.len()).ok()?;
-        let total = frame_data.len() + FRAMING;
-        let out = out.get_mut(..total)?;
-        out[0] = START;
-        out[1..3].copy_from_slice(&len.to_be_bytes());
-        out[3..total - 1].copy_from_slice(frame_data);
-        out[total - 1] = checksum(frame_data);
-        Some(total)
+        let len = frame_data.len();
+        u16::try_from(len).ok()?;
+        let out = out.get_mut(..len + FRAMING)?;
+        out[HEADER_LEN..HEADER_LEN + len].copy_from_slice(frame_data);
+        Some(frame_in_place(out, len))
     }
 
-    /// Frames `out[3..3 + len]` in place; returns the frame's length.
+    /// Frames the `len` bytes of `FRAME_DATA` at `out[HEADER_LEN..]` in place (`len`
+    /// at most 65535); returns the frame's length.
     pub(super) fn frame_in_place(out: &mut [u8], len: usize) -> usize {
-        out[0] = START;
-        out[1..3].copy_from_slice(&(len as u16).to_be_bytes());
-        out[3 + len] = checksum(&out[3..3 + len]);
+        let mut packet = Packet::new_unchecked(out);
+        packet.set_start(START);
+        packet.set_length(len as u16);
+        packet.fill_checksum();
         len + FRAMING
     }
 }
@@ -599,9 +578,9 @@ impl SplitMix64 {
 }
 
 /// Largest `FRAME_DATA` of a transmit request (868: 14-byte header + 256 bytes).
-const MAX_FRAME_DATA: usize = 14 + 256;
+const MAX_FRAME_DATA: usize = XBeeVariant::XBee868.tx_header() + api::MAX_RF_PAYLOAD_868;
 /// Largest RX frame, framing included (868: 12-byte header + 256 bytes).
-const MAX_RX_FRAME: usize = 12 + 256 + xbee::FRAMING;
+const MAX_RX_FRAME: usize = rx_frame_len(XBeeVariant::XBee868, api::MAX_RF_PAYLOAD_868);
 /// Frames the XBee modem holds.
 const MODEM_FRAMES: usize = 16;
 
@@ -773,20 +752,24 @@ impl Parser {
         if data.len() < header || data.len() - header > variant.max_rf_payload() {
             return None;
         }
-        let broadcast = match variant {
+        let (broadcast, options) = match variant {
             XBeeVariant::XBee24 if data[0] == xbee::API_TX16 => {
-                u16::from_be_bytes([data[2], data[3]]) == xbee::BROADCAST_16
+                let mut dest = [0u8; 2];
+                dest.copy_from_slice(&data[api::field::tx16::DEST]);
+                let broadcast = u16::from_be_bytes(dest) == xbee::BROADCAST_16;
+                (broadcast, data[api::field::tx16::OPTIONS])
             }
             XBeeVariant::XBee868 if data[0] == xbee::API_TX_868 => {
                 let mut dest = [0u8; 8];
-                dest.copy_from_slice(&data[2..10]);
-                u64::from_be_bytes(dest) == xbee::BROADCAST_64
+                dest.copy_from_slice(&data[api::field::tx868::DEST64]);
+                let broadcast = u64::from_be_bytes(dest) == xbee::BROADCAST_64;
+                (broadcast, data[api::field::tx868::OPTIONS])
             }
             _ => return None,
         };
-        let options = data[header - 1];
+        // The frame id is at the same offset in both requests.
         Some(TxRequest {
-            frame_id: data[1],
+            frame_id: data[api::field::tx16::FRAME_ID],
             broadcast,
             acked: !broadcast && options & xbee::OPTION_DISABLE_ACK == 0,
             rf_start: header,
@@ -1223,26 +1206,19 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         status: u8,
         due: u64,
     ) {
-        let mut frame = [0u8; 7 + xbee::FRAMING];
-        let len = match x.variant {
-            XBeeVariant::XBee24 => {
-                frame[3..6].copy_from_slice(&[xbee::API_TX_STATUS, frame_id, status]);
-                3
-            }
-            XBeeVariant::XBee868 => {
-                frame[3..10].copy_from_slice(&[
-                    xbee::API_TX_STATUS_868,
-                    frame_id,
-                    0xFF,
-                    0xFE,
-                    retries,
-                    status,
-                    xbee::DISCOVERY_NONE,
-                ]);
-                7
-            }
+        let mut frame = [0u8; api::TX_STATUS_868_FRAME_LEN];
+        let encoded = match x.variant {
+            XBeeVariant::XBee24 => api::encode_tx_status_24(frame_id, status, &mut frame),
+            XBeeVariant::XBee868 => api::encode_tx_status_868(
+                frame_id,
+                retries,
+                status,
+                xbee::DISCOVERY_NONE,
+                &mut frame,
+            ),
         };
-        let n = xbee::frame_in_place(&mut frame, len);
+        // The buffer holds the larger of the two frames.
+        let Ok(n) = encoded else { return };
         let stored = self.with(direction.other(), |o| {
             let stored = o.insert(&frame[..n], due);
             if stored {
@@ -1366,23 +1342,25 @@ fn rx_frame(
 ) -> usize {
     let rf = &data[req.rf_start..];
     let header = x.variant.rx_header();
-    let fd = &mut out[3..];
+    let fd = &mut out[api::HEADER_LEN..];
     match x.variant {
         XBeeVariant::XBee24 => {
-            fd[0] = xbee::API_RX16;
-            fd[1..3].copy_from_slice(&(source as u16).to_be_bytes());
-            fd[3] = x.rssi;
-            fd[4] = if req.broadcast {
+            use api::field::rx16;
+            fd[rx16::API_ID] = xbee::API_RX16;
+            fd[rx16::SOURCE].copy_from_slice(&(source as u16).to_be_bytes());
+            fd[rx16::RSSI] = x.rssi;
+            fd[rx16::OPTIONS] = if req.broadcast {
                 xbee::RX_OPTION_BROADCAST
             } else {
                 0
             };
         }
         XBeeVariant::XBee868 => {
-            fd[0] = xbee::API_RX_868;
-            fd[1..9].copy_from_slice(&source.to_be_bytes());
-            fd[9..11].copy_from_slice(&[0xFF, 0xFE]);
-            fd[11] = if req.broadcast {
+            use api::field::rx868;
+            fd[rx868::API_ID] = xbee::API_RX_868;
+            fd[rx868::SOURCE64].copy_from_slice(&source.to_be_bytes());
+            fd[rx868::SOURCE16].copy_from_slice(&[0xFF, 0xFE]);
+            fd[rx868::OPTIONS] = if req.broadcast {
                 xbee::RX_OPTION_BROADCAST
             } else if req.acked {
                 xbee::RX_OPTION_ACKED
