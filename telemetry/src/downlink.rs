@@ -50,7 +50,7 @@
 //! assert_eq!(log.device().stats().queued, 2);
 //! ```
 
-use core::cell::Cell;
+use core::cell::{Cell, RefCell};
 use core::fmt;
 use core::future::poll_fn;
 use core::task::{Context, Poll};
@@ -58,9 +58,10 @@ use core::task::{Context, Poll};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use pprz_messages::Message;
-use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, TxMeta};
+use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, TxMeta, TxStatus};
 
 use crate::arena::{AllocError, ArenaStats, FrameArena, FrameBuf};
+use crate::delivery::{DeliveryStats, DeliveryWindow, Outstanding};
 use crate::queue::{FrameQueue, MessageKey, Pushed};
 use crate::stats::{DeviceStats, DropReason};
 
@@ -247,6 +248,10 @@ pub struct DeviceConfig {
     /// The link budget of a radio without flow control (`None`: write frames as fast as
     /// the device accepts them, for devices that push back or never lose bytes).
     pub pacing: Option<Pacing>,
+    /// For a transport with transmit statuses (XBee API): how many frames may await
+    /// their status in the modem (`None`: frames are written without frame ids, the
+    /// modem sends no status). See [`delivery`](crate::delivery).
+    pub delivery: Option<DeliveryWindow>,
 }
 
 impl DeviceConfig {
@@ -259,7 +264,15 @@ impl DeviceConfig {
             flush: false,
             replies: Some(ReplyLimit::DEFAULT),
             pacing: None,
+            delivery: None,
         }
+    }
+
+    /// With this transmit-status window (`None`: none); it applies to transports with
+    /// transmit statuses (XBee API) and is ignored by the others.
+    pub const fn delivery(mut self, window: Option<DeliveryWindow>) -> Self {
+        self.delivery = window;
+        self
     }
 
     /// With this link budget (`None`: no pacing); see [`Pacing`].
@@ -368,6 +381,8 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     undeliverable: Mutex<M, Cell<u32>>,
     /// Per device, the reply rate limit's state (see [`ReplyLimit::admit`]).
     reply_tat: [Mutex<M, Cell<u64>>; D],
+    /// Per device, the frames awaiting their transmit status.
+    outstanding: [Mutex<M, RefCell<Outstanding>>; D],
     /// PPRZLOG time stamps, in 100 µs ticks.
     clock: fn() -> u32,
 }
@@ -411,6 +426,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             ports_taken: Mutex::new(Cell::new(false)),
             undeliverable: Mutex::new(Cell::new(0)),
             reply_tat: [const { Mutex::new(Cell::new(0)) }; D],
+            outstanding: [const { Mutex::new(RefCell::new(Outstanding::new())) }; D],
             clock: no_clock,
         }
     }
@@ -717,6 +733,8 @@ trait Core: Sync {
     fn arena_stats(&self) -> ArenaStats;
     fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>>;
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
+    /// Runs `f` on device `device`'s outstanding frames (nothing for a bad index).
+    fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
     fn complete(&self, device: usize, len: usize, written: bool);
 }
 
@@ -760,6 +778,12 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
 
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize> {
         self.queues.get(device)?.peek_len(cx)
+    }
+
+    fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding)) {
+        if let Some(o) = self.outstanding.get(device) {
+            o.lock(|o| f(&mut o.borrow_mut()));
+        }
     }
 
     fn complete(&self, device: usize, len: usize, written: bool) {
@@ -929,6 +953,47 @@ impl<'d> Device<'d> {
             .send_fields(msg, Route::reply::<Msg>(), Targets::from(*self))
     }
 
+    /// A transmit status the radio sent for one of this device's frames (the device's
+    /// [`Reader`](crate::reader::Reader) passes on those it decodes): frees that frame's
+    /// place in the [`DeliveryWindow`] and counts the outcome; a status for no
+    /// outstanding frame is counted and ignored.
+    pub fn tx_status(&self, status: &TxStatus) {
+        self.core
+            .outstanding(self.index(), &mut |o| o.status(status));
+    }
+
+    /// What the transmit statuses of this device said.
+    pub fn delivery_stats(&self) -> DeliveryStats {
+        let mut stats = DeliveryStats::default();
+        self.core
+            .outstanding(self.index(), &mut |o| stats = o.stats);
+        stats
+    }
+
+    /// Whether a frame may go to the modem now under `window`, else the deadline of the
+    /// oldest outstanding frame (registering `cx` for the next status).
+    pub(crate) fn delivery_room(
+        &self,
+        window: &DeliveryWindow,
+        now: u64,
+        cx: Option<&mut Context<'_>>,
+    ) -> Result<(), u64> {
+        let mut cx = cx;
+        let mut room = Ok(());
+        self.core.outstanding(self.index(), &mut |o| {
+            room = o.room(window, now, cx.take());
+        });
+        room
+    }
+
+    /// A fresh frame id for a frame going to the modem now, recorded as outstanding.
+    pub(crate) fn delivery_start(&self, window: &DeliveryWindow, now: u64) -> Option<u8> {
+        let mut id = None;
+        self.core
+            .outstanding(self.index(), &mut |o| id = o.start(window, now));
+        id
+    }
+
     /// Statistics of this device.
     pub fn stats(&self) -> DeviceStats {
         self.core.stats(self.index()).unwrap_or_default()
@@ -1074,6 +1139,11 @@ impl fmt::Debug for Outgoing<'_> {
 }
 
 impl Outgoing<'_> {
+    /// The frame's bytes, to change before writing (the writer sets XBee frame ids).
+    pub(crate) fn bytes_mut(&mut self) -> &mut [u8] {
+        &mut self.frame
+    }
+
     /// Counts the frame as sent (`written`) or as a
     /// [`DropReason::WriteError`] drop, and releases its memory.
     pub fn finish(mut self, written: bool) {

@@ -4,6 +4,7 @@
 #![warn(missing_docs)]
 
 pub mod arena;
+pub mod delivery;
 pub mod downlink;
 pub mod link;
 mod queue;
@@ -18,6 +19,7 @@ pub use pprz_messages;
 pub use pprz_transports;
 
 pub use arena::{AllocError, FrameArena, FrameBuf};
+pub use delivery::{DeliveryStats, DeliveryWindow};
 pub use downlink::{
     Device, DeviceConfig, Downlink, FrameAlloc, Outgoing, Pacing, Port, PortsTaken, ReplyLimit,
     SendError, Sender, Targets,

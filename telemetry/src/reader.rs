@@ -45,6 +45,10 @@
 //! drop((a, b));
 //! ```
 //!
+//! Transmit statuses (XBee API) are not messages: the reader hands them to its device's
+//! writer ([`Device::tx_status`]), which counts them and frees the frames' places in the
+//! modem ([`delivery`](crate::delivery)).
+//!
 //! # Destination filtering
 //! PPRZ v2 frames carry a destination: frames for our aircraft id or for broadcast
 //! (`0xFF`) are accepted, the rest are counted in [`UplinkStats::not_for_us`]. PPRZ v1
@@ -231,6 +235,13 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
         self.device
     }
 
+    /// Hands the transmit statuses the decoder found (XBee API) to the device's writer.
+    fn pass_tx_statuses(&mut self) {
+        while let Some(status) = self.decoder.take_tx_status() {
+            self.device.tx_status(&status);
+        }
+    }
+
     /// Counters of this reader's decoder (frames, checksum errors, ...).
     pub fn decoder_stats(&self) -> DecoderStats {
         *self.decoder.stats()
@@ -252,6 +263,7 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
             });
             frames += 1;
         }
+        self.pass_tx_statuses();
         frames
     }
 
@@ -269,6 +281,7 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
             });
             frames += 1;
         }
+        self.pass_tx_statuses();
         frames
     }
 

@@ -24,17 +24,34 @@
 //! takes the next frame only when it fits in the budget: until then frames wait in the
 //! queue, where a more important one can still overtake them.
 
+//!
+//! # Transmit statuses
+//! For an XBee device configured with a [`DeliveryWindow`](crate::DeliveryWindow), the
+//! writer gives every frame a fresh frame id and waits, before taking the next frame,
+//! until fewer than `in_modem` frames await their transmit status (or the oldest timed
+//! out); see [`delivery`](crate::delivery).
+
+use core::future::poll_fn;
+use core::task::Poll;
+
+use embassy_futures::select::select;
 use embassy_time::{Instant, Timer};
 use embedded_io_async::Write;
 
-use crate::downlink::{Pacing, Port};
+use crate::delivery::DeliveryWindow;
+use crate::downlink::{Device, Pacing, Port};
 
 /// Runs the writer of `port`'s device forever, writing its frames to `io`. (The port is
 /// borrowed, so it outlives a cancelled writer and can be given to the next one.)
 pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
-    let config = port.device().config();
+    let device = port.device();
+    let config = device.config();
     let mut modem = config.pacing.map(ModemModel::new);
+    let window = config.delivery.filter(|_| config.transport.has_tx_status());
     loop {
+        if let Some(window) = &window {
+            wait_for_room(device, window).await;
+        }
         if let Some(model) = &modem {
             // Wait for room for the most important frame; look again after waiting, as a
             // more important (perhaps longer) frame may have arrived meanwhile.
@@ -45,9 +62,15 @@ pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
                 continue;
             }
         }
-        let frame = port.next().await;
+        let mut frame = port.next().await;
+        let now = Instant::now().as_ticks();
         if let Some(model) = &mut modem {
-            model.add(frame.len(), Instant::now().as_ticks());
+            model.add(frame.len(), now);
+        }
+        if let Some(window) = &window
+            && let Some(id) = device.delivery_start(window, now)
+        {
+            config.transport.set_frame_id(frame.bytes_mut(), id);
         }
         let mut written = io.write_all(&frame).await.is_ok();
         if written && config.flush {
@@ -56,6 +79,30 @@ pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
         // Counted here; if this future is dropped mid-write, `frame` counts itself as a
         // failed write when it drops.
         frame.finish(written);
+    }
+}
+
+/// Waits until `device`'s modem may take one more frame under `window`: a transmit
+/// status arrives, or the oldest outstanding frame times out.
+async fn wait_for_room(device: Device<'_>, window: &DeliveryWindow) {
+    loop {
+        let deadline = match device.delivery_room(window, Instant::now().as_ticks(), None) {
+            Ok(()) => return,
+            Err(deadline) => deadline,
+        };
+        // Registered for the next status on the first poll, ready on the one after.
+        let mut registered = false;
+        let status = poll_fn(|cx| {
+            if registered {
+                return Poll::Ready(());
+            }
+            registered = true;
+            match device.delivery_room(window, Instant::now().as_ticks(), Some(cx)) {
+                Ok(()) => Poll::Ready(()),
+                Err(_) => Poll::Pending,
+            }
+        });
+        select(Timer::at(Instant::from_ticks(deadline)), status).await;
     }
 }
 
