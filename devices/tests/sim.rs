@@ -1,39 +1,15 @@
 //! The simulated radio link under embassy-time's mock clock: byte rate, latency,
 //! buffer overflow, receiver overrun, bit errors, determinism.
 
-use std::future::Future;
-use std::pin::pin;
-use std::sync::{Mutex, MutexGuard};
-use std::task::{Context, Poll, Waker};
+mod common;
 
+use common::{mock_time, run};
 use embassy_futures::join::join;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
-use embassy_time::{Duration, Instant, MockDriver};
+use embassy_time::{Duration, Instant};
 use embedded_io_async::{Read, Write};
 use pprz_devices::sim::{Direction, Overflow, SimConfig, SimLink, SimStats};
 use pprz_transports::{MsgHeader, PprzV2, PprzV2Decoder, TxMeta, write_frame};
-
-/// The mock clock is global to this test binary: tests take this lock.
-static MOCK_TIME: Mutex<()> = Mutex::new(());
-
-fn mock_time() -> MutexGuard<'static, ()> {
-    let guard = MOCK_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    MockDriver::get().reset();
-    guard
-}
-
-/// Polls `fut` to completion, advancing mock time by `step` whenever it is pending.
-fn run<F: Future>(fut: F, step: Duration, max_steps: u64) -> F::Output {
-    let mut fut = pin!(fut);
-    let mut cx = Context::from_waker(Waker::noop());
-    for _ in 0..max_steps {
-        if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
-            return v;
-        }
-        MockDriver::get().advance(step);
-    }
-    panic!("simulation did not finish in {max_steps} steps");
-}
 
 fn ms(t: Instant) -> f64 {
     t.as_micros() as f64 / 1000.0

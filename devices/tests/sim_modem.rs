@@ -2,12 +2,9 @@
 //! air rate, modem overfill (drop or CTS), UART and air busy time, and the XBee API
 //! modem (RX frames, transmit statuses, retries, malformed frames).
 
-use std::future::Future;
-use std::pin::pin;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
-use std::task::{Context, Poll, Wake, Waker};
+mod common;
 
+use common::{mock_time, run};
 use embassy_futures::join::join;
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
@@ -17,46 +14,6 @@ use pprz_devices::sim::{
     Direction, Overflow, SimConfig, SimLink, SimStats, XBeeModem, XBeeVariant, xbee,
 };
 use pprz_transports::{MsgHeader, TxMeta, XBee24, XBee24Decoder, write_frame};
-
-/// The mock clock is global to this test binary: tests take this lock.
-static MOCK_TIME: Mutex<()> = Mutex::new(());
-
-fn mock_time() -> MutexGuard<'static, ()> {
-    let guard = MOCK_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    MockDriver::get().reset();
-    guard
-}
-
-/// Wakes by setting a flag.
-struct Flag(AtomicBool);
-
-impl Wake for Flag {
-    fn wake(self: Arc<Self>) {
-        self.0.store(true, Ordering::SeqCst);
-    }
-}
-
-/// Polls `fut` to completion like an executor: again at once while it was woken,
-/// otherwise after advancing mock time by `step`.
-fn run<F: Future>(fut: F, step: Duration, max_steps: u64) -> F::Output {
-    let flag = Arc::new(Flag(AtomicBool::new(false)));
-    let waker = Waker::from(flag.clone());
-    let mut cx = Context::from_waker(&waker);
-    let mut fut = pin!(fut);
-    for _ in 0..max_steps {
-        loop {
-            flag.0.store(false, Ordering::SeqCst);
-            if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
-                return v;
-            }
-            if !flag.0.load(Ordering::SeqCst) {
-                break;
-            }
-        }
-        MockDriver::get().advance(step);
-    }
-    panic!("simulation did not finish in {max_steps} steps");
-}
 
 const US: Duration = Duration::from_micros(1);
 const STEP: Duration = Duration::from_micros(100);
@@ -324,6 +281,14 @@ fn tx16(frame_id: u8, dest: u16, options: u8, rf: &[u8]) -> Vec<u8> {
     frame(&fd)
 }
 
+/// `count` TX16 requests to the ground, frame ids 1 to `count`, request `i` carrying
+/// `rf_len` bytes `i`.
+fn tx16_run(count: u8, rf_len: usize) -> Vec<u8> {
+    (0..count)
+        .flat_map(|i| tx16(i + 1, 0x0100, 0, &vec![i; rf_len]))
+        .collect()
+}
+
 /// An 868 transmit request.
 fn tx868(frame_id: u8, dest: u64, options: u8, rf: &[u8]) -> Vec<u8> {
     let mut fd = vec![xbee::API_TX_868, frame_id];
@@ -374,27 +339,57 @@ fn xbee_config(modem: XBeeModem) -> SimConfig {
         .xbee(modem)
 }
 
+/// What the endpoints of an XBee link read during [`exchange`].
+struct Exchange {
+    /// When A's write completed.
+    done: Instant,
+    /// What the ground (B) read.
+    down: Vec<(u8, Instant)>,
+    /// What the aircraft (A) read.
+    up: Vec<(u8, Instant)>,
+}
+
+/// Writes `downlink` on A (the aircraft) and `uplink` on B (the ground) while both
+/// read until `until_us`, polling every [`STEP`] at most `max_steps` times.
+fn exchange<const N: usize>(
+    link: &SimLink<NoopRawMutex, N>,
+    downlink: &[u8],
+    uplink: &[u8],
+    until_us: u64,
+    max_steps: u64,
+) -> Exchange {
+    let (air, ground) = link.endpoints();
+    let (mut air_rx, mut air_tx) = air.split();
+    let (mut ground_rx, mut ground_tx) = ground.split();
+    let ((done, ()), (down, up)) = run(
+        join(
+            join(write_at(&mut air_tx, downlink), async {
+                ground_tx.write_all(uplink).await.unwrap();
+            }),
+            join(
+                read_until(&mut ground_rx, at_us(until_us)),
+                read_until(&mut air_rx, at_us(until_us)),
+            ),
+        ),
+        STEP,
+        max_steps,
+    );
+    Exchange { done, down, up }
+}
+
+/// The `FRAME_DATA` of the API frames in `got` (see [`api_frames`]).
+fn frame_data(got: &[(u8, Instant)]) -> Vec<Vec<u8>> {
+    api_frames(got).into_iter().map(|(fd, _)| fd).collect()
+}
+
 #[test]
 fn xbee24_rf_data_arrives_as_rx16_frames_and_statuses_come_back() {
     let _t = mock_time();
     let link = SimLink::<NoopRawMutex, 1024>::new(xbee_config(xbee24()));
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, _ground_tx) = ground.split();
     let rf: Vec<u8> = (100..120).collect();
     let request = tx16(5, 0x0100, 0, &rf);
     assert_eq!(request.len(), 29);
-    let (done, (down, up)) = run(
-        join(
-            write_at(&mut air_tx, &request),
-            join(
-                read_until(&mut ground_rx, at_us(30_000)),
-                read_until(&mut air_rx, at_us(30_000)),
-            ),
-        ),
-        STEP,
-        1000,
-    );
+    let Exchange { done, down, up } = exchange(&link, &request, &[], 30_000, 1000);
     // 29 bytes on the UART: 5.8 ms. Then 30 bytes on the air (20 + 10 overhead): 3 ms.
     assert_eq!(done, at_us(5_800));
     let down = api_frames(&down);
@@ -471,22 +466,9 @@ fn xbee24_frames_of_the_pprz_encoder_decode_at_the_ground() {
 fn xbee_frame_id_zero_gets_no_status() {
     let _t = mock_time();
     let link = SimLink::<NoopRawMutex, 1024>::new(xbee_config(xbee24()));
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, _ground_tx) = ground.split();
     let mut data = tx16(0, 0x0100, 0, b"silent");
     data.extend(tx16(9, 0x0100, 0, b"loud"));
-    let (_, (down, up)) = run(
-        join(
-            air_tx.write_all(&data),
-            join(
-                read_until(&mut ground_rx, at_us(50_000)),
-                read_until(&mut air_rx, at_us(50_000)),
-            ),
-        ),
-        STEP,
-        1000,
-    );
+    let Exchange { down, up, .. } = exchange(&link, &data, &[], 50_000, 1000);
     assert_eq!(api_frames(&down).len(), 2);
     let up = api_frames(&up);
     assert_eq!(up.len(), 1);
@@ -584,29 +566,15 @@ fn xbee_lost_frames_do_not_arrive() {
     let _t = mock_time();
     let modem = xbee24().failure_rate(1.0).retries(1);
     let link = SimLink::<NoopRawMutex, 1024>::new(xbee_config(modem));
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, _ground_tx) = ground.split();
     let mut data = tx16(1, 0x0100, 0, &[1; 10]);
     // A broadcast is sent once, lost too, and reported delivered.
     data.extend(tx16(2, xbee::BROADCAST_16, 0, &[2; 10]));
     // So is a frame with the ACK disabled.
     data.extend(tx16(3, 0x0100, xbee::OPTION_DISABLE_ACK, &[3; 10]));
-    let (_, (down, up)) = run(
-        join(
-            air_tx.write_all(&data),
-            join(
-                read_until(&mut ground_rx, at_us(100_000)),
-                read_until(&mut air_rx, at_us(100_000)),
-            ),
-        ),
-        STEP,
-        2000,
-    );
+    let Exchange { down, up, .. } = exchange(&link, &data, &[], 100_000, 2000);
     assert!(down.is_empty());
-    let up: Vec<Vec<u8>> = api_frames(&up).into_iter().map(|(fd, _)| fd).collect();
     assert_eq!(
-        up,
+        frame_data(&up),
         [
             vec![xbee::API_TX_STATUS, 1, xbee::STATUS_NO_ACK],
             vec![xbee::API_TX_STATUS, 2, xbee::STATUS_SUCCESS],
@@ -629,24 +597,8 @@ fn xbee_bit_errors_fail_transmissions_instead_of_corrupting_frames() {
         .bit_error_rate(1e-3)
         .overflow(Overflow::Wait);
     let link = SimLink::<NoopRawMutex, 8192>::new(config);
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, _ground_tx) = ground.split();
-    let mut data = Vec::new();
-    for i in 0..50u8 {
-        data.extend(tx16(i + 1, 0x0100, 0, &[i; 60]));
-    }
-    let (_, (down, _)) = run(
-        join(
-            air_tx.write_all(&data),
-            join(
-                read_until(&mut ground_rx, at_us(2_000_000)),
-                read_until(&mut air_rx, at_us(2_000_000)),
-            ),
-        ),
-        STEP,
-        30_000,
-    );
+    let data = tx16_run(50, 60);
+    let Exchange { down, .. } = exchange(&link, &data, &[], 2_000_000, 30_000);
     let s = link.stats(Direction::AToB);
     assert!(s.bit_errors > 0 && s.failed_attempts > 10, "{s:?}");
     assert_eq!((s.frames_sent, s.frames_dropped, s.frames_lost), (50, 0, 0));
@@ -661,9 +613,6 @@ fn xbee_bit_errors_fail_transmissions_instead_of_corrupting_frames() {
 fn xbee_malformed_frames_are_counted_and_dropped() {
     let _t = mock_time();
     let link = SimLink::<NoopRawMutex, 1024>::new(xbee_config(xbee24()));
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, _ground_tx) = ground.split();
     let mut data = b"noise".to_vec(); // 5 bytes outside frames
     let mut bad_checksum = tx16(1, 0x0100, 0, b"abc"); // 12 bytes
     *bad_checksum.last_mut().unwrap() ^= 0x20;
@@ -672,17 +621,7 @@ fn xbee_malformed_frames_are_counted_and_dropped() {
     data.extend(tx16(3, 0x0100, 0, &[0; 101])); // RF data too long: 110 bytes
     data.extend([xbee::START, 0x02, 0x00]); // length above any frame: 3 bytes
     data.extend(tx16(4, 0x0100, 0, b"good")); // 13 bytes
-    let (_, (down, up)) = run(
-        join(
-            air_tx.write_all(&data),
-            join(
-                read_until(&mut ground_rx, at_us(100_000)),
-                read_until(&mut air_rx, at_us(100_000)),
-            ),
-        ),
-        STEP,
-        2000,
-    );
+    let Exchange { down, up, .. } = exchange(&link, &data, &[], 100_000, 2000);
     let down = api_frames(&down);
     assert_eq!(down.len(), 1);
     assert_eq!(&down[0].0[5..], b"good");
@@ -700,24 +639,8 @@ fn xbee_full_modem_drops_whole_frames() {
     // An instant UART: 10 frames of 29 bytes arrive at once in a 202-byte modem.
     let modem = xbee24().purge_status(true);
     let link = SimLink::<NoopRawMutex, 2048>::new(xbee_config(modem).serial_rate(0));
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, _ground_tx) = ground.split();
-    let mut data = Vec::new();
-    for i in 0..10u8 {
-        data.extend(tx16(i + 1, 0x0100, 0, &[i; 20]));
-    }
-    let (_, (down, up)) = run(
-        join(
-            air_tx.write_all(&data),
-            join(
-                read_until(&mut ground_rx, at_us(100_000)),
-                read_until(&mut air_rx, at_us(100_000)),
-            ),
-        ),
-        STEP,
-        2000,
-    );
+    let data = tx16_run(10, 20);
+    let Exchange { down, up, .. } = exchange(&link, &data, &[], 100_000, 2000);
     // 6 frames (174 bytes) fit, the 7th would make 203.
     let down = api_frames(&down);
     assert_eq!(down.len(), 6);
@@ -756,10 +679,7 @@ fn xbee_wait_mode_holds_the_uart_instead_of_dropping() {
     let (air, ground) = link.endpoints();
     let (mut air_rx, mut air_tx) = air.split();
     let (mut ground_rx, _ground_tx) = ground.split();
-    let mut data = Vec::new();
-    for i in 0..30u8 {
-        data.extend(tx16(i + 1, 0x0100, 0, &[i; 100]));
-    }
+    let data = tx16_run(30, 100);
     let ((done, flushed), (down, up)) = run(
         join(
             async {
@@ -800,10 +720,7 @@ fn xbee_receiver_overrun_loses_the_frame_not_the_status() {
     let link = SimLink::<NoopRawMutex, 64>::new(xbee_config(xbee24()));
     let (air, ground) = link.endpoints();
     let (mut air_rx, mut air_tx) = air.split();
-    let mut data = Vec::new();
-    for i in 0..3u8 {
-        data.extend(tx16(i + 1, 0x0100, 0, &[i; 22]));
-    }
+    let data = tx16_run(3, 22);
     let (_, up) = run(
         join(
             air_tx.write_all(&data),
@@ -812,8 +729,11 @@ fn xbee_receiver_overrun_loses_the_frame_not_the_status() {
         STEP,
         2000,
     );
-    let up: Vec<Vec<u8>> = api_frames(&up).into_iter().map(|(fd, _)| fd).collect();
-    assert_eq!(up.len(), 3, "every frame was sent and acknowledged");
+    assert_eq!(
+        frame_data(&up).len(),
+        3,
+        "every frame was sent and acknowledged"
+    );
     let s = link.stats(Direction::AToB);
     assert_eq!((s.frames_sent, s.frames_overrun), (3, 1));
     assert_eq!((s.bytes_sent, s.overrun_bytes), (62, 31));
@@ -827,23 +747,10 @@ fn xbee868_layouts() {
         .addresses(0x0013_A200_4000_0007, 0x0013_A200_4000_0100)
         .api_uplink(true);
     let link = SimLink::<NoopRawMutex, 1024>::new(xbee_config(modem));
-    let (air, ground) = link.endpoints();
-    let (mut air_rx, mut air_tx) = air.split();
-    let (mut ground_rx, mut ground_tx) = ground.split();
     let mut data = tx868(1, 0x0100, 0, b"unicast");
     data.extend(tx868(2, xbee::BROADCAST_64, 0, b"broadcast"));
     let uplink = tx868(3, 7, 0, b"uplink");
-    let (_, (down, up)) = run(
-        join(
-            join(air_tx.write_all(&data), ground_tx.write_all(&uplink)),
-            join(
-                read_until(&mut ground_rx, at_us(100_000)),
-                read_until(&mut air_rx, at_us(100_000)),
-            ),
-        ),
-        STEP,
-        2000,
-    );
+    let Exchange { down, up, .. } = exchange(&link, &data, &uplink, 100_000, 2000);
     let rx90 = |source: u64, options: u8, rf: &[u8]| {
         let mut fd = vec![xbee::API_RX_868];
         fd.extend_from_slice(&source.to_be_bytes());
@@ -852,8 +759,7 @@ fn xbee868_layouts() {
         fd
     };
     let status = |id: u8| vec![xbee::API_TX_STATUS_868, id, 0xFF, 0xFE, 0, 0, 0];
-    let down: Vec<Vec<u8>> = api_frames(&down).into_iter().map(|(fd, _)| fd).collect();
-    let up: Vec<Vec<u8>> = api_frames(&up).into_iter().map(|(fd, _)| fd).collect();
+    let (down, up) = (frame_data(&down), frame_data(&up));
     let a = 0x0013_A200_4000_0007;
     let b = 0x0013_A200_4000_0100;
     // Ground: its status at 6.4 ms (24 bytes of UART, 0.6 ms of air, 1 ms of ACK
