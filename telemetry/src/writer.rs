@@ -26,7 +26,7 @@
 
 //!
 //! # Transmit statuses
-//! For an XBee device configured with a [`DeliveryWindow`](crate::DeliveryWindow), the
+//! For an XBee device configured with a [`DeliveryWindow`], the
 //! writer gives every frame a fresh frame id and waits, before taking the next frame,
 //! until fewer than `in_modem` frames await their transmit status (or the oldest timed
 //! out); see [`delivery`](crate::delivery).
