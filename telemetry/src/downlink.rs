@@ -408,6 +408,8 @@ impl core::error::Error for PortsTaken {}
 /// executor): the downlink's ports and handles are shared between tasks.
 impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, Q> {
     const VALID: () = assert!(D > 0 && D <= 32, "a downlink has 1..=32 devices");
+    /// The [`Targets`] bits of this downlink's devices.
+    const DEVICE_BITS: u32 = if D >= 32 { u32::MAX } else { (1 << D) - 1 };
 
     /// A downlink for aircraft `ac_id` over `devices`, frames allocated in `arena`.
     /// A `const fn`, so the downlink can be a `static`.
@@ -533,7 +535,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             latest,
         } = route;
         let latest = latest.then_some(MessageKey { class, msg_id });
-        if (0..D).all(|d| !targets.contains(d)) {
+        if targets.bits() & Self::DEVICE_BITS == 0 {
             self.undeliverable.lock(|n| n.set(n.get().wrapping_add(1)));
             return Err(SendError {
                 device: D,
