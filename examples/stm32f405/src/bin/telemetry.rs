@@ -1,7 +1,13 @@
 //! The example aircraft on an STM32F405 autopilot ("Apogee"-class).
 //!
-//! * Telemetry radio on USART1 (PB6 TX, PB7 RX) at 57600 baud, PPRZ v2: downlink writer
-//!   and datalink reader (PING, SETTING, GET_SETTING).
+//! * Telemetry radio on USART2 (PA2 TX, PA3 RX) at 57600 baud, PPRZ v2: downlink writer
+//!   and datalink reader (PING, SETTING, GET_SETTING). With the cargo feature
+//!   `flow-control` (on by default) the UART also uses hardware flow control, PA1 RTS and
+//!   PA0 CTS: the modem's CTS holds our transmitter while its buffer is full, so frames
+//!   wait in the downlink's priority queue instead of overflowing the modem. Built with
+//!   `--no-default-features` (a radio without RTS/CTS wiring), the downlink paces the
+//!   radio instead, with [`SIK_PACING`]. (USART1's only RTS/CTS pins, PA12/PA11, are the
+//!   USB OTG FS data lines, hence USART2.)
 //! * A second output: USB CDC-ACM (OTG FS, PA11/PA12), the same telemetry with the same
 //!   priorities; unplugged, its writes fail fast and are counted.
 //! * The application of `pprz-example-app`: simulated sensors and rotorcraft state,
@@ -11,11 +17,14 @@
 #![no_main]
 
 use embassy_executor::Spawner;
-use embassy_stm32::peripherals::{USART1, USB_OTG_FS};
+use embassy_stm32::gpio::Pull;
+use embassy_stm32::peripherals::{USART2, USB_OTG_FS};
 use embassy_stm32::rcc::{
     AHBPrescaler, APBPrescaler, Pll, PllMul, PllPDiv, PllPreDiv, PllQDiv, PllSource, Sysclk,
 };
-use embassy_stm32::usart::{BufferedInterruptHandler, BufferedUartRx, BufferedUartTx};
+use embassy_stm32::usart::{
+    self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx,
+};
 use embassy_stm32::{bind_interrupts, usb};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_usb::UsbDevice;
@@ -25,13 +34,33 @@ use pprz_devices::stm32::{UartErrorCounters, UartRx, f405};
 use pprz_devices::usb::{CdcTx, UsbConfig, UsbCounters};
 use pprz_example_app::{AC_ID, Config};
 use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
-use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
+use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Pacing, Port, run_writer};
 use static_cell::StaticCell;
 
 bind_interrupts!(struct Irqs {
-    USART1 => BufferedInterruptHandler<USART1>;
+    USART2 => BufferedInterruptHandler<USART2>;
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
 });
+
+/// Whether the radio UART uses hardware flow control (RTS/CTS): cargo feature
+/// `flow-control`, on by default; build with `--no-default-features` for a radio whose
+/// RTS/CTS lines are not wired.
+const FLOW_CONTROL: bool = cfg!(feature = "flow-control");
+
+/// The link budget of a SiK radio without flow control (57600 baud serial, `AIR_SPEED=64`).
+/// Air rate: 64 kbit/s is 8000 B/s on the air, half of it with `ECC=1` (Golay coding
+/// doubles every byte), less about a quarter for the radio's packet framing and its
+/// time-division turns with the ground radio: 3000 B/s. On the low side on purpose: too
+/// low only idles the link a little, too high fills the modem's serial buffer (1 to 2 KiB)
+/// until it drops bytes. Budget: one longest PPRZ v2 frame (255 bytes) plus a margin may
+/// wait in the UART driver and the modem, so an acknowledgement waits at most about two
+/// frame times (170 ms). Measure the radio's real throughput with a saturating test and
+/// adjust.
+const SIK_PACING: Pacing = Pacing::new(3_000, 320);
+
+/// The radio's pacing: none when the modem's CTS line pushes back, [`SIK_PACING`] when
+/// nothing does.
+const RADIO_PACING: Option<Pacing> = if FLOW_CONTROL { None } else { Some(SIK_PACING) };
 
 /// Radio (0) and USB (1), 32 frames each at most.
 type Dl = Downlink<'static, M, 2, 32>;
@@ -43,7 +72,7 @@ static DOWNLINK: Dl = Downlink::new(
     &ARENA,
     AC_ID,
     [
-        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())).pacing(RADIO_PACING),
         DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())).depth(16),
     ],
 );
@@ -81,6 +110,16 @@ async fn aircraft(radio: Device<'static>, rx: UartRx<'static, BufferedUartRx<'st
     panic!("the aircraft application cannot start: {e}");
 }
 
+/// The radio UART's settings: 57600 baud 8N1. CTS has a pull-down, so with flow control
+/// an unconnected (or broken) CTS line reads "clear to send": the radio then still works,
+/// only without back-pressure, instead of falling silent.
+fn radio_config() -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = 57_600;
+    config.cts_pull = Pull::Down;
+    config
+}
+
 /// 168 MHz from the 16 MHz HSI, 48 MHz for USB.
 fn clocks() -> embassy_stm32::Config {
     let mut config = embassy_stm32::Config::default();
@@ -104,9 +143,24 @@ fn clocks() -> embassy_stm32::Config {
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clocks());
 
-    // Radio: USART1, interrupt driven, 256-byte buffers (44 ms of 57600 baud each way).
+    // Radio: USART2, interrupt driven, 256-byte buffers (44 ms of 57600 baud each way);
+    // with RTS (PA1) and CTS (PA0) under the `flow-control` feature.
     let (tx_buf, rx_buf) = UART_BUFFERS.init(([0; 256], [0; 256]));
-    let uart = match f405::usart1_buffered(p.USART1, p.PB7, p.PB6, Irqs, tx_buf, rx_buf, 57_600) {
+    #[cfg(feature = "flow-control")]
+    let uart = BufferedUart::new_with_rtscts(
+        p.USART2,
+        p.PA3,
+        p.PA2,
+        p.PA1,
+        p.PA0,
+        Irqs,
+        tx_buf,
+        rx_buf,
+        radio_config(),
+    );
+    #[cfg(not(feature = "flow-control"))]
+    let uart = BufferedUart::new(p.USART2, p.PA3, p.PA2, tx_buf, rx_buf, Irqs, radio_config());
+    let uart = match uart {
         Ok(uart) => uart,
         Err(e) => panic!("radio UART: {e:?}"),
     };

@@ -2,7 +2,11 @@
 //! tree, other UARTs), to show that nothing in the stack is F4-specific.
 //!
 //! * Telemetry radio on USART2 (PD5 TX, PD6 RX) at 57600 baud, PPRZ v2: downlink writer
-//!   and datalink reader.
+//!   and datalink reader. With the cargo feature `flow-control` (on by default) the UART
+//!   also uses hardware flow control, PD4 RTS and PD3 CTS: the modem's CTS holds our
+//!   transmitter while its buffer is full, so frames wait in the downlink's priority
+//!   queue instead of overflowing the modem. Built with `--no-default-features` (a radio
+//!   without RTS/CTS wiring), the downlink paces the radio instead, with [`SIK_PACING`].
 //! * An on-board serial logger (an OpenLog-style recorder) on USART3 (PD8 TX, PD9 RX) at
 //!   921600 baud with the PPRZLOG transport: the same messages, time-stamped, in the
 //!   format Paparazzi's log tools read. Transport and device are run-time choices per
@@ -13,6 +17,7 @@
 
 use embassy_executor::Spawner;
 use embassy_stm32::bind_interrupts;
+use embassy_stm32::gpio::Pull;
 use embassy_stm32::peripherals::{USART2, USART3};
 use embassy_stm32::usart::{
     self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx,
@@ -23,13 +28,32 @@ use panic_halt as _;
 use pprz_devices::stm32::{UartErrorCounters, UartRx};
 use pprz_example_app::{AC_ID, Config};
 use pprz_telemetry::pprz_transports::{AnyTransport, PprzLog, PprzV2};
-use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
+use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Pacing, Port, run_writer};
 use static_cell::StaticCell;
 
 bind_interrupts!(struct Irqs {
     USART2 => BufferedInterruptHandler<USART2>;
     USART3 => BufferedInterruptHandler<USART3>;
 });
+
+/// Whether the radio UART uses hardware flow control (RTS/CTS): cargo feature
+/// `flow-control`, on by default; build with `--no-default-features` for a radio whose
+/// RTS/CTS lines are not wired.
+const FLOW_CONTROL: bool = cfg!(feature = "flow-control");
+
+/// The link budget of a SiK radio without flow control (57600 baud serial, `AIR_SPEED=64`),
+/// the same figures as the STM32F405 board's (see its `SIK_PACING`). Air rate: 64 kbit/s
+/// is 8000 B/s on the air, half of it with `ECC=1` (Golay coding doubles every byte), less
+/// about a quarter for the radio's packet framing and its time-division turns with the
+/// ground radio: 3000 B/s, on the low side on purpose (too high fills the modem's serial
+/// buffer until it drops bytes). Budget: one longest PPRZ v2 frame (255 bytes) plus a
+/// margin, so an acknowledgement waits at most about two frame times (170 ms). Measure the
+/// radio's real throughput with a saturating test and adjust.
+const SIK_PACING: Pacing = Pacing::new(3_000, 320);
+
+/// The radio's pacing: none when the modem's CTS line pushes back, [`SIK_PACING`] when
+/// nothing does.
+const RADIO_PACING: Option<Pacing> = if FLOW_CONTROL { None } else { Some(SIK_PACING) };
 
 /// Radio (0) and log (1).
 type Dl = Downlink<'static, M, 2, 32>;
@@ -39,7 +63,7 @@ static DOWNLINK: Dl = Downlink::new(
     &ARENA,
     AC_ID,
     [
-        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
+        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())).pacing(RADIO_PACING),
         DeviceConfig::new(AnyTransport::PprzLog(PprzLog::TELEMETRY)),
     ],
 )
@@ -63,9 +87,13 @@ fn log_clock() -> u32 {
     (Instant::now().as_micros() / 100) as u32
 }
 
+/// 8N1 at `baudrate`. CTS (used by the radio with flow control) has a pull-down, so an
+/// unconnected or broken CTS line reads "clear to send": the radio then still works, only
+/// without back-pressure, instead of falling silent.
 fn uart_config(baudrate: u32) -> usart::Config {
     let mut config = usart::Config::default();
     config.baudrate = baudrate;
+    config.cts_pull = Pull::Down;
     config
 }
 
@@ -74,7 +102,21 @@ async fn main(spawner: Spawner) {
     // Default clocks (64 MHz HSI) are plenty for the UARTs.
     let p = embassy_stm32::init(embassy_stm32::Config::default());
     let [radio_tx_buf, radio_rx_buf, log_tx_buf, log_rx_buf] = BUFFERS.init([[0; 256]; 4]);
-    let radio = match BufferedUart::new(
+    // Radio: with RTS (PD4) and CTS (PD3) under the `flow-control` feature.
+    #[cfg(feature = "flow-control")]
+    let radio = BufferedUart::new_with_rtscts(
+        p.USART2,
+        p.PD6,
+        p.PD5,
+        p.PD4,
+        p.PD3,
+        Irqs,
+        radio_tx_buf,
+        radio_rx_buf,
+        uart_config(57_600),
+    );
+    #[cfg(not(feature = "flow-control"))]
+    let radio = BufferedUart::new(
         p.USART2,
         p.PD6,
         p.PD5,
@@ -82,7 +124,8 @@ async fn main(spawner: Spawner) {
         radio_rx_buf,
         Irqs,
         uart_config(57_600),
-    ) {
+    );
+    let radio = match radio {
         Ok(uart) => uart,
         Err(e) => panic!("radio UART: {e:?}"),
     };
