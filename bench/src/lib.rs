@@ -26,5 +26,7 @@
 pub mod arena;
 pub mod downlink;
 pub mod overload;
+pub mod radio;
 pub use pprz_test_support::rng;
+pub mod sim;
 pub mod stream;

@@ -33,27 +33,23 @@
 //!   the ring is free again once it is on the wire, as with an interrupt-driven UART.
 
 use std::cell::{Cell, RefCell};
-use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap, VecDeque};
+use std::collections::{HashMap, VecDeque};
 use std::convert::Infallible;
 use std::fmt::Write as _;
-use std::future::{Future, poll_fn};
-use std::pin::pin;
-use std::task::{Context, Poll, Waker};
+use std::future::poll_fn;
+use std::task::Poll;
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_time::{Duration, Instant, MockDriver, Timer};
-use pprz_default::messages::telemetry::{
-    Alive, Attitude, AutopilotVersion, DatalinkReport, DlValue, Energy, GpsInt, Ins, Payload,
-    RotorcraftFp, RotorcraftStatus,
-};
-use pprz_messages::{Chars, Message, VarArray, priority};
+use embassy_time::MockDriver;
+use pprz_messages::Message;
 use pprz_telemetry::stats::DeviceStats;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 use pprz_transports::PprzV2;
 
 use crate::rng::Rng;
+use crate::sim::{Agenda, MOCK_TIME, Submit, Traffic, now_us};
+pub use crate::sim::{Level, STATUS};
 use crate::stream::{AC_ID, encode_frame};
 
 /// Link speed in baud (8N1: 10 bits per byte).
@@ -86,62 +82,6 @@ pub const fn wire_time_us(bytes: usize) -> u64 {
 
 /// The acknowledgement latency target: two maximum-size (255-byte) frame times, in µs.
 pub const ACK_TARGET_US: u64 = 2 * wire_time_us(255);
-
-/// The status messages of the `default` mode of `telemetry.xml` (priority 128): name,
-/// period and phase in ms. Phases are staggered 100 ms apart (0, 100, 200, ... modulo the
-/// period) as the generator does when none is given; ENERGY's phase is the configured
-/// 0.5 s.
-pub const STATUS: [(&str, u64, u64); 9] = [
-    ("ALIVE", 2100, 0),
-    ("ROTORCRAFT_STATUS", 1200, 100),
-    ("ROTORCRAFT_FP", 250, 200),
-    ("ATTITUDE", 250, 50),
-    ("GPS_INT", 250, 150),
-    ("INS", 250, 0),
-    ("ENERGY", 2500, 500),
-    ("DATALINK_REPORT", 5100, 700),
-    ("AUTOPILOT_VERSION", 11_100, 800),
-];
-
-/// The three fundamental priority levels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Level {
-    /// Acknowledgements (priority 192 and above).
-    High,
-    /// Flight status telemetry (128..192).
-    Normal,
-    /// Payload and debug (below 128).
-    Low,
-}
-
-impl Level {
-    /// Every level, most important first.
-    pub const ALL: [Level; 3] = [Level::High, Level::Normal, Level::Low];
-
-    /// The level of a priority.
-    pub const fn of(priority: u8) -> Level {
-        if priority >= priority::HIGH {
-            Level::High
-        } else if priority >= priority::NORMAL {
-            Level::Normal
-        } else {
-            Level::Low
-        }
-    }
-
-    const fn index(self) -> usize {
-        self as usize
-    }
-
-    /// A short label.
-    pub const fn label(self) -> &'static str {
-        match self {
-            Level::High => "high (acks)",
-            Level::Normal => "normal (status)",
-            Level::Low => "low (payload)",
-        }
-    }
-}
 
 /// Figures of one priority level in one system.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -207,47 +147,6 @@ pub struct OverloadReport {
     pub offered_payload_bytes_per_s: u64,
     /// The stack first, then the FIFOs.
     pub systems: Vec<SystemReport>,
-}
-
-// ---------------------------------------------------------------------------------------
-// Event-driven mock time.
-
-/// The mock clock is global: simulations take this lock.
-static MOCK_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn now_us() -> u64 {
-    Instant::now().as_micros()
-}
-
-/// The deadlines the simulated tasks wait for.
-#[derive(Default)]
-struct Agenda(RefCell<BinaryHeap<Reverse<u64>>>);
-
-impl Agenda {
-    async fn sleep_until(&self, t_us: u64) {
-        self.0.borrow_mut().push(Reverse(t_us));
-        Timer::at(Instant::from_micros(t_us)).await;
-    }
-
-    /// Polls `fut` to completion, jumping the mock clock from deadline to deadline.
-    fn run<F: Future>(&self, fut: F) -> F::Output {
-        let mut fut = pin!(fut);
-        let mut cx = Context::from_waker(Waker::noop());
-        loop {
-            if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
-                return v;
-            }
-            let now = now_us();
-            let next = loop {
-                match self.0.borrow_mut().pop() {
-                    Some(Reverse(t)) if t <= now => {}
-                    Some(Reverse(t)) => break t,
-                    None => panic!("simulation stalled at {now} µs: nothing to wait for"),
-                }
-            };
-            MockDriver::get().advance(Duration::from_micros(next - now));
-        }
-    }
 }
 
 /// One frame on the wire.
@@ -394,12 +293,12 @@ struct Producer<'p, P: TxPath> {
     path: &'p P,
     submitted: Submitted,
     counts: [u32; 3],
-    tag: u32,
     frame: Vec<u8>,
 }
 
-impl<P: TxPath> Producer<'_, P> {
-    fn submit<M: Message>(&mut self, msg: &M) {
+impl<P: TxPath> Submit for Producer<'_, P> {
+    /// The FIFO and workload 4's stack have no latest-value-wins: `state` is not used.
+    fn submit<M: Message>(&mut self, _state: bool, msg: &M) {
         self.frame.resize(255, 0);
         let len = encode_frame(&PprzV2::new(), msg, &mut self.frame).expect("frames fit");
         self.frame.truncate(len);
@@ -409,83 +308,6 @@ impl<P: TxPath> Producer<'_, P> {
         self.counts[level.index()] += 1;
         // Whether it was dropped at once or later is told by the wire log.
         let _ = self.path.submit(msg, &self.frame);
-    }
-
-    fn next_tag(&mut self) -> u32 {
-        self.tag += 1;
-        self.tag
-    }
-
-    fn status(&mut self, which: usize) {
-        let tag = self.next_tag();
-        let t = tag as f32;
-        match which {
-            0 => {
-                let mut md5 = [0u8; 16];
-                md5[..4].copy_from_slice(&tag.to_le_bytes());
-                self.submit(&Alive {
-                    md5sum: VarArray::new(&md5),
-                });
-            }
-            1 => self.submit(&RotorcraftStatus {
-                link_imu_nb_err: tag,
-                frame_rate: 100,
-                vsupply: 16.4,
-                ..Default::default()
-            }),
-            2 => self.submit(&RotorcraftFp {
-                east: tag as i32,
-                up: 2560,
-                flight_time: (tag / 16) as u16,
-                ..Default::default()
-            }),
-            3 => self.submit(&Attitude {
-                phi: t,
-                psi: 0.5,
-                theta: -0.1,
-            }),
-            4 => self.submit(&GpsInt {
-                tow: tag,
-                numsv: 12,
-                fix: 3,
-                ..Default::default()
-            }),
-            5 => self.submit(&Ins {
-                ins_x: tag as i32,
-                ..Default::default()
-            }),
-            6 => self.submit(&Energy {
-                voltage: 16.2,
-                charge: t,
-                ..Default::default()
-            }),
-            7 => self.submit(&DatalinkReport {
-                uplink_nb_msgs: tag as u16,
-                downlink_nb_msgs: (tag >> 16) as u16,
-                ..Default::default()
-            }),
-            _ => self.submit(&AutopilotVersion {
-                version: tag,
-                desc: Chars::from_str("pprz-embassy 0.1.0"),
-            }),
-        }
-    }
-
-    fn ack(&mut self) {
-        let tag = self.next_tag();
-        self.submit(&DlValue {
-            index: tag as u8,
-            value: tag as f32,
-        });
-    }
-
-    fn payload(&mut self, values: usize) {
-        let tag = self.next_tag();
-        let mut bytes = [0x5Au8; PAYLOAD_VALUES.1];
-        bytes[..4].copy_from_slice(&tag.to_le_bytes());
-        self.submit(&Payload {
-            values: VarArray::new(&bytes[..values]),
-        });
     }
 }
 
@@ -504,10 +326,10 @@ fn simulate<P: TxPath>(name: String, path: &P) -> (SystemReport, u64) {
         path,
         submitted: HashMap::new(),
         counts: [0; 3],
-        tag: 0,
         frame: Vec::new(),
     };
     let mut offered_payload = 0u64;
+    let mut traffic_tags = Traffic::default();
     let traffic = async {
         let mut rng = Rng::new(SEED);
         // Payload credit in tenths of a byte: OVERLOAD x capacity per ms.
@@ -515,11 +337,11 @@ fn simulate<P: TxPath>(name: String, path: &P) -> (SystemReport, u64) {
         let mut credit = 0u64;
         let mut next_values = rng.range(PAYLOAD_VALUES.0, PAYLOAD_VALUES.1);
         for ms in 0..SECONDS * 1000 {
-            producer.producer_tick(ms);
+            traffic_tags.tick(ms, ACK_PERIOD_MS, &mut producer);
             credit += per_ms;
             // A payload frame is 9 bytes longer than its values.
             while credit >= (next_values as u64 + 9) * 10 {
-                producer.payload(next_values);
+                traffic_tags.payload(next_values, &mut producer);
                 credit -= (next_values as u64 + 9) * 10;
                 offered_payload += next_values as u64 + 9;
                 next_values = rng.range(PAYLOAD_VALUES.0, PAYLOAD_VALUES.1);
@@ -540,20 +362,6 @@ fn simulate<P: TxPath>(name: String, path: &P) -> (SystemReport, u64) {
         report(name, counts, submitted, &uart.log),
         offered_payload / SECONDS,
     )
-}
-
-impl<P: TxPath> Producer<'_, P> {
-    /// The status messages and acknowledgement due at `ms`.
-    fn producer_tick(&mut self, ms: u64) {
-        if ms % ACK_PERIOD_MS == ACK_PERIOD_MS / 2 {
-            self.ack();
-        }
-        for (which, &(_, period, phase)) in STATUS.iter().enumerate() {
-            if ms % period == phase {
-                self.status(which);
-            }
-        }
-    }
 }
 
 /// Traces the wire log back to the submissions.
@@ -719,13 +527,6 @@ mod tests {
         assert_eq!(wire_time_us(5760), 1_000_000);
         // Two 255-byte frames: 88.5 ms.
         assert_eq!(ACK_TARGET_US, 88_542);
-    }
-
-    #[test]
-    fn levels_follow_the_fundamental_priorities() {
-        assert_eq!(Level::of(DlValue::PRIORITY), Level::High);
-        assert_eq!(Level::of(Attitude::PRIORITY), Level::Normal);
-        assert_eq!(Level::of(Payload::PRIORITY), Level::Low);
     }
 
     #[test]

@@ -13,15 +13,15 @@
 //!
 //! Modes: `encode`, `parse` (`Decoder::feed_borrowed`), `parse-buffered` (`Decoder::feed`),
 //! `downlink`, `arena-10`, `arena-50`, `arena-90`, `arena` (the
-//! three fill levels and the fill at the first failure), `overload`, `all` (default).
+//! three fill levels and the fill at the first failure), `overload`, `radio`, `all` (default).
 
 use std::hint::black_box;
 use std::process::ExitCode;
 
 use pprz_bench::arena::{self, ChurnSummary, CostArena, FillState};
 use pprz_bench::downlink::{self, Sink};
-use pprz_bench::overload;
 use pprz_bench::stream::{self, MESSAGES, ParseSummary};
+use pprz_bench::{overload, radio};
 use pprz_telemetry::stats::DeviceStats;
 
 /// Workload 1, measured: encode [`MESSAGES`] messages into `out`.
@@ -183,7 +183,14 @@ fn run_overload() {
     print!("{}", overload::render(&report));
 }
 
-const USAGE: &str = "usage: workloads [--mode encode|parse|parse-buffered|downlink|arena-10|arena-50|arena-90|arena|overload|all]";
+/// Workload 7: radios without back-pressure (figures from the simulation).
+fn run_radio() {
+    for report in radio::run_radio() {
+        println!("{}", radio::render(&report));
+    }
+}
+
+const USAGE: &str = "usage: workloads [--mode encode|parse|parse-buffered|downlink|arena-10|arena-50|arena-90|arena|overload|radio|all]";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -214,6 +221,7 @@ fn main() -> ExitCode {
             run_arena_fill();
         }
         "overload" => run_overload(),
+        "radio" => run_radio(),
         "all" => {
             run_encode();
             run_parse();
@@ -224,6 +232,7 @@ fn main() -> ExitCode {
             }
             run_arena_fill();
             run_overload();
+            run_radio();
         }
         other => {
             eprintln!("unknown mode {other:?}\n{USAGE}");
