@@ -460,6 +460,14 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         self.queues.get(index).map(FrameQueue::stats)
     }
 
+    /// What the transmit statuses of device `index` said (all zero for a device without
+    /// a [`DeliveryWindow`]); `None` if there is no such device.
+    pub fn delivery_stats(&self, index: usize) -> Option<DeliveryStats> {
+        self.outstanding
+            .get(index)
+            .map(|o| o.lock(|o| o.borrow().stats))
+    }
+
     /// Statistics of the shared arena.
     pub fn arena_stats(&self) -> ArenaStats {
         self.arena.arena_stats()

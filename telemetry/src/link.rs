@@ -61,6 +61,7 @@ use pprz_messages::roles::ServiceSet;
 use pprz_transports::{AnyTransport, PprzV2};
 
 use crate::arena::ArenaStats;
+use crate::delivery::DeliveryStats;
 use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, Port, PortsTaken, SendError, Sender};
 use crate::reader::{Datalink, Inbox, Reader, UplinkStats};
 use crate::registry::{Filter, Received, RegistryFull, Subscriber};
@@ -104,6 +105,9 @@ pub struct LinkStats {
     pub services: ServiceStats,
     /// The frame arena.
     pub arena: ArenaStats,
+    /// The radio's transmit statuses (XBee API with a [`DeliveryWindow`](crate::DeliveryWindow);
+    /// all zero otherwise).
+    pub delivery: DeliveryStats,
 }
 
 impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
@@ -200,6 +204,7 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
             uplink: self.datalink.stats(),
             services: self.services.stats(),
             arena: self.downlink.arena_stats(),
+            delivery: self.downlink.delivery_stats(0).unwrap_or_default(),
         }
     }
 }

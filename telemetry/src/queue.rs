@@ -372,3 +372,122 @@ impl<M: RawMutex, const Q: usize> Default for FrameQueue<'_, M, Q> {
         Self::new()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! Superseding in place versus re-queueing, measured on the real queue: a 4800-baud
+    //! link (480 B/s) carrying a rotorcraft's status telemetry (about 680 B/s, the
+    //! `default` mode of Paparazzi's telemetry.xml), every message sent latest-value-wins.
+    //! Re-queueing is emulated here (the older instance leaves, the newer goes to the back
+    //! of its priority); the queue itself only supersedes in place.
+
+    use super::*;
+    use crate::arena::FrameArena;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as NoopRawMutex;
+
+    /// Status types: period (ms), phase (ms), frame bytes.
+    const STATUS: [(u64, u64, usize); 9] = [
+        (2100, 0, 26),     // ALIVE
+        (1200, 100, 29),   // ROTORCRAFT_STATUS
+        (250, 200, 40),    // ROTORCRAFT_FP
+        (250, 50, 18),     // ATTITUDE
+        (250, 150, 56),    // GPS_INT
+        (250, 0, 42),      // INS
+        (2500, 500, 30),   // ENERGY
+        (5100, 700, 31),   // DATALINK_REPORT
+        (11_100, 800, 35), // AUTOPILOT_VERSION
+    ];
+    const LINK_BYTES_PER_S: u64 = 480;
+    const SECONDS: u64 = 60;
+
+    #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+    enum Policy {
+        InPlace,
+        Requeue,
+    }
+
+    /// Per policy: p99 age at delivery (µs) and, per type, the longest gap between two
+    /// deliveries (µs).
+    fn simulate(policy: Policy) -> (u64, [u64; 9]) {
+        let arena: FrameArena<NoopRawMutex, 4096> = FrameArena::new();
+        let queue: FrameQueue<'_, NoopRawMutex, 32> = FrameQueue::new();
+        let mut seq = 0u32;
+        let mut ages = Vec::new();
+        let mut last = [0u64; 9];
+        let mut gaps = [0u64; 9];
+        let mut link_free_us = 0u64;
+        for ms in 0..SECONDS * 1000 {
+            let now_us = ms * 1000;
+            for (i, &(period, phase, len)) in STATUS.iter().enumerate() {
+                if ms % period != phase {
+                    continue;
+                }
+                let Ok(mut frame) = arena.alloc(len) else {
+                    panic!("the arena holds one frame per type");
+                };
+                frame[0] = i as u8;
+                frame[1..9].copy_from_slice(&now_us.to_le_bytes());
+                let key = Some(MessageKey {
+                    class: 1,
+                    msg_id: i as u8,
+                });
+                if policy == Policy::Requeue {
+                    let old = queue.with(|s| {
+                        let at = s.entries.iter().position(|e| e.latest == key)?;
+                        Some(s.entries.remove(at))
+                    });
+                    drop(old);
+                }
+                seq += 1;
+                queue.push(128, seq, key, frame, 32);
+            }
+            // The link takes the most important frame whenever it is free.
+            while link_free_us <= now_us {
+                let Some(frame) = queue.try_receive(None) else {
+                    break;
+                };
+                let start = link_free_us.max(now_us);
+                let end = start + frame.len() as u64 * 1_000_000 / LINK_BYTES_PER_S;
+                let i = usize::from(frame[0]);
+                let mut at = [0u8; 8];
+                at.copy_from_slice(&frame[1..9]);
+                ages.push(end - u64::from_le_bytes(at));
+                gaps[i] = gaps[i].max(end - last[i]);
+                last[i] = end;
+                queue.complete(frame.len(), true);
+                link_free_us = end;
+            }
+        }
+        for (gap, last) in gaps.iter_mut().zip(last) {
+            *gap = (*gap).max(SECONDS * 1_000_000 - last.min(SECONDS * 1_000_000));
+        }
+        ages.sort_unstable();
+        let p99 = ages[(ages.len() * 99).div_ceil(100) - 1];
+        (p99, gaps)
+    }
+
+    /// `cargo test -p pprz-telemetry --lib superseding -- --nocapture` prints the figures
+    /// quoted in docs/design-decisions.md.
+    #[test]
+    fn superseding_in_place_keeps_every_type_flowing_and_re_queueing_does_not() {
+        let (in_place_p99, in_place_gaps) = simulate(Policy::InPlace);
+        let (requeue_p99, requeue_gaps) = simulate(Policy::Requeue);
+        println!("age p99: in place {in_place_p99} µs, re-queue {requeue_p99} µs");
+        println!("longest gap per type (µs), in place: {in_place_gaps:?}");
+        println!("longest gap per type (µs), re-queue: {requeue_gaps:?}");
+        for (i, gap) in in_place_gaps.iter().enumerate() {
+            let bound = (STATUS[i].0 + 1000).max(2000) * 1000;
+            assert!(*gap <= bound, "in place: type {i} waited {gap} µs");
+        }
+        // Re-queueing sends slightly fresher samples, but a type refreshed faster than
+        // the backlog drains keeps going to the back of the line: the 4 Hz types (250 ms)
+        // go more than twice as long without a delivery.
+        let fast = |gaps: &[u64; 9]| (2..6).map(|i| gaps[i]).max().unwrap_or(0);
+        assert!(fast(&in_place_gaps) < 1_000_000, "{in_place_gaps:?}");
+        assert!(
+            fast(&requeue_gaps) > 2 * fast(&in_place_gaps),
+            "{requeue_gaps:?}"
+        );
+        assert!(requeue_p99 < in_place_p99);
+    }
+}

@@ -629,3 +629,62 @@ fn a_static_downlink_hands_out_static_handles() {
     assert_eq!(frame[4], 1);
     frame.finish(true);
 }
+
+/// On an XBee radio with a delivery window, the link's reader hands the module's transmit
+/// statuses to its writer, and `LinkStats::delivery` counts what they said: a status for
+/// the first frame, none for the second (timed out), one for no frame (unexpected).
+#[test]
+fn link_stats_count_the_radios_transmit_statuses() {
+    use pprz_telemetry::DeliveryWindow;
+    use pprz_telemetry::pprz_transports::XBee24;
+    use pprz_telemetry::pprz_transports::xbee::{self, status};
+
+    let _clock = mock_time();
+    static ARENA: FrameArena<LinkMutex, 1024> = FrameArena::new();
+    static LINK: Link<'static, Set> = Link::with_device(
+        &ARENA,
+        AC_ID,
+        DeviceConfig::new(AnyTransport::XBee24(XBee24::new()))
+            .delivery(Some(DeliveryWindow::new(1, 200))),
+    );
+    let attitude = Attitude {
+        phi: 0.1,
+        psi: 0.2,
+        theta: 0.3,
+    };
+    LINK.send(&attitude).unwrap();
+    LINK.send(&attitude).unwrap();
+    let status_frame = |id| {
+        let mut out = [0u8; xbee::TX_STATUS_FRAME_LEN];
+        let n = xbee::encode_tx_status_24(id, status::SUCCESS, &mut out).unwrap();
+        out[..n].to_vec()
+    };
+    let rx = ScriptedRx {
+        chunks: VecDeque::from([
+            (Duration::from_millis(50), status_frame(1)),
+            (Duration::from_millis(50), status_frame(99)),
+        ]),
+    };
+    let log = RefCell::new(Vec::new());
+    let mut tx = SimUart {
+        byte_us: byte_time_us(57_600),
+        log: &log,
+    };
+    let run = select(
+        LINK.run(&mut tx, rx),
+        Timer::after(Duration::from_millis(600)),
+    );
+    match run_with_mock_time(run, Duration::from_micros(50), 20_000) {
+        Either::First(result) => panic!("the link stopped: {result:?}"),
+        Either::Second(()) => {}
+    }
+    let frames = wire(log);
+    assert_eq!(frames.len(), 2);
+    // Fresh frame ids 1 and 2, set by the writer.
+    assert_eq!((frames[0][4], frames[1][4]), (1, 2));
+    let d = LINK.stats().delivery;
+    assert_eq!(
+        (d.delivered, d.failed, d.timeouts, d.unexpected),
+        (1, 0, 1, 1)
+    );
+}
