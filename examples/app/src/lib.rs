@@ -64,19 +64,50 @@ pub struct Config {
     /// Low-priority payload bytes per second to send (0: none). 10x the link's byte rate
     /// saturates it tenfold.
     pub flood_bytes_per_s: u32,
+    /// Called with every message the application submits to the downlink (periodic
+    /// telemetry and payload, not the services' replies), just before it is submitted,
+    /// whether the downlink then accepts it or not (`None`, the default: nothing is
+    /// called and nothing is encoded for it). The simulation records submission times
+    /// with it to measure how old messages are when they reach the ground.
+    pub observer: Option<Observer>,
 }
 
-/// Sends `msg` to every device; a drop is counted by the downlink (per device, reason
-/// and priority level), so the result needs no handling here.
-fn send<Msg: Message>(downlink: Sender<'_>, msg: &Msg) {
-    let _ = downlink.send(msg);
+/// An observer of submissions (see [`Config::observer`]): class id, message id, the
+/// encoded message fields (the payload of a PPRZ frame) and the time of submission.
+pub type Observer = fn(class_id: u8, msg_id: u8, payload: &[u8], now: Instant);
+
+/// Where the application's messages go: the downlink, and the observer if any.
+#[derive(Clone, Copy)]
+struct Out<'d> {
+    downlink: Sender<'d>,
+    observer: Option<Observer>,
 }
 
-/// Sends the state sample `msg` (attitude, position, status: one stream per message) to
-/// every device: a newer sample takes the place of one still waiting, so a saturated
-/// link carries the latest state. Counted as [`send`] is.
-fn send_state<Msg: Message>(downlink: Sender<'_>, msg: &Msg) {
-    let _ = downlink.send_latest(msg);
+impl Out<'_> {
+    /// Sends `msg` to every device; a drop is counted by the downlink (per device,
+    /// reason and priority level), so the result needs no handling here.
+    fn send<Msg: Message>(&self, msg: &Msg) {
+        self.observe(msg);
+        let _ = self.downlink.send(msg);
+    }
+
+    /// Sends the state sample `msg` (attitude, position, status: one stream per message)
+    /// to every device: a newer sample takes the place of one still waiting, so a
+    /// saturated link carries the latest state. Counted as [`send`](Self::send) is.
+    fn send_state<Msg: Message>(&self, msg: &Msg) {
+        self.observe(msg);
+        let _ = self.downlink.send_latest(msg);
+    }
+
+    /// Shows `msg` to the observer, if there is one.
+    fn observe<Msg: Message>(&self, msg: &Msg) {
+        if let Some(observer) = self.observer {
+            let mut fields = [0u8; 256];
+            if let Ok(len) = msg.encode(&mut fields) {
+                observer(Msg::CLASS_ID, Msg::ID, &fields[..len], Instant::now());
+            }
+        }
+    }
 }
 
 /// Runs the aircraft application forever: dynamics at 50 Hz, periodic telemetry to
@@ -91,7 +122,10 @@ pub async fn run_aircraft<R: Read>(
     radio_rx: R,
     config: Config,
 ) -> Result<Infallible, SetupError> {
-    let downlink = radio.sender();
+    let out = Out {
+        downlink: radio.sender(),
+        observer: config.observer,
+    };
     let vehicle: Mutex<M, RefCell<Vehicle>> = Mutex::new(RefCell::new(Vehicle::new()));
     let v = || vehicle.lock(|v| *v.borrow());
     let boot = Instant::now();
@@ -118,27 +152,27 @@ pub async fn run_aircraft<R: Read>(
     services.subscribe(datalink.registry())?;
 
     // Periodic telemetry callbacks.
-    let alive = || send_state(downlink, &telemetry::alive());
-    let version = || send_state(downlink, &telemetry::version());
-    let attitude = || send_state(downlink, &telemetry::attitude(&v()));
+    let alive = || out.send_state(&telemetry::alive());
+    let version = || out.send_state(&telemetry::version());
+    let attitude = || out.send_state(&telemetry::attitude(&v()));
     let gps_int = || {
         let tow = boot.elapsed().as_millis() as u32;
-        send_state(downlink, &telemetry::gps_int(&v(), tow));
+        out.send_state(&telemetry::gps_int(&v(), tow));
     };
-    let fp = || send_state(downlink, &telemetry::rotorcraft_fp(&v()));
-    let ins = || send_state(downlink, &telemetry::ins(&v()));
-    let energy = || send_state(downlink, &telemetry::energy(&v()));
-    let status = || send_state(downlink, &telemetry::status(&v()));
-    let gyro = || send_state(downlink, &telemetry::gyro(&v()));
-    let accel = || send_state(downlink, &telemetry::accel(&v()));
-    let mag = || send_state(downlink, &telemetry::mag());
-    let uart_errors = || send_state(downlink, &UartErrors::default());
+    let fp = || out.send_state(&telemetry::rotorcraft_fp(&v()));
+    let ins = || out.send_state(&telemetry::ins(&v()));
+    let energy = || out.send_state(&telemetry::energy(&v()));
+    let status = || out.send_state(&telemetry::status(&v()));
+    let gyro = || out.send_state(&telemetry::gyro(&v()));
+    let accel = || out.send_state(&telemetry::accel(&v()));
+    let mag = || out.send_state(&telemetry::mag());
+    let uart_errors = || out.send_state(&UartErrors::default());
     let reporter = Mutex::<M, _>::new(RefCell::new(LinkReporter::new()));
     let report = || {
         let up = datalink.stats();
         let down = radio.stats();
         let report = reporter.lock(|r| r.borrow_mut().report(Instant::now(), &up, &down));
-        send_state(downlink, &DatalinkReport::from(report));
+        out.send_state(&DatalinkReport::from(report));
     };
     // Cycle through the settings, as the reference firmware's periodic DL_VALUE does
     // (one message type for several settings: not a single state stream, so `send`).
@@ -147,7 +181,7 @@ pub async fn run_aircraft<R: Read>(
         let count = settings.len().max(1) as u8;
         let index = dl_value_index.lock(|c| c.replace((c.get() + 1) % count));
         if let Some(value) = settings.get(index) {
-            send(downlink, &DlValue { index, value });
+            out.send(&DlValue { index, value });
         }
     };
 
@@ -194,7 +228,7 @@ pub async fn run_aircraft<R: Read>(
                 let payload = Payload {
                     values: VarArray::new(&bytes),
                 };
-                send(downlink, &payload);
+                out.send(&payload);
             }
         }
     };

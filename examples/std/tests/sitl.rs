@@ -44,15 +44,20 @@ fn run_sitl(extra: &[&str]) -> String {
     stdout
 }
 
-/// The summary row of a level: submitted, sent, shed, superseded, received.
+/// The summary row of a level: submitted, sent, shed, superseded, received (the age
+/// columns after them are left out).
 fn level_row(out: &str, level: &str) -> [u64; 5] {
     let line = out
         .lines()
-        .find(|l| l.trim_start().starts_with(level) && l.split_whitespace().count() == 6)
+        .find(|l| {
+            let words: Vec<&str> = l.split_whitespace().collect();
+            words.len() == 8 && words[0] == level && words[1].parse::<u64>().is_ok()
+        })
         .unwrap_or_else(|| panic!("no summary row for {level}:\n{out}"));
     let v: Vec<u64> = line
         .split_whitespace()
         .skip(1)
+        .take(5)
         .map(|x| x.parse().unwrap())
         .collect();
     [v[0], v[1], v[2], v[3], v[4]]

@@ -1,0 +1,212 @@
+//! What the simulation measures on its own clock (embassy-time's mock clock, the
+//! aircraft's time, not wall time): when the application submitted each message, when
+//! each message reached the ground end of the radio, and the PING round trips through
+//! the radio.
+//!
+//! The age of a delivered message is the time from its submission (recorded through the
+//! example application's [`Config::observer`](pprz_example_app::Config::observer)) to
+//! its arrival at the ground end of the radio, where the ground bridge decodes it. A
+//! message received is matched to a submission of the same class, id and identical
+//! payload bytes; when several submissions have identical bytes (a constant message such
+//! as ALIVE, or the payload flood, whose frames are all alike), the latest one before the
+//! arrival is taken, so the age of such a message is a lower bound. Messages the
+//! application did not submit itself (PONG, and DL_VALUE answering a SETTING, sent by the
+//! services) have no submission of their own: PONG is measured by the PING round trip
+//! instead, and a DL_VALUE answer matches the periodic DL_VALUE of the same setting and
+//! value if there was one. Submissions older than [`HORIZON_S`] are forgotten, so a
+//! message waiting longer than that counts as received but not aged.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::{LazyLock, Mutex, MutexGuard};
+
+use embassy_time::Instant;
+use pprz_default::messages::MESSAGES;
+use pprz_default::messages::datalink::Ping;
+use pprz_default::messages::telemetry::Pong;
+use pprz_ground::ping::PingTracker;
+use pprz_messages::Message;
+use pprz_telemetry::pprz_messages::priority;
+
+/// Seconds (simulated) a submission is remembered for matching.
+pub const HORIZON_S: u64 = 120;
+
+/// Most samples kept per distribution; beyond, a uniform sample of them (reservoir), so
+/// a long run keeps bounded memory and unbiased percentiles.
+const MAX_SAMPLES: usize = 1 << 20;
+
+/// A distribution of durations, in microseconds.
+#[derive(Debug, Clone, Default)]
+pub struct Samples {
+    values: Vec<u64>,
+    /// Values offered (kept or not).
+    seen: u64,
+    /// State of the reservoir's random generator (xorshift64).
+    rng: u64,
+}
+
+impl Samples {
+    /// Adds one duration.
+    pub fn push(&mut self, micros: u64) {
+        self.seen += 1;
+        if self.values.len() < MAX_SAMPLES {
+            self.values.push(micros);
+            return;
+        }
+        // Reservoir sampling (algorithm R): keep the new value with probability
+        // MAX_SAMPLES / seen, in place of a random one.
+        if self.rng == 0 {
+            self.rng = 0x9E37_79B9_7F4A_7C15;
+        }
+        self.rng ^= self.rng << 13;
+        self.rng ^= self.rng >> 7;
+        self.rng ^= self.rng << 17;
+        let slot = self.rng % self.seen;
+        if let Some(v) = usize::try_from(slot)
+            .ok()
+            .and_then(|i| self.values.get_mut(i))
+        {
+            *v = micros;
+        }
+    }
+
+    /// Durations offered.
+    pub fn count(&self) -> u64 {
+        self.seen
+    }
+
+    /// The `p`-th percentile (nearest rank, `p` in 0..=100), in milliseconds, or `None`
+    /// without samples.
+    pub fn percentile_ms(&self, p: f64) -> Option<f64> {
+        let mut sorted = self.values.clone();
+        sorted.sort_unstable();
+        let n = sorted.len();
+        if n == 0 {
+            return None;
+        }
+        let rank = ((p / 100.0) * n as f64).ceil() as usize;
+        let v = sorted[rank.clamp(1, n) - 1];
+        Some(v as f64 / 1000.0)
+    }
+}
+
+/// What the ground end of the radio received at one priority level.
+#[derive(Debug, Clone, Default)]
+pub struct LevelRecord {
+    /// Messages decoded at the ground end of the radio.
+    pub received: u64,
+    /// Ages (submission to arrival) of the messages matched to a submission.
+    pub ages: Samples,
+    /// Matches among them to a payload submitted more than once (their age is a lower
+    /// bound).
+    pub ambiguous: u64,
+}
+
+/// What the ground end of the radio received of one message type.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TypeRecord {
+    /// Messages decoded.
+    pub received: u64,
+    /// Last arrival, in microseconds.
+    last_us: u64,
+    /// Longest time between two arrivals, in microseconds (0 before the second).
+    pub max_gap_us: u64,
+}
+
+/// Everything measured; one per process ([`lock`]).
+#[derive(Debug, Default)]
+pub struct Record {
+    /// Latest submission time (µs) of each distinct message (class, id, payload), and
+    /// how many times it was submitted.
+    submissions: HashMap<(u8, u8, Vec<u8>), (u64, u32)>,
+    /// Submissions recorded since the last pruning.
+    since_prune: usize,
+    /// Per level (high, normal, low).
+    pub levels: [LevelRecord; 3],
+    /// Messages received whose class and id the message set does not know.
+    pub unknown: u64,
+    /// Per message type (class, id).
+    pub types: BTreeMap<(u8, u8), TypeRecord>,
+    /// PINGs that went up the radio and the PONGs that came down.
+    pub pings: PingTracker,
+    /// PING round trips through the radio.
+    pub rtt: Samples,
+}
+
+static RECORD: LazyLock<Mutex<Record>> = LazyLock::new(Mutex::default);
+
+/// The record (a panic elsewhere does not make it unreadable).
+pub fn lock() -> MutexGuard<'static, Record> {
+    RECORD
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The observer given to the application: the message `class_id`/`msg_id` with fields
+/// `payload` was submitted at `now`.
+pub fn submitted(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
+    lock().submitted(class_id, msg_id, payload, now.as_micros());
+}
+
+/// A frame from the ground went up the radio at `now`: tracked if it is a PING.
+pub fn uplink(class_id: u8, msg_id: u8, now: Instant) {
+    if (class_id, msg_id) == (Ping::CLASS_ID, Ping::ID) {
+        lock().pings.sent(seconds(now.as_micros()));
+    }
+}
+
+/// A message arrived at the ground end of the radio at `now`.
+pub fn received(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
+    lock().received(class_id, msg_id, payload, now.as_micros());
+}
+
+fn seconds(micros: u64) -> f64 {
+    micros as f64 / 1e6
+}
+
+impl Record {
+    fn submitted(&mut self, class_id: u8, msg_id: u8, payload: &[u8], now_us: u64) {
+        let entry = self
+            .submissions
+            .entry((class_id, msg_id, payload.to_vec()))
+            .or_insert((now_us, 0));
+        *entry = (now_us, entry.1.saturating_add(1));
+        self.since_prune += 1;
+        // Now and then, forget the submissions past the horizon.
+        if self.since_prune >= 4096 && self.submissions.len() >= 65_536 {
+            let oldest = now_us.saturating_sub(HORIZON_S * 1_000_000);
+            self.submissions.retain(|_, (at, _)| *at >= oldest);
+            self.since_prune = 0;
+        }
+    }
+
+    fn received(&mut self, class_id: u8, msg_id: u8, payload: &[u8], now_us: u64) {
+        let Some(desc) = MESSAGES.find(class_id, msg_id) else {
+            self.unknown += 1;
+            return;
+        };
+        let level = &mut self.levels[priority::level(desc.priority)];
+        level.received += 1;
+        let t = self.types.entry((class_id, msg_id)).or_default();
+        if t.received > 0 {
+            t.max_gap_us = t.max_gap_us.max(now_us.saturating_sub(t.last_us));
+        }
+        t.received += 1;
+        t.last_us = now_us;
+        // The key is rebuilt for the lookup: a HashMap of owned keys is not searched by
+        // borrowed tuples.
+        let key = (class_id, msg_id, payload.to_vec());
+        if let Some(&(at, times)) = self.submissions.get(&key)
+            && now_us.saturating_sub(at) <= HORIZON_S * 1_000_000
+        {
+            level.ages.push(now_us.saturating_sub(at));
+            if times > 1 {
+                level.ambiguous += 1;
+            }
+        }
+        if (class_id, msg_id) == (Pong::CLASS_ID, Pong::ID)
+            && let Some(rtt) = self.pings.pong(seconds(now_us))
+        {
+            self.rtt.push((rtt * 1e6).round() as u64);
+        }
+    }
+}

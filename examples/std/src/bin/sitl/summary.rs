@@ -1,0 +1,312 @@
+//! The end summary: what the radio device submitted, sent, shed and superseded per
+//! priority level, what reached the ground and how old, the modem's losses and busy
+//! times, the XBee transmit statuses and the PING round trips. Printed as a table and,
+//! with `--summary-json`, written as JSON (the schema is in the README's SITL section;
+//! the field names below are the JSON's).
+
+use serde::Serialize;
+
+/// Everything the summary shows.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Version of this JSON layout (incremented when a field changes meaning or goes).
+    pub schema: u32,
+    /// The simulated radio and load.
+    pub config: RunConfig,
+    /// Simulated seconds elapsed when the summary was taken.
+    pub simulated_s: f64,
+    /// Per priority level.
+    pub levels: Levels,
+    /// The radio device's totals in the downlink.
+    pub downlink: DownlinkFigures,
+    /// The aircraft's radio modem (aircraft to ground direction).
+    pub modem: ModemFigures,
+    /// XBee transmit statuses (`None`, JSON `null`, for PPRZ v2).
+    pub delivery: Option<DeliveryFigures>,
+    /// PINGs through the radio, timed on the simulation's clock at the ground end.
+    pub ping: PingFigures,
+    /// Per message type received, by class and id.
+    pub messages: Vec<MessageFigures>,
+}
+
+/// The options of the run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunConfig {
+    /// `"pprz2"` or `"xbee"` (XBee 802.15.4 API).
+    pub transport: &'static str,
+    /// UART baud rate (8N1) between the autopilot and its modem.
+    pub baud: u32,
+    /// UART throughput, bytes per second (`baud / 10`).
+    pub serial_rate_bytes_per_s: u32,
+    /// The modem's over-the-air throughput, bytes per second.
+    pub air_rate_bytes_per_s: u32,
+    /// The modem's buffer, bytes.
+    pub modem_buffer_bytes: usize,
+    /// `"cts"` (the modem stops the UART when full) or `"none"` (it drops bytes).
+    pub flow_control: &'static str,
+    /// Whether the radio device paces its writes to the air rate.
+    pub pacing: bool,
+    /// The pacing budget in bytes (`null` without pacing).
+    pub pacing_budget_bytes: Option<u16>,
+    /// XBee: frames awaiting their transmit status at most (`null` for PPRZ v2).
+    pub in_modem: Option<u8>,
+    /// Whether the low-priority payload flood is on.
+    pub overload: bool,
+    /// The flood's rate, bytes per second (0 without `--overload`).
+    pub flood_bytes_per_s: u32,
+    /// Simulated seconds per wall-clock second.
+    pub speed: f64,
+    /// The requested run time, simulated seconds.
+    pub duration_s: f64,
+}
+
+/// The three priority levels.
+#[derive(Debug, Clone, Serialize)]
+pub struct Levels {
+    /// Acknowledgements (PONG, DL_VALUE).
+    pub high: Level,
+    /// Flight status telemetry.
+    pub normal: Level,
+    /// Payload and debug data.
+    pub low: Level,
+}
+
+impl Levels {
+    /// The levels with their names, most important first.
+    pub fn named(&self) -> [(&'static str, &Level); 3] {
+        [
+            ("high", &self.high),
+            ("normal", &self.normal),
+            ("low", &self.low),
+        ]
+    }
+}
+
+/// One priority level.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Level {
+    /// Messages submitted to the radio device.
+    pub submitted: u32,
+    /// Frames written to the modem.
+    pub sent: u32,
+    /// Messages shed: dropped (queue or arena full, rate limit, too large, write error)
+    /// or evicted by more important ones.
+    pub shed: u32,
+    /// State samples replaced, while waiting, by a newer sample.
+    pub superseded: u32,
+    /// Messages decoded at the ground end of the radio.
+    pub received: u64,
+    /// Received messages matched to their submission (those with an age).
+    pub aged: u64,
+    /// Median age at arrival (submission to arrival), milliseconds.
+    pub age_p50_ms: Option<f64>,
+    /// 99th percentile of the age at arrival, milliseconds.
+    pub age_p99_ms: Option<f64>,
+    /// Aged messages whose payload was submitted more than once (constant messages,
+    /// the identical frames of the payload flood): their age is measured from the latest
+    /// such submission, a lower bound.
+    pub ambiguous: u64,
+}
+
+/// One message type received at the ground end of the radio.
+#[derive(Debug, Clone, Serialize)]
+pub struct MessageFigures {
+    /// Class name (`telemetry`).
+    pub class: &'static str,
+    /// Message name (`ATTITUDE`).
+    pub name: &'static str,
+    /// Priority level: `"high"`, `"normal"` or `"low"`.
+    pub level: &'static str,
+    /// Messages decoded.
+    pub received: u64,
+    /// Longest time between two arrivals, milliseconds (`null` before the second).
+    pub max_gap_ms: Option<f64>,
+}
+
+/// The radio device's totals.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct DownlinkFigures {
+    /// Frames written to the modem.
+    pub sent: u32,
+    /// Messages dropped, all reasons.
+    pub dropped: u32,
+    /// Dropped: the queue was full of more important messages.
+    pub queue_full: u32,
+    /// Dropped: the arena was full of more important frames.
+    pub arena_full: u32,
+    /// Dropped: too large for the transport (XBee 802.15.4: 96 field bytes).
+    pub too_large: u32,
+    /// Replies refused by the reply rate limit.
+    pub rate_limited: u32,
+    /// Messages evicted for more important ones.
+    pub evicted: u32,
+    /// State samples superseded.
+    pub superseded: u32,
+    /// Messages still queued.
+    pub queued: u16,
+}
+
+/// The aircraft's radio modem.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct ModemFigures {
+    /// Bytes the modem dropped because its buffer was full (no flow control).
+    pub dropped_bytes: u32,
+    /// XBee: API frames dropped whole because the modem was full.
+    pub frames_dropped: u32,
+    /// Bytes lost because the ground's receive ring was full.
+    pub overrun_bytes: u32,
+    /// Fraction of the simulated time the UART was transferring bytes (0 to 1).
+    pub uart_busy: f64,
+    /// Fraction of the simulated time the air carried this direction's bytes (0 to 1).
+    pub air_busy: f64,
+}
+
+/// XBee transmit statuses, as the radio device counted them.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct DeliveryFigures {
+    /// Frames the modem reported delivered.
+    pub delivered: u32,
+    /// Frames the modem reported not delivered (no ACK, purged, ...).
+    pub failed: u32,
+    /// Frames whose status never came in time.
+    pub timeouts: u32,
+    /// Statuses for no outstanding frame.
+    pub unexpected: u32,
+}
+
+/// PINGs through the radio.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct PingFigures {
+    /// PINGs that went up the radio.
+    pub sent: u64,
+    /// PINGs answered by a PONG.
+    pub answered: u64,
+    /// PINGs unanswered after 5 s, or pushed out by 64 newer ones outstanding.
+    pub lost: u64,
+    /// Median round trip, milliseconds.
+    pub rtt_p50_ms: Option<f64>,
+    /// 99th percentile of the round trip, milliseconds.
+    pub rtt_p99_ms: Option<f64>,
+}
+
+/// `v` with one decimal, or `-`.
+fn ms(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"))
+}
+
+/// `fraction` as a percentage with one decimal.
+fn percent(fraction: f64) -> String {
+    format!("{:.1} %", fraction * 100.0)
+}
+
+impl Summary {
+    /// The summary as text, for the terminal.
+    pub fn text(&self) -> String {
+        use std::fmt::Write as _;
+        let c = &self.config;
+        let mut s = String::new();
+        let pacing = match c.pacing_budget_bytes {
+            Some(budget) => format!("on (budget {budget} B)"),
+            None => "off".to_owned(),
+        };
+        let in_modem = c
+            .in_modem
+            .map(|k| format!(", {k} frame(s) awaiting status at most"))
+            .unwrap_or_default();
+        let _ = writeln!(s);
+        let _ = writeln!(
+            s,
+            "Radio: {} at {} baud ({} B/s UART), air {} B/s, modem buffer {} B, flow control {}, pacing {}{in_modem}; {:.1} s simulated",
+            c.transport,
+            c.baud,
+            c.serial_rate_bytes_per_s,
+            c.air_rate_bytes_per_s,
+            c.modem_buffer_bytes,
+            c.flow_control,
+            pacing,
+            self.simulated_s,
+        );
+        let _ = writeln!(s, "Priority shedding on the radio:");
+        let _ = writeln!(
+            s,
+            "  {:<8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>11} {:>11}",
+            "level",
+            "submitted",
+            "sent",
+            "shed",
+            "superseded",
+            "received",
+            "age p50 ms",
+            "age p99 ms"
+        );
+        for (name, level) in self.levels.named() {
+            let _ = writeln!(
+                s,
+                "  {:<8} {:>10} {:>10} {:>10} {:>10} {:>10} {:>11} {:>11}",
+                name,
+                level.submitted,
+                level.sent,
+                level.shed,
+                level.superseded,
+                level.received,
+                ms(level.age_p50_ms),
+                ms(level.age_p99_ms),
+            );
+        }
+        let _ = writeln!(
+            s,
+            "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug;\n   superseded: state samples replaced, while waiting, by a newer sample; received: decoded at\n   the ground end of the radio; age: from submission to arrival on the simulated clock,\n   for the messages matched to their submission, see the README)"
+        );
+        let d = &self.downlink;
+        let _ = writeln!(
+            s,
+            "  downlink: sent {}, dropped {} (queue full {}, arena full {}, too large {}, replies over the rate limit {}), evicted {}, still queued {}",
+            d.sent,
+            d.dropped,
+            d.queue_full,
+            d.arena_full,
+            d.too_large,
+            d.rate_limited,
+            d.evicted,
+            d.queued
+        );
+        let m = &self.modem;
+        let _ = writeln!(
+            s,
+            "  modem: dropped bytes {} (whole XBee frames {}), UART busy {}, air busy {}",
+            m.dropped_bytes,
+            m.frames_dropped,
+            percent(m.uart_busy),
+            percent(m.air_busy)
+        );
+        if let Some(x) = &self.delivery {
+            let _ = writeln!(
+                s,
+                "  XBee transmit statuses: delivered {}, failed {}, timed out {}, unexpected {}",
+                x.delivered, x.failed, x.timeouts, x.unexpected
+            );
+        }
+        let p = &self.ping;
+        let _ = write!(
+            s,
+            "  PINGs: sent {}, answered {}, lost {}",
+            p.sent, p.answered, p.lost
+        );
+        if p.rtt_p50_ms.is_some() {
+            let _ = write!(
+                s,
+                ", round trip p50 {} ms, p99 {} ms",
+                ms(p.rtt_p50_ms),
+                ms(p.rtt_p99_ms)
+            );
+        }
+        let _ = writeln!(s);
+        s
+    }
+
+    /// The summary as pretty-printed JSON.
+    pub fn json(&self) -> String {
+        // Serialising plain structs of numbers and strings cannot fail.
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+}
