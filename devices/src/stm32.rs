@@ -75,6 +75,13 @@
 //! Size the buffers for the worst pause of the reading task: at 57600 baud 5.76 bytes
 //! arrive per millisecond, so a 256-byte ring covers 44 ms. The TX buffer only needs to
 //! hold a frame or two: the downlink queue is the real buffer, and it sheds by priority.
+//!
+//! With hardware flow control (a modem that raises CTS when its buffer fills), build the
+//! UART with `usart::BufferedUart::new_with_rtscts(peri, rx, tx, rts, cts, ...)` instead;
+//! USART1's RTS/CTS pins on the F405 are the USB lines PA12/PA11, so the board examples
+//! put the radio on USART2 (PA2 TX, PA3 RX, PA1 RTS, PA0 CTS; see their READMEs). Without
+//! flow control, configure the downlink device's `Pacing` so frames wait in the priority
+//! queue rather than in the modem.
 
 use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
