@@ -3,7 +3,10 @@
 //! and under a 10x overload only low-priority messages are shed.
 
 use std::net::UdpSocket;
+use std::path::PathBuf;
 use std::process::Command;
+
+use serde_json::Value;
 
 /// Two free loopback UDP ports (bound then released; the test runs them at once).
 fn free_ports() -> (u16, u16) {
@@ -16,14 +19,20 @@ fn free_ports() -> (u16, u16) {
 }
 
 fn run_sitl(extra: &[&str]) -> String {
+    run_sitl_for("6", "3", extra)
+}
+
+/// Runs the simulation with the monitor (one line per message) for `duration` simulated
+/// seconds at `speed`, plus `extra` options; returns its output.
+fn run_sitl_for(duration: &str, speed: &str, extra: &[&str]) -> String {
     let (ground, uplink) = free_ports();
     let ground = format!("127.0.0.1:{ground}");
     let uplink = format!("127.0.0.1:{uplink}");
     let mut args = vec![
         "--duration",
-        "6",
+        duration,
         "--speed",
-        "3",
+        speed,
         "--lines",
         "--ground",
         &ground,
@@ -42,6 +51,32 @@ fn run_sitl(extra: &[&str]) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     stdout
+}
+
+/// A path for a summary in the temporary directory, unique to this test process.
+fn temp_json(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("pprz-sitl-{}-{name}.json", std::process::id()))
+}
+
+/// Runs like [`run_sitl_for`] with `--summary-json`; returns the output and the summary.
+fn run_sitl_json(name: &str, duration: &str, speed: &str, extra: &[&str]) -> (String, Value) {
+    let path = temp_json(name);
+    let path_str = path.to_str().expect("a UTF-8 temporary path").to_owned();
+    let mut args = vec!["--summary-json", &path_str];
+    args.extend_from_slice(extra);
+    let out = run_sitl_for(duration, speed, &args);
+    let text = std::fs::read_to_string(&path).expect("the summary file was written");
+    let _ = std::fs::remove_file(&path);
+    let json: Value = serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("the summary is not valid JSON ({e}):\n{text}"));
+    (out, json)
+}
+
+/// A whole number at `pointer` (JSON pointer syntax) in `json`.
+fn uint(json: &Value, pointer: &str) -> u64 {
+    json.pointer(pointer)
+        .and_then(Value::as_u64)
+        .unwrap_or_else(|| panic!("{pointer} is not a whole number in {json:#}"))
 }
 
 /// The summary row of a level: submitted, sent, shed, superseded, received (the age
@@ -134,6 +169,22 @@ fn nonsense_options_are_refused() {
         ("--baud", "9"),
         ("--ping-rate", "0"),
         ("--ping-rate", "1e9"),
+        ("--modem-buffer", "0"),
+        ("--modem-buffer", "-5"),
+        ("--modem-buffer", "NaN"),
+        ("--modem-buffer", "1e9"),
+        ("--modem-buffer", "100000"),
+        ("--modem-buffer", "2.5"),
+        ("--flow-control", "rts"),
+        ("--air-rate", "0"),
+        ("--air-rate", "NaN"),
+        ("--air-rate", "-1"),
+        ("--air-rate", "4000000000"),
+        ("--pacing", "maybe"),
+        ("--pacing-budget", "0"),
+        ("--transport", "mavlink"),
+        ("--in-modem", "0"),
+        ("--in-modem", "9"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
             .args(["--headless", &format!("{option}={value}")])
@@ -171,4 +222,253 @@ fn ping_flood_is_rate_limited_in_the_summary() {
     let pongs = out.lines().filter(|l| *l == "7 telemetry PONG").count() as u64;
     // 10 at once, then 20 per second over 6 s: well under the thousands of PINGs.
     assert!((5..=140).contains(&pongs), "{pongs} PONGs:\n{out}");
+}
+
+/// Options that make no sense together are refused before anything starts, naming the
+/// options involved.
+#[test]
+fn contradictory_radio_options_are_refused() {
+    for (args, expected) in [
+        (
+            &["--in-modem", "2"][..],
+            &["--in-modem", "--transport xbee"][..],
+        ),
+        (
+            &["--transport", "xbee", "--modem-buffer", "64"],
+            &["--modem-buffer 64", "xbee", "109"],
+        ),
+        (
+            &["--pacing-budget", "100"],
+            &["--pacing-budget", "--pacing on"],
+        ),
+        (
+            &[
+                "--pacing",
+                "on",
+                "--modem-buffer",
+                "64",
+                "--pacing-budget",
+                "100",
+            ],
+            &["--pacing-budget 100", "64"],
+        ),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+            .arg("--headless")
+            .args(args)
+            .output()
+            .expect("sitl starts");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        for text in expected {
+            assert!(stderr.contains(text), "{args:?}: no `{text}` in {stderr}");
+        }
+    }
+}
+
+/// A summary file that cannot be written is reported at once, with exit code 1.
+#[test]
+fn unwritable_summary_path_fails_with_a_message() {
+    let path = std::env::temp_dir()
+        .join(format!("pprz-sitl-no-such-dir-{}", std::process::id()))
+        .join("summary.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+        .args(["--headless", "--duration", "1", "--speed", "10"])
+        .arg("--summary-json")
+        .arg(&path)
+        .output()
+        .expect("sitl starts");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("cannot write the summary") && stderr.contains("summary.json"),
+        "{stderr}"
+    );
+}
+
+/// `--summary-json` writes the documented fields, agreeing with the printed table.
+#[test]
+fn summary_json_has_the_documented_fields() {
+    let (out, json) = run_sitl_json("fields", "6", "3", &[]);
+    for (pointer, expected) in [
+        ("/config/transport", "pprz2"),
+        ("/config/flow_control", "cts"),
+    ] {
+        assert_eq!(
+            json.pointer(pointer).and_then(Value::as_str),
+            Some(expected),
+            "{json:#}"
+        );
+    }
+    assert_eq!(uint(&json, "/schema"), 1);
+    for field in [
+        "baud",
+        "serial_rate_bytes_per_s",
+        "air_rate_bytes_per_s",
+        "modem_buffer_bytes",
+        "flood_bytes_per_s",
+    ] {
+        uint(&json, &format!("/config/{field}"));
+    }
+    assert_eq!(json.pointer("/config/pacing"), Some(&Value::Bool(false)));
+    assert_eq!(
+        json.pointer("/config/pacing_budget_bytes"),
+        Some(&Value::Null)
+    );
+    assert_eq!(json.pointer("/config/in_modem"), Some(&Value::Null));
+    assert!(
+        json["simulated_s"].as_f64().is_some_and(|s| s > 5.0),
+        "{json:#}"
+    );
+    for level in ["high", "normal", "low"] {
+        let row = level_row(&out, level);
+        for (i, field) in ["submitted", "sent", "shed", "superseded", "received"]
+            .into_iter()
+            .enumerate()
+        {
+            let value = uint(&json, &format!("/levels/{level}/{field}"));
+            // The table and the file are written from the same figures.
+            assert_eq!(value, row[i], "{level} {field}:\n{out}\n{json:#}");
+        }
+        let aged = uint(&json, &format!("/levels/{level}/aged"));
+        assert!(aged <= row[4], "{level}: more aged than received");
+        uint(&json, &format!("/levels/{level}/ambiguous"));
+        for field in ["age_p50_ms", "age_p99_ms"] {
+            let v = &json["levels"][level][field];
+            assert!(v.is_null() || v.as_f64().is_some(), "{level} {field}: {v}");
+        }
+    }
+    // Status telemetry is aged, and on an unloaded link within a second.
+    let p99 = json["levels"]["normal"]["age_p99_ms"].as_f64().unwrap();
+    assert!(
+        uint(&json, "/levels/normal/aged") > 50 && p99 > 0.0 && p99 < 1000.0,
+        "{json:#}"
+    );
+    for field in [
+        "dropped",
+        "queue_full",
+        "arena_full",
+        "too_large",
+        "rate_limited",
+        "evicted",
+    ] {
+        uint(&json, &format!("/downlink/{field}"));
+    }
+    assert_eq!(uint(&json, "/modem/dropped_bytes"), 0);
+    uint(&json, "/modem/frames_dropped");
+    for field in ["uart_busy", "air_busy"] {
+        let busy = json["modem"][field].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&busy), "{field} {busy}");
+    }
+    assert_eq!(json["delivery"], Value::Null);
+    assert!(uint(&json, "/ping/sent") >= 3 && uint(&json, "/ping/answered") >= 3);
+    let rtt = json["ping"]["rtt_p50_ms"].as_f64().unwrap();
+    assert!(rtt > 0.0 && rtt <= json["ping"]["rtt_p99_ms"].as_f64().unwrap());
+    let messages = json["messages"].as_array().unwrap();
+    let attitude = messages
+        .iter()
+        .find(|m| m["name"] == "ATTITUDE")
+        .unwrap_or_else(|| panic!("no ATTITUDE in {json:#}"));
+    assert_eq!(attitude["class"], "telemetry");
+    assert_eq!(attitude["level"], "normal");
+    assert!(uint(attitude, "/received") >= 12);
+    assert!(attitude["max_gap_ms"].as_f64().is_some_and(|g| g < 1000.0));
+}
+
+/// Issue 13, scenario a: a 57600-baud UART into a modem with a 2048-byte buffer that
+/// sends 4000 B/s and drops what overflows (no flow control), flooded. Without pacing the
+/// modem drops bytes; with pacing it drops none and every acknowledgement arrives. (The
+/// run is paced by the wall clock, so the counts vary: only the difference is checked.)
+#[test]
+fn pacing_keeps_an_overflowing_modem_from_dropping() {
+    let scenario = [
+        "--baud",
+        "57600",
+        "--modem-buffer",
+        "2048",
+        "--air-rate",
+        "4000",
+        "--flow-control",
+        "none",
+        "--overload",
+        "--pacing",
+    ];
+    let with = |pacing: &'static str| {
+        let mut args = scenario.to_vec();
+        args.push(pacing);
+        std::thread::spawn(move || run_sitl_json(pacing, "8", "4", &args))
+    };
+    let (on, off) = (with("on"), with("off"));
+    let (on_out, on) = on.join().unwrap();
+    let (off_out, off) = off.join().unwrap();
+
+    assert_eq!(uint(&on, "/modem/dropped_bytes"), 0, "{on_out}");
+    let [_, high_sent, high_shed, _, high_received] = level_row(&on_out, "high");
+    assert_eq!(high_shed, 0, "{on_out}");
+    // Every acknowledgement arrives (one may still be on its way at the end).
+    assert!(high_received + 1 >= high_sent && high_sent >= 5, "{on_out}");
+    assert!(
+        uint(&on, "/ping/answered") + 1 >= uint(&on, "/ping/sent"),
+        "{on_out}"
+    );
+    assert_eq!(level_row(&on_out, "normal")[2], 0, "{on_out}");
+    assert!(
+        level_row(&on_out, "low")[2] > 0,
+        "the flood is shed:\n{on_out}"
+    );
+
+    assert!(
+        uint(&off, "/modem/dropped_bytes") > 0,
+        "without pacing the modem overflows:\n{off_out}"
+    );
+    let received: u64 = ["high", "normal", "low"]
+        .iter()
+        .map(|l| uint(&off, &format!("/levels/{l}/received")))
+        .sum();
+    assert!(
+        received < uint(&off, "/downlink/sent"),
+        "frames lose bytes in the modem:\n{off_out}"
+    );
+}
+
+/// Issue 13, scenario b: XBee 802.15.4 API with transmit statuses, flooded. Every frame
+/// is reported delivered, none times out, the flood is shed in the queue (its frames
+/// fit 802.15.4), acknowledgements arrive, and the uplink (PING, SETTING) goes through
+/// XBee frames too.
+#[test]
+fn xbee_transmit_statuses_over_a_flooded_link() {
+    let (out, json) = run_sitl_json(
+        "xbee",
+        "6",
+        "3",
+        &[
+            "--transport",
+            "xbee",
+            "--in-modem",
+            "2",
+            "--flow-control",
+            "none",
+            "--overload",
+        ],
+    );
+    assert_eq!(json["config"]["transport"], "xbee", "{json:#}");
+    assert_eq!(uint(&json, "/config/in_modem"), 2);
+    let delivered = uint(&json, "/delivery/delivered");
+    assert!(delivered > 100, "{out}");
+    assert_eq!(uint(&json, "/delivery/failed"), 0, "{out}");
+    assert_eq!(uint(&json, "/delivery/timeouts"), 0, "{out}");
+    assert_eq!(uint(&json, "/downlink/too_large"), 0, "{out}");
+    assert_eq!(uint(&json, "/modem/frames_dropped"), 0, "{out}");
+    let [_, high_sent, high_shed, _, high_received] = level_row(&out, "high");
+    assert_eq!(high_shed, 0, "{out}");
+    assert!(high_received + 1 >= high_sent, "{out}");
+    assert!(level_row(&out, "low")[2] > 0, "the flood is shed:\n{out}");
+    assert!(
+        out.lines().filter(|l| *l == "7 telemetry PONG").count() >= 3,
+        "{out}"
+    );
+    assert!(
+        out.contains("7 telemetry DL_VALUE index=2 value=2.5"),
+        "{out}"
+    );
 }

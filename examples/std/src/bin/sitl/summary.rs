@@ -255,7 +255,7 @@ impl Summary {
         }
         let _ = writeln!(
             s,
-            "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug;\n   superseded: state samples replaced, while waiting, by a newer sample; received: decoded at\n   the ground end of the radio; age: from submission to arrival on the simulated clock,\n   for the messages matched to their submission, see the README)"
+            "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug;\n   superseded: state samples replaced, while waiting, by a newer sample; received: decoded at\n   the ground end of the radio; age: submission to arrival on the simulated clock, for the\n   messages matched to their submission: a lower bound for constant ones and the flood)"
         );
         let d = &self.downlink;
         let _ = writeln!(
