@@ -372,6 +372,7 @@ fn summary_json_has_the_documented_fields() {
     assert_eq!(attitude["class"], "telemetry");
     assert_eq!(attitude["level"], "normal");
     assert!(uint(attitude, "/received") >= 12);
+    assert!(uint(attitude, "/submitted") >= uint(attitude, "/received"));
     assert!(attitude["max_gap_ms"].as_f64().is_some_and(|g| g < 1000.0));
 }
 

@@ -101,9 +101,12 @@ pub struct LevelRecord {
     pub ambiguous: u64,
 }
 
-/// What the ground end of the radio received of one message type.
+/// One message type: submitted by the application, received at the ground end of the
+/// radio.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct TypeRecord {
+    /// Messages the application submitted (the services' replies are not seen).
+    pub submitted: u64,
     /// Messages decoded.
     pub received: u64,
     /// Last arrival, in microseconds.
@@ -170,6 +173,7 @@ impl Record {
             .entry((class_id, msg_id, payload.to_vec()))
             .or_insert((now_us, 0));
         *entry = (now_us, entry.1.saturating_add(1));
+        self.types.entry((class_id, msg_id)).or_default().submitted += 1;
         self.since_prune += 1;
         // Now and then, forget the submissions past the horizon.
         if self.since_prune >= 4096 && self.submissions.len() >= 65_536 {

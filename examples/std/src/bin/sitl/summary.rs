@@ -25,7 +25,7 @@ pub struct Summary {
     pub delivery: Option<DeliveryFigures>,
     /// PINGs through the radio, timed on the simulation's clock at the ground end.
     pub ping: PingFigures,
-    /// Per message type received, by class and id.
+    /// Per message type submitted or received, by class and id.
     pub messages: Vec<MessageFigures>,
 }
 
@@ -108,7 +108,7 @@ pub struct Level {
     pub ambiguous: u64,
 }
 
-/// One message type received at the ground end of the radio.
+/// One message type the application submitted or the ground end of the radio received.
 #[derive(Debug, Clone, Serialize)]
 pub struct MessageFigures {
     /// Class name (`telemetry`).
@@ -117,7 +117,10 @@ pub struct MessageFigures {
     pub name: &'static str,
     /// Priority level: `"high"`, `"normal"` or `"low"`.
     pub level: &'static str,
-    /// Messages decoded.
+    /// Messages the application submitted (0 for the services' replies, PONG, and for
+    /// DL_VALUE only the periodic ones).
+    pub submitted: u64,
+    /// Messages decoded at the ground end of the radio.
     pub received: u64,
     /// Longest time between two arrivals, milliseconds (`null` before the second).
     pub max_gap_ms: Option<f64>,
