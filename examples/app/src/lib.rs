@@ -102,11 +102,18 @@ impl Out<'_> {
     /// Shows `msg` to the observer, if there is one.
     fn observe<Msg: Message>(&self, msg: &Msg) {
         if let Some(observer) = self.observer {
-            let mut fields = [0u8; 256];
-            if let Ok(len) = msg.encode(&mut fields) {
-                observer(Msg::CLASS_ID, Msg::ID, &fields[..len], Instant::now());
-            }
+            observe(observer, msg);
         }
+    }
+}
+
+/// Encodes `msg` for `observer` and calls it. Not inlined, so that the send path of a
+/// firmware without an observer does not reserve the encoding buffer on its stack.
+#[inline(never)]
+fn observe<Msg: Message>(observer: Observer, msg: &Msg) {
+    let mut fields = [0u8; 256];
+    if let Ok(len) = msg.encode(&mut fields) {
+        observer(Msg::CLASS_ID, Msg::ID, &fields[..len], Instant::now());
     }
 }
 

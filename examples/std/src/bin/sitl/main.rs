@@ -248,9 +248,11 @@ fn parse_in_modem(s: &str) -> Result<u8, String> {
 /// air and received but not yet read.
 const RADIO_RING: usize = 16_384;
 
-/// The modem buffer without `--modem-buffer`: 64 bytes for a transparent modem (what the
-/// SITL always had), 202 for an XBee (the serial receive buffer of an XBee Series 1).
+/// The modem buffer without `--modem-buffer` for a transparent modem (what the SITL
+/// always had).
 const DEFAULT_MODEM_BUFFER: usize = 64;
+/// The modem buffer without `--modem-buffer` for an XBee: the serial receive buffer of an
+/// XBee Series 1.
 const DEFAULT_XBEE_BUFFER: usize = 202;
 
 /// The over-the-air rate of XBee 802.15.4 (250 kbit/s), the default with
@@ -283,11 +285,13 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// XBee: the uplink messages, re-framed as PPRZ v2 for the application's reader.
 static UPLINK_PIPE: Pipe<M, 1024> = Pipe::new();
 
+/// The radio device's writer.
 #[embassy_executor::task]
 async fn radio_writer(mut port: Port<'static>, tx: SimTx<'static, M, RADIO_RING>) {
     run_writer(&mut port, tx).await
 }
 
+/// The application reading its uplink from the radio (PPRZ v2).
 #[embassy_executor::task]
 async fn aircraft(radio: Device<'static>, rx: SimRx<'static, M, RADIO_RING>, config: Config) {
     let Err(e) = pprz_example_app::run_aircraft(radio, rx, config).await;

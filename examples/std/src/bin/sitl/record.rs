@@ -214,3 +214,57 @@ impl Record {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use pprz_default::messages::telemetry::Attitude;
+
+    use super::*;
+
+    #[test]
+    fn percentiles_are_nearest_rank() {
+        let mut s = Samples::default();
+        assert_eq!(s.percentile_ms(50.0), None);
+        for us in (1..=100).rev() {
+            s.push(us * 1000);
+        }
+        assert_eq!(s.count(), 100);
+        assert_eq!(s.percentile_ms(50.0), Some(50.0));
+        assert_eq!(s.percentile_ms(99.0), Some(99.0));
+        assert_eq!(s.percentile_ms(0.0), Some(1.0));
+        assert_eq!(s.percentile_ms(100.0), Some(100.0));
+    }
+
+    #[test]
+    fn an_arrival_matches_the_latest_identical_submission() {
+        let mut r = Record::default();
+        let (class, id) = (Attitude::CLASS_ID, Attitude::ID);
+        let level = priority::level(Attitude::PRIORITY);
+        r.submitted(class, id, &[1, 2], 1_000);
+        r.submitted(class, id, &[3, 4], 2_000);
+        r.submitted(class, id, &[1, 2], 5_000);
+        // [3, 4] was submitted once: exact; [1, 2] twice: from the latest, ambiguous.
+        r.received(class, id, &[3, 4], 12_000);
+        r.received(class, id, &[1, 2], 13_000);
+        // Never submitted: received, not aged.
+        r.received(class, id, &[9], 14_000);
+        let l = &r.levels[level];
+        assert_eq!((l.received, l.ages.count(), l.ambiguous), (3, 2, 1));
+        assert_eq!(l.ages.percentile_ms(0.0), Some(8.0));
+        assert_eq!(l.ages.percentile_ms(100.0), Some(10.0));
+        let t = r.types[&(class, id)];
+        assert_eq!((t.submitted, t.received, t.max_gap_us), (3, 3, 1_000));
+    }
+
+    #[test]
+    fn pong_arrivals_time_the_pings() {
+        let mut r = Record::default();
+        r.pings.sent(1.0);
+        r.received(Pong::CLASS_ID, Pong::ID, &[], 1_030_000);
+        assert_eq!(r.pings.answered(), 1);
+        assert_eq!(r.rtt.percentile_ms(50.0), Some(30.0));
+        // Unknown message types are counted apart.
+        r.received(0xEE, 0xEE, &[], 2_000_000);
+        assert_eq!(r.unknown, 1);
+    }
+}
