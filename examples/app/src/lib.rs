@@ -68,18 +68,23 @@ pub struct Config {
     /// telemetry and payload, not the services' replies), just before it is submitted,
     /// whether the downlink then accepts it or not (`None`, the default: nothing is
     /// called and nothing is encoded for it). The simulation records submission times
-    /// with it to measure how old messages are when they reach the ground.
+    /// with it to measure how old messages are when they reach the ground. Only with the
+    /// crate's `observer` feature (off on the boards: the observer's encoding costs about
+    /// 2 KiB of flash).
+    #[cfg(feature = "observer")]
     pub observer: Option<Observer>,
 }
 
 /// An observer of submissions (see [`Config::observer`]): class id, message id, the
 /// encoded message fields (the payload of a PPRZ frame) and the time of submission.
+#[cfg(feature = "observer")]
 pub type Observer = fn(class_id: u8, msg_id: u8, payload: &[u8], now: Instant);
 
 /// Where the application's messages go: the downlink, and the observer if any.
 #[derive(Clone, Copy)]
 struct Out<'d> {
     downlink: Sender<'d>,
+    #[cfg(feature = "observer")]
     observer: Option<Observer>,
 }
 
@@ -101,14 +106,18 @@ impl Out<'_> {
 
     /// Shows `msg` to the observer, if there is one.
     fn observe<Msg: Message>(&self, msg: &Msg) {
+        #[cfg(feature = "observer")]
         if let Some(observer) = self.observer {
             observe(observer, msg);
         }
+        #[cfg(not(feature = "observer"))]
+        let _ = msg;
     }
 }
 
 /// Encodes `msg` for `observer` and calls it. Not inlined, so that the send path of a
 /// firmware without an observer does not reserve the encoding buffer on its stack.
+#[cfg(feature = "observer")]
 #[inline(never)]
 fn observe<Msg: Message>(observer: Observer, msg: &Msg) {
     let mut fields = [0u8; 256];
@@ -131,6 +140,7 @@ pub async fn run_aircraft<R: Read>(
 ) -> Result<Infallible, SetupError> {
     let out = Out {
         downlink: radio.sender(),
+        #[cfg(feature = "observer")]
         observer: config.observer,
     };
     let vehicle: Mutex<M, RefCell<Vehicle>> = Mutex::new(RefCell::new(Vehicle::new()));
