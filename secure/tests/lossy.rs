@@ -19,14 +19,17 @@ enum Fate {
     Delay,
 }
 
+/// Decides the fate of the n-th frame of a direction.
+type LinkModel = Box<dyn FnMut(usize, &[u8]) -> Fate>;
+
 struct Sim {
     air: Aircraft,
     ground: Ground,
     now: u64,
     rng: TestRng,
     /// Fates of the uplink and downlink frames, by index (default: deliver).
-    up: Box<dyn FnMut(usize, &[u8]) -> Fate>,
-    down: Box<dyn FnMut(usize, &[u8]) -> Fate>,
+    up: LinkModel,
+    down: LinkModel,
     up_count: usize,
     down_count: usize,
     up_held: Vec<Vec<u8>>,
@@ -76,7 +79,7 @@ impl Sim {
     fn step(&mut self) {
         self.now += 100;
         self.ground.poll(self.now, &mut self.rng);
-        if self.now % 500 == 0 && self.ground.ch.has_session() {
+        if self.now.is_multiple_of(500) && self.ground.ch.has_session() {
             self.ground.send(&ping()).unwrap();
         }
         match self.air.send(&alive()) {
