@@ -22,13 +22,11 @@
 
 use core::fmt;
 
-use ed25519_dalek::ed25519::signature::Signer;
-use ed25519_dalek::{Signature, SigningKey, VerifyingKey};
 use pprz_transports::MsgHeader;
-use sha2::{Digest, Sha512};
-use zeroize::{Zeroize, Zeroizing};
+use zeroize::Zeroizing;
 
 use crate::channel::{KEY_EXCHANGE_GCS, KEY_EXCHANGE_UAV, MsgId};
+use crate::crypto::{SigningKey, VerifyingKey};
 use crate::frame::{DirectionKey, KEY_LEN, SALT_LEN, STX, TAG_LEN, finish_pprz};
 
 /// Length of an X25519 public key.
@@ -337,34 +335,22 @@ impl KeyExchange {
 /// `Ka||Sa` (`label` 0) or `Kb||Sb` (`label` 1) from the shared secret `z`:
 /// `SHA-512(z || label)`, key = bytes 0..32, salt = bytes 32..44.
 pub(crate) fn derive(z: &[u8; 32], label: u8) -> DirectionKey {
-    let mut h = Sha512::new();
-    h.update(z);
-    h.update([label]);
-    let mut out = h.finalize();
+    let out = crate::crypto::sha512(&[z, &[label]]);
     let mut key = Zeroizing::new([0u8; KEY_LEN]);
     let mut salt = Zeroizing::new([0u8; SALT_LEN]);
     key.copy_from_slice(&out[..KEY_LEN]);
     salt.copy_from_slice(&out[KEY_LEN..KEY_LEN + SALT_LEN]);
-    out.as_mut_slice().zeroize();
     DirectionKey::new(*key, *salt)
 }
 
 /// The two direction keys of the shared secret `z`: `(A->B, B->A)`; `None` if `z` is
 /// all zero (a low-order public key).
-pub(crate) fn session_keys(z: &[u8; 32]) -> Option<(DirectionKey, DirectionKey)> {
-    if crate::channel::ct_eq(z, &[0u8; 32]) {
+pub(crate) fn session_keys(z: &Zeroizing<[u8; 32]>) -> Option<(DirectionKey, DirectionKey)> {
+    if crate::crypto::is_zero(z) {
         return None;
     }
     Some((derive(z, 0), derive(z, 1)))
 }
-
-/// X25519 of the secret scalar `k` (clamped) and the point `u`, zeroized on drop.
-pub(crate) fn x25519(k: &[u8; 32], u: [u8; 32]) -> Zeroizing<[u8; 32]> {
-    Zeroizing::new(x25519_dalek::x25519(*k, u))
-}
-
-/// X25519's base point.
-pub(crate) const BASEPOINT: [u8; 32] = x25519_dalek::X25519_BASEPOINT_BYTES;
 
 /// `first || second`.
 fn concat(first: &[u8; 32], second: &[u8; 32]) -> [u8; 64] {
@@ -385,7 +371,7 @@ pub(crate) fn sign_and_seal(
     let sig = own.sign(&concat(first, second));
     let mut out = [0u8; SIG_DATA_LEN];
     let (ct, tag_out) = out.split_at_mut(SIGNATURE_LEN);
-    ct.copy_from_slice(&sig.to_bytes());
+    ct.copy_from_slice(&sig);
     let tag = key.encrypt(key.salt(), &[], ct)?;
     tag_out.copy_from_slice(&tag);
     Some(out)
@@ -408,8 +394,11 @@ pub(crate) fn open_and_verify(
     if !key.decrypt(key.salt(), &[], ct, &mut sig, tag) {
         return Err(HandshakeError::BadTag);
     }
-    peer.verify_strict(&concat(first, second), &Signature::from_bytes(&sig))
-        .map_err(|_| HandshakeError::BadSignature)
+    if peer.verify(&concat(first, second), &sig) {
+        Ok(())
+    } else {
+        Err(HandshakeError::BadSignature)
+    }
 }
 
 #[cfg(test)]
@@ -456,7 +445,7 @@ mod tests {
 
     #[test]
     fn zero_shared_secret_is_refused() {
-        assert!(session_keys(&[0; 32]).is_none());
-        assert!(session_keys(&[1; 32]).is_some());
+        assert!(session_keys(&Zeroizing::new([0; 32])).is_none());
+        assert!(session_keys(&Zeroizing::new([1; 32])).is_some());
     }
 }

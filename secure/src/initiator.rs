@@ -21,10 +21,11 @@ use zeroize::Zeroizing;
 use pprz_transports::{BROADCAST_ID, GROUND_ID};
 
 use crate::channel::ct_eq;
+use crate::crypto::{x25519, x25519_public};
 use crate::frame::SessionKeys;
 use crate::handshake::{
-    BASEPOINT, HandshakeError, HandshakeStats, KeyExchange, KeyExchangeIds, MsgType, P_BE_DATA_LEN,
-    PUBLIC_KEY_LEN, SIG_DATA_LEN, open_and_verify, session_keys, sign_and_seal, x25519,
+    HandshakeError, HandshakeStats, KeyExchange, KeyExchangeIds, MsgType, P_BE_DATA_LEN,
+    PUBLIC_KEY_LEN, SIG_DATA_LEN, open_and_verify, session_keys, sign_and_seal,
 };
 use crate::keys::GroundKeys;
 
@@ -191,7 +192,7 @@ impl Initiator {
     fn start<R: CryptoRng + ?Sized>(&mut self, now_ms: u64, rng: &mut R) -> KeyExchange {
         let mut secret = Zeroizing::new([0u8; 32]);
         rng.fill_bytes(secret.as_mut_slice());
-        let p_ae = *x25519(&secret, BASEPOINT);
+        let p_ae = x25519_public(&secret);
         self.state = State::WaitMsg2 {
             secret,
             p_ae,
@@ -295,7 +296,7 @@ impl Initiator {
         let (p_be_bytes, sealed) = data.split_at(PUBLIC_KEY_LEN);
         let mut p_be = [0u8; PUBLIC_KEY_LEN];
         p_be.copy_from_slice(p_be_bytes);
-        let z = x25519(secret, p_be);
+        let z = x25519(secret, &p_be);
         let (a_to_b, b_to_a) = session_keys(&z).ok_or(HandshakeError::BadKey)?;
         drop(z);
         open_and_verify(&self.keys.0.peer, &p_be, &p_ae, &b_to_a, sealed)?;

@@ -34,11 +34,11 @@
 
 use core::fmt;
 
-use ed25519_dalek::{SigningKey, VerifyingKey};
 use rand_core::CryptoRng;
 use zeroize::Zeroize;
 
 use crate::channel::ct_eq;
+use crate::crypto::{SigningKey, VerifyingKey};
 
 /// A published key set, **for tests and simulation only**: anyone can read it, so it
 /// protects nothing. It is the key set of the known-answer vectors.
@@ -387,8 +387,8 @@ impl KeyFile {
         let mut uav = [0u8; 32];
         rng.fill_bytes(&mut gcs);
         rng.fill_bytes(&mut uav);
-        let gcs_public = SigningKey::from_bytes(&gcs).verifying_key().to_bytes();
-        let uav_public = SigningKey::from_bytes(&uav).verifying_key().to_bytes();
+        let gcs_public = SigningKey::from_seed(&gcs).public();
+        let uav_public = SigningKey::from_seed(&uav).public();
         let file = Self::from_keys(Some(gcs_public), Some(gcs), Some(uav_public), Some(uav));
         gcs.zeroize();
         uav.zeroize();
@@ -446,16 +446,13 @@ impl KeyFile {
     ) -> Result<Identity, KeyError> {
         let seed = self.get(own).ok_or(KeyError::Missing(own))?;
         let peer_bytes = self.get(peer).ok_or(KeyError::Missing(peer))?;
-        let signing = SigningKey::from_bytes(seed);
+        let signing = SigningKey::from_seed(seed);
         if let Some(public) = self.get(own_public)
-            && !ct_eq(public, signing.verifying_key().as_bytes())
+            && !ct_eq(public, &signing.public())
         {
             return Err(KeyError::Mismatch(own_public));
         }
-        let peer_key = VerifyingKey::from_bytes(peer_bytes)
-            .ok()
-            .filter(|k| !k.is_weak())
-            .ok_or(KeyError::BadPublicKey(peer))?;
+        let peer_key = VerifyingKey::from_bytes(peer_bytes).ok_or(KeyError::BadPublicKey(peer))?;
         Ok(Identity {
             own: signing,
             peer: peer_key,
@@ -484,20 +481,17 @@ impl KeyFile {
 }
 
 /// Our signing key and the peer's verifying key.
-#[derive(Clone)]
 pub(crate) struct Identity {
     pub(crate) own: SigningKey,
     pub(crate) peer: VerifyingKey,
 }
 
 /// The aircraft's long-term keys: its Ed25519 signing key and the ground's verifying key
-/// (what the [`Responder`](crate::Responder) needs). The seed is zeroized on drop.
-#[derive(Clone)]
+/// (what the [`Responder`](crate::Responder) needs). The secret is zeroized on drop.
 pub struct AircraftKeys(pub(crate) Identity);
 
 /// The ground's long-term keys: its Ed25519 signing key and the aircraft's verifying key
-/// (what the [`Initiator`](crate::Initiator) needs). The seed is zeroized on drop.
-#[derive(Clone)]
+/// (what the [`Initiator`](crate::Initiator) needs). The secret is zeroized on drop.
 pub struct GroundKeys(pub(crate) Identity);
 
 impl AircraftKeys {
@@ -511,7 +505,7 @@ impl AircraftKeys {
 
     /// The aircraft's public key.
     pub fn public(&self) -> [u8; 32] {
-        self.0.own.verifying_key().to_bytes()
+        self.0.own.public()
     }
 }
 
@@ -526,7 +520,7 @@ impl GroundKeys {
 
     /// The ground's public key.
     pub fn public(&self) -> [u8; 32] {
-        self.0.own.verifying_key().to_bytes()
+        self.0.own.public()
     }
 }
 

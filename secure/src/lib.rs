@@ -3,6 +3,7 @@
 #![forbid(unsafe_code)]
 
 pub mod channel;
+pub mod crypto;
 pub mod frame;
 pub mod handshake;
 pub mod initiator;

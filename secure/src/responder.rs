@@ -25,11 +25,11 @@ use zeroize::Zeroizing;
 use pprz_transports::{BROADCAST_ID, GROUND_ID};
 
 use crate::channel::ct_eq;
+use crate::crypto::{x25519, x25519_public};
 use crate::frame::SessionKeys;
 use crate::handshake::{
-    BASEPOINT, HandshakeError, HandshakeStats, KeyExchange, KeyExchangeIds, MsgType, P_AE_DATA_LEN,
+    HandshakeError, HandshakeStats, KeyExchange, KeyExchangeIds, MsgType, P_AE_DATA_LEN,
     P_BE_DATA_LEN, PUBLIC_KEY_LEN, SIG_DATA_LEN, open_and_verify, session_keys, sign_and_seal,
-    x25519,
 };
 use crate::keys::AircraftKeys;
 
@@ -256,8 +256,8 @@ impl Responder {
         self.last_work_ms = Some(now_ms);
         let mut b = Zeroizing::new([0u8; 32]);
         rng.fill_bytes(b.as_mut_slice());
-        let p_be = *x25519(&b, BASEPOINT);
-        let z = x25519(&b, p_ae);
+        let p_be = x25519_public(&b);
+        let z = x25519(&b, &p_ae);
         drop(b);
         let (a_to_b, b_to_a) = session_keys(&z).ok_or(HandshakeError::BadKey)?;
         drop(z);
