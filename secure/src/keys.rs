@@ -28,7 +28,8 @@
 //! let keys = KEYS.aircraft()?; // at start-up: derives the public key from the seed
 //! ```
 //!
-//! (A `build.rs` can call the same parser and write the keys out instead.) Never commit a
+//! ([`const_key_file!`](crate::const_key_file) takes text already at hand; a `build.rs`
+//! can call the same parser and write the keys out instead.) Never commit a
 //! real key file; [`INSECURE_TEST_KEY_FILE`] is a published key set for tests and
 //! simulation only.
 
@@ -44,19 +45,41 @@ use crate::crypto::{SigningKey, VerifyingKey};
 /// protects nothing. It is the key set of the known-answer vectors.
 pub const INSECURE_TEST_KEY_FILE: &str = include_str!("../keys/INSECURE-TEST-ONLY.keys");
 
-/// Embeds the key file named by the environment variable `$env` at build time, parsed by
-/// the `const` [`KeyFile::parse`]: a missing variable, file or key, or a malformed line,
-/// fails the build. Expands to a `KeyFile` constant expression.
+/// A [`KeyFile`] constant from key-file text known at build time (a literal, an
+/// `include_str!`), parsed by the `const` [`parse_raw`]: a malformed line fails the
+/// build.
+///
+/// ```
+/// static KEYS: pprz_secure::KeyFile =
+///     pprz_secure::const_key_file!(pprz_secure::keys::INSECURE_TEST_KEY_FILE);
+/// assert!(KEYS.aircraft().is_ok());
+/// ```
+///
+/// ```compile_fail
+/// // A key of 2 hex digits: "a key value is not 64 hex digits", at build time.
+/// static KEYS: pprz_secure::KeyFile = pprz_secure::const_key_file!("UAV_PUBLIC = 12");
+/// ```
 #[macro_export]
-macro_rules! include_key_file {
-    ($env:literal) => {{
+macro_rules! const_key_file {
+    ($text:expr) => {{
         const KEYS: $crate::KeyFile =
-            $crate::KeyFile::from_raw(match $crate::keys::parse_raw(include_str!(env!($env))) {
+            $crate::KeyFile::from_raw(match $crate::keys::parse_raw($text) {
                 Ok(keys) => keys,
                 Err(e) => panic!("{}", e.kind.message()),
             });
         KEYS
     }};
+}
+
+/// Embeds the key file named by the environment variable `$env` at build time (see
+/// [`const_key_file!`]): a missing variable or file, or a malformed line, fails the
+/// build. Keys an end needs but the file lacks are reported at run time by
+/// [`KeyFile::aircraft`] or [`KeyFile::ground`].
+#[macro_export]
+macro_rules! include_key_file {
+    ($env:literal) => {
+        $crate::const_key_file!(include_str!(env!($env)))
+    };
 }
 
 /// The names of the keys in a key file.
@@ -593,10 +616,7 @@ mod tests {
 
     #[test]
     fn const_parse() {
-        const F: KeyFile = KeyFile::from_raw(match parse_raw(INSECURE_TEST_KEY_FILE) {
-            Ok(f) => f,
-            Err(e) => panic!("{}", e.kind.message()),
-        });
+        static F: KeyFile = crate::const_key_file!(INSECURE_TEST_KEY_FILE);
         assert!(F.aircraft().is_ok());
         assert!(F.ground().is_ok());
     }
