@@ -566,6 +566,7 @@ impl SecureChannel {
                 return Err(SealError::TooLong);
             }
             let out = buf.get_mut(..len).ok_or(SealError::BufferTooSmall)?;
+            // In range: data_end + 1 == len - 2.
             out.copy_within(2..data_end, 3);
             if let Some(b) = out.get_mut(2) {
                 *b = PLAINTEXT;
@@ -588,11 +589,16 @@ impl SecureChannel {
         //        ^2           ^7        ^9             ^9+2+fields_len
         const SRC_AT: usize = 2 + field::encrypted::SOURCE;
         const CT_AT: usize = 2 + field::encrypted::CIPHERTEXT;
+        // In range: SRC_AT + (data_end - 2) == len - 18.
         out.copy_within(2..data_end, SRC_AT);
         let ct_end = CT_AT + 2 + fields_len;
         let nonce = tx.key.nonce(counter);
-        let (head, rest) = out.split_at_mut(CT_AT);
-        let (ct, rest) = rest.split_at_mut(ct_end - CT_AT);
+        let (head, rest) = out
+            .split_at_mut_checked(CT_AT)
+            .ok_or(SealError::BufferTooSmall)?;
+        let (ct, rest) = rest
+            .split_at_mut_checked(ct_end - CT_AT)
+            .ok_or(SealError::BufferTooSmall)?;
         let tag_out = rest.get_mut(..TAG_LEN).ok_or(SealError::BufferTooSmall)?;
         let aad = head.get(SRC_AT..CT_AT).unwrap_or_default();
         let tag = tx
@@ -712,7 +718,9 @@ impl SecureChannel {
         // 99 LEN src dst | cc id fields | CK
         let len = ct.len() + 6;
         let frame = out.get_mut(..len).ok_or(Reject::BufferTooSmall)?;
-        let (head, rest) = frame.split_at_mut(4);
+        let (head, rest) = frame
+            .split_at_mut_checked(4)
+            .ok_or(Reject::BufferTooSmall)?;
         let plain = rest.get_mut(..ct.len()).ok_or(Reject::BufferTooSmall)?;
         if !rx.key.decrypt(&rx.key.nonce(counter), aad, ct, plain, tag) {
             return Err(Reject::BadTag);

@@ -44,6 +44,7 @@ fn canonical_scalar(s: &[u8]) -> bool {
 /// The y-coordinates (little-endian, sign bit cleared) of the small-order points of
 /// Ed25519, canonical and not: 0, 1, the two of order 8, p - 1, p, p + 1.
 #[cfg_attr(not(feature = "salty"), allow(dead_code))]
+#[allow(clippy::indexing_slicing)] // evaluated at build time
 const SMALL_ORDER_Y: [[u8; 32]; 7] = {
     let mut ys = [[0u8; 32]; 7];
     ys[1][0] = 1;

@@ -234,8 +234,11 @@ impl KeyExchange {
         data: &[u8],
     ) -> Self {
         let mut buf = [0u8; MAX_DATA_LEN];
-        let n = data.len().min(MAX_DATA_LEN);
-        buf[..n].copy_from_slice(&data[..n]);
+        let mut n = 0;
+        for (b, d) in buf.iter_mut().zip(data) {
+            *b = *d;
+            n += 1;
+        }
         Self {
             source: header.0,
             destination: header.1,
@@ -317,7 +320,7 @@ impl KeyExchange {
     pub fn write_frame(&self, buf: &mut [u8]) -> Option<usize> {
         let len = 8 + self.fields_len();
         let frame = buf.get_mut(..len)?;
-        let (head, rest) = frame.split_at_mut(6);
+        let (head, rest) = frame.split_at_mut_checked(6)?;
         head.copy_from_slice(&[
             STX,
             0,
@@ -338,8 +341,11 @@ pub(crate) fn derive(z: &[u8; 32], label: u8) -> DirectionKey {
     let out = crate::crypto::sha512(&[z, &[label]]);
     let mut key = Zeroizing::new([0u8; KEY_LEN]);
     let mut salt = Zeroizing::new([0u8; SALT_LEN]);
-    key.copy_from_slice(&out[..KEY_LEN]);
-    salt.copy_from_slice(&out[KEY_LEN..KEY_LEN + SALT_LEN]);
+    let (k, rest) = out.split_at(KEY_LEN);
+    key.copy_from_slice(k);
+    for (s, b) in salt.iter_mut().zip(rest) {
+        *s = *b;
+    }
     DirectionKey::new(*key, *salt)
 }
 

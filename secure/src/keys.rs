@@ -252,6 +252,8 @@ const fn hex_value(b: u8) -> Option<u8> {
     }
 }
 
+// Indices bounded by the loops' conditions (`const fn` cannot use `get`).
+#[allow(clippy::indexing_slicing)]
 /// Whether `text[start..end]` is `name` (the range is within `text`).
 const fn name_is(text: &[u8], start: usize, end: usize, name: &str) -> bool {
     let name = name.as_bytes();
@@ -268,6 +270,8 @@ const fn name_is(text: &[u8], start: usize, end: usize, name: &str) -> bool {
     true
 }
 
+// Indices bounded by the loops' conditions (`const fn` cannot use `get`).
+#[allow(clippy::indexing_slicing)]
 /// Parses the line `text[start..end]` (within `text`): `None` for a blank or comment
 /// line, the key's index and value otherwise.
 const fn parse_line(
@@ -335,6 +339,8 @@ const fn parse_line(
     Ok(Some((name, key)))
 }
 
+// Indices bounded by the loops' conditions (`const fn` cannot use `get`).
+#[allow(clippy::indexing_slicing)]
 /// Parses a key file into its raw keys: the `const` parser behind [`KeyFile::parse`],
 /// for build-time use (see [`include_key_file!`](crate::include_key_file)).
 ///
@@ -420,16 +426,24 @@ impl KeyFile {
 
     /// The key `name`, if the file has it.
     pub const fn get(&self, name: KeyName) -> Option<&[u8; 32]> {
-        self.keys[name.index()].as_ref()
+        let [gcs_public, gcs_private, uav_public, uav_private] = &self.keys;
+        match name {
+            KeyName::GcsPublic => gcs_public.as_ref(),
+            KeyName::GcsPrivate => gcs_private.as_ref(),
+            KeyName::UavPublic => uav_public.as_ref(),
+            KeyName::UavPrivate => uav_private.as_ref(),
+        }
     }
 
     /// The same file without the key `name` (to write the part of a key set one end
     /// needs).
     pub fn without(mut self, name: KeyName) -> Self {
-        if let Some(k) = &mut self.keys[name.index()] {
-            k.zeroize();
+        if let Some(slot) = self.keys.get_mut(name.index()) {
+            if let Some(k) = slot {
+                k.zeroize();
+            }
+            *slot = None;
         }
-        self.keys[name.index()] = None;
         self
     }
 

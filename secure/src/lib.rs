@@ -1,6 +1,18 @@
 #![doc = include_str!("../README.md")]
 #![no_std]
 #![forbid(unsafe_code)]
+// No panic on any input: no indexing that can fail, no unwrap, no panic (the `const`
+// key-file parser and `const` tables, evaluated at build time, are the exceptions,
+// allowed where they are).
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::indexing_slicing,
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic
+    )
+)]
 
 pub mod channel;
 pub mod crypto;

@@ -9,8 +9,9 @@
 //! * the work a `P_AE` costs (two X25519, one Ed25519 signature) is rate-limited by the
 //!   caller's monotonic clock: at most one per [`Responder::min_interval_ms`]
 //!   (1000 ms by default), refusals counted; a repeated `P_AE` of the pending handshake
-//!   is answered from a cache, without new work, at most once per interval too (so a
-//!   replayed message 1 cannot make the aircraft flood the radio);
+//!   is answered from a cache, without new work, at most twice per interval (so a
+//!   replayed message 1 cannot make the aircraft flood the radio, and the ground's
+//!   once-a-second repeat is answered despite clock jitter);
 //! * at most one Ed25519 verification per pending handshake: a `SIG` whose signature
 //!   fails ends that handshake (only the holder of the pending handshake's keys can get
 //!   that far, and a genuine ground station signs correctly);
@@ -18,6 +19,13 @@
 //! * an all-zero or low-order `P_AE` (all-zero shared secret) is refused;
 //! * the destination byte must be our id or broadcast, and the `ac_id` field our id or 0
 //!   (Paparazzi's ground leaves it at 0).
+//!
+//! What it cannot do: anyone can send `P_AE` (the key exchange is anonymous until the
+//! signatures), so a sustained flood of fresh `P_AE` (more than one per interval) can
+//! keep a ground from completing a *new* handshake (its `P_AE` refused by the rate limit,
+//! or its pending handshake replaced by a newer one). It never disturbs an established
+//! session, and costs the aircraft one handshake's work per interval; jamming the radio
+//! would deny service as well.
 
 use rand_core::CryptoRng;
 use zeroize::Zeroizing;
@@ -235,7 +243,7 @@ impl Responder {
         {
             // Message 2 was lost (the ground repeats message 1): the same answer again,
             // without new work, rate-limited like the work.
-            if !Self::elapsed(self.last_resend_ms, now_ms, self.min_interval_ms) {
+            if !Self::elapsed(self.last_resend_ms, now_ms, self.min_interval_ms / 2) {
                 return Err(HandshakeError::RateLimited);
             }
             self.last_resend_ms = Some(now_ms);
