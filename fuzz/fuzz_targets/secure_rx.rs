@@ -143,7 +143,11 @@ fn run(input: &[u8]) {
             let opened = match result {
                 Ok(opened) => opened,
                 Err(reason) => {
-                    assert_ne!(reason, Reject::BufferTooSmall, "a 255-byte buffer is enough");
+                    assert_ne!(
+                        reason,
+                        Reject::BufferTooSmall,
+                        "a 255-byte buffer is enough"
+                    );
                     assert_eq!(after.rejected(), before.rejected() + 1);
                     continue;
                 }
@@ -152,7 +156,9 @@ fn run(input: &[u8]) {
             if opened.is_encrypted() {
                 assert!(plain.len() <= 255 - pprz_secure::OVERHEAD);
             }
-            let (view, len) = PprzV2.parse(plain).expect("an opened frame is a PPRZ v2 frame");
+            let (view, len) = PprzV2
+                .parse(plain)
+                .expect("an opened frame is a PPRZ v2 frame");
             assert_eq!(len, plain.len());
             assert_eq!(view.data(), opened.data());
             match opened.protection() {

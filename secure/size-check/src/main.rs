@@ -90,7 +90,9 @@ fn salty_verify() {
 #[cfg(feature = "aircraft")]
 fn aircraft() {
     use pprz_secure::rand_core::{CryptoRng, RngCore};
-    use pprz_secure::{KeyExchange, KeyExchangeIds, KeyFile, Policy, Responder, ResponderEvent, SecureChannel};
+    use pprz_secure::{
+        KeyExchange, KeyExchangeIds, KeyFile, Policy, Responder, ResponderEvent, SecureChannel,
+    };
 
     /// Stands in for the hardware RNG.
     struct Rng;
@@ -123,7 +125,9 @@ fn aircraft() {
     let mut out = [0u8; 255];
     // The reader: a frame's DATA, opened; a key exchange goes to the responder.
     let data = input::<64>();
-    let opened = channel.open(&data[..black_box(40)], &mut out).map(|o| o.data());
+    let opened = channel
+        .open(&data[..black_box(40)], &mut out)
+        .map(|o| o.data());
     if let Ok(data) = opened
         && let Ok(Some(kx)) = KeyExchange::parse(data, &KeyExchangeIds::PPRZLINK)
     {
