@@ -48,7 +48,7 @@ use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 use pprz_transports::PprzV2;
 
 use crate::rng::Rng;
-use crate::sim::{Agenda, MOCK_TIME, Submit, Traffic, now_us};
+use crate::sim::{Agenda, MOCK_TIME, Submit, Traffic, ms, now_us, percentile};
 pub use crate::sim::{Level, STATUS};
 use crate::stream::{AC_ID, encode_frame};
 
@@ -99,12 +99,7 @@ pub struct LevelReport {
 impl LevelReport {
     /// Nearest-rank percentile `p` (0..=100) of the latencies, µs.
     pub fn percentile_us(&self, p: u64) -> Option<u64> {
-        let n = self.latencies_us.len() as u64;
-        if n == 0 {
-            return None;
-        }
-        let rank = (p * n).div_ceil(100).max(1);
-        self.latencies_us.get(rank as usize - 1).copied()
+        percentile(&self.latencies_us, p)
     }
 
     /// Largest latency, µs.
@@ -433,10 +428,6 @@ pub fn run_overload() -> OverloadReport {
         offered_payload_bytes_per_s: offered,
         systems,
     }
-}
-
-fn ms(us: Option<u64>) -> String {
-    us.map_or_else(|| "-".to_owned(), |us| format!("{:.1}", us as f64 / 1000.0))
 }
 
 /// The report as a text table, the systems side by side.

@@ -65,7 +65,7 @@ use pprz_transports::{AnyTransport, Decoder, Framing, PprzV2, XBee24};
 
 use crate::rng::Rng;
 pub use crate::sim::Level;
-use crate::sim::{Agenda, MOCK_TIME, STATUS, Submit, Traffic, now_us};
+use crate::sim::{Agenda, MOCK_TIME, STATUS, Submit, Traffic, ms, now_us, percentile};
 use crate::stream::{AC_ID, encode_frame};
 
 /// Simulated seconds of traffic.
@@ -325,16 +325,6 @@ impl LevelFigures {
     pub fn excess_us(&self, p: u64) -> Option<u64> {
         percentile(&self.excess_us, p)
     }
-}
-
-/// Nearest-rank percentile of sorted `values`.
-fn percentile(values: &[u64], p: u64) -> Option<u64> {
-    let n = values.len() as u64;
-    if n == 0 {
-        return None;
-    }
-    let rank = (p * n).div_ceil(100).max(1);
-    values.get(rank as usize - 1).copied()
 }
 
 /// The longest time one status message type went without a delivery.
@@ -1020,10 +1010,6 @@ pub fn run_radio() -> Vec<ScenarioReport> {
         .iter()
         .map(run_scenario)
         .collect()
-}
-
-fn ms(us: Option<u64>) -> String {
-    us.map_or_else(|| "-".to_owned(), |us| format!("{:.1}", us as f64 / 1000.0))
 }
 
 /// One scenario as a text table, the setups side by side.

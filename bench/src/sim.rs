@@ -112,6 +112,21 @@ impl Agenda {
     }
 }
 
+/// Nearest-rank percentile `p` (0..=100) of sorted `values`.
+pub(crate) fn percentile(values: &[u64], p: u64) -> Option<u64> {
+    let n = values.len() as u64;
+    if n == 0 {
+        return None;
+    }
+    let rank = (p * n).div_ceil(100).max(1);
+    values.get(rank as usize - 1).copied()
+}
+
+/// µs as ms with one decimal, `-` for none (the tables of the workloads).
+pub(crate) fn ms(us: Option<u64>) -> String {
+    us.map_or_else(|| "-".to_owned(), |us| format!("{:.1}", us as f64 / 1000.0))
+}
+
 /// Where the traffic goes.
 pub trait Submit {
     /// `msg` is submitted now; `state`: it is a periodic state sample (a newer one may
