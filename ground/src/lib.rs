@@ -12,6 +12,7 @@
 //! * [`record`]: PPRZLOG recordings that never destroy an input nor lose data silently.
 //! * [`cli`]: the command line, with every value checked.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
+//! * [`secure`]: the ground's end of a secure PPRZ v2 link (`pprz-monitor --secure`).
 //!
 //! ```
 //! use pprz_ground::{monitor::Monitor, set::RuntimeSet};
@@ -37,6 +38,7 @@ pub mod input;
 pub mod monitor;
 pub mod ping;
 pub mod record;
+pub mod secure;
 pub mod set;
 pub mod settings;
 pub mod uplink;

@@ -19,11 +19,13 @@ use std::fmt::Write as _;
 
 use pprz_messages::dynamic;
 use pprz_messages::{BaseType, FieldType, MessageDescriptor};
-use pprz_transports::{AnyTransport, Decoder, DecoderStats};
+use pprz_secure::{HandshakeError, Reject, SealError};
+use pprz_transports::{AnyTransport, Decoder, DecoderStats, Framing, PprzV2};
 
 use crate::format;
 use crate::input::Drops;
 use crate::ping::PingTracker;
+use crate::secure::{GroundSecure, HandshakeEvent, Incoming, SecureSetupError, SecureStatus};
 use crate::set::RuntimeSet;
 use crate::settings::{Answer, Expired, SettingTracker};
 
@@ -37,6 +39,12 @@ pub const IDLE_FLUSH: f64 = 0.5;
 
 /// Events and notices kept for the live view (the latest ones).
 pub const MAX_EVENTS: usize = 8;
+
+/// Handshake frames waiting for [`Monitor::poll_secure`] (the latest ones).
+pub const MAX_SECURE_OUT: usize = 4;
+
+/// Seconds during which rejections of the same reason share one notice.
+const REJECT_COALESCE: f64 = 1.0;
 
 /// Time buckets of a rate.
 const BUCKETS: usize = 10;
@@ -123,6 +131,11 @@ pub enum Event {
         /// What it means for the requests pending on this index.
         answer: Answer,
     },
+    /// A secure session was set up with the aircraft (handshake completed).
+    SecureSession {
+        /// Handshakes completed so far.
+        completed: u32,
+    },
 }
 
 /// Things that went wrong, worth a line of their own in the live view.
@@ -139,6 +152,16 @@ pub enum Notice {
     RequestExpired(Expired),
     /// Input dropped under overload before the bytes that followed.
     InputDropped(Drops),
+    /// Frames rejected by the secure link (not decoded): `count` in a row for the same
+    /// reason within a second share one notice.
+    SecureRejected {
+        /// Why.
+        reason: Reject,
+        /// How many.
+        count: u64,
+    },
+    /// A key-exchange message from the aircraft refused (forged, malformed, unexpected).
+    HandshakeRefused(HandshakeError),
 }
 
 /// Pushes `item` at time `now`, keeping the latest [`MAX_EVENTS`].
@@ -167,6 +190,8 @@ pub struct Monitor {
     input_gaps: u64,
     event_count: u64,
     notice_count: u64,
+    secure: Option<GroundSecure>,
+    secure_out: VecDeque<Vec<u8>>,
 }
 
 /// The scalar type of field `name` of `desc`.
@@ -197,7 +222,62 @@ impl Monitor {
             input_gaps: 0,
             event_count: 0,
             notice_count: 0,
+            secure: None,
+            secure_out: VecDeque::new(),
         }
+    }
+
+    /// The same monitor on a secure link: every frame is opened by `secure` first
+    /// (frames that fail are counted and noted, never decoded), the key exchange is
+    /// handled, and [`poll_secure`](Self::poll_secure) and
+    /// [`seal_uplink`](Self::seal_uplink) give the frames to write.
+    ///
+    /// # Errors
+    /// [`SecureSetupError::NotPprzV2`]: the monitor's transport is not PPRZ v2.
+    pub fn with_secure(mut self, secure: GroundSecure) -> Result<Self, SecureSetupError> {
+        if !matches!(self.decoder.framing(), AnyTransport::PprzV2(_)) {
+            return Err(SecureSetupError::NotPprzV2);
+        }
+        self.secure = Some(secure);
+        Ok(self)
+    }
+
+    /// The frames to write to the aircraft at `now` for the secure link: handshake
+    /// replies produced by the frames received, then what the handshake sends on its own
+    /// (message 1 and its repeats). Call it every loop iteration (at least every 100 ms
+    /// or so); empty without a secure link.
+    pub fn poll_secure(&mut self, now: f64) -> Vec<Vec<u8>> {
+        let mut out: Vec<Vec<u8>> = self.secure_out.drain(..).collect();
+        if let Some(secure) = &mut self.secure
+            && let Some(frame) = secure.poll(millis(now))
+        {
+            out.push(frame);
+        }
+        out
+    }
+
+    /// An uplink frame (PING, SETTING...) ready to write: sealed on a secure link,
+    /// unchanged otherwise.
+    ///
+    /// # Errors
+    /// On a secure link, [`SealError::NoSession`] before the handshake has completed
+    /// (and the other [`SealError`]s); the frame must not be sent.
+    pub fn seal_uplink(&mut self, frame: &[u8]) -> Result<Vec<u8>, SealError> {
+        match &mut self.secure {
+            Some(secure) => secure.seal(frame),
+            None => Ok(frame.to_vec()),
+        }
+    }
+
+    /// The secure link's state and counters; `None` without a secure link.
+    pub fn secure_status(&self) -> Option<SecureStatus> {
+        self.secure.as_ref().map(GroundSecure::status)
+    }
+
+    /// Whether uplink frames can be sent: always without a secure link, once the
+    /// session keys are installed with one.
+    pub fn uplink_ready(&self) -> bool {
+        self.secure.as_ref().is_none_or(GroundSecure::has_session)
     }
 
     /// The same monitor with other PING and request trackers (other bounds and
@@ -216,23 +296,70 @@ impl Monitor {
         self.byte_rate.add(now, bytes.len() as u64);
         let mut input = bytes;
         while let Some(frame) = self.decoder.feed(&mut input) {
-            let (source, class, id) = (frame.source(), frame.class(), frame.msg_id());
-            let payload = frame.payload().to_vec();
-            let raw = frame.raw().to_vec();
-            let line = self.handle(now, source, class, id, &payload);
-            on_message(&line, &raw);
+            let received = Received::of(&frame);
+            self.deliver(now, received, &mut on_message);
         }
     }
 
     /// End of input: decodes frames held behind an incomplete false start.
     pub fn flush(&mut self, now: f64, mut on_message: impl FnMut(&str, &[u8])) {
         while let Some(frame) = self.decoder.flush() {
-            let (source, class, id) = (frame.source(), frame.class(), frame.msg_id());
-            let payload = frame.payload().to_vec();
-            let raw = frame.raw().to_vec();
-            let line = self.handle(now, source, class, id, &payload);
-            on_message(&line, &raw);
+            let received = Received::of(&frame);
+            self.deliver(now, received, &mut on_message);
         }
+    }
+
+    /// Decodes a received frame, after opening it on a secure link.
+    fn deliver(&mut self, now: f64, frame: Received, on_message: &mut impl FnMut(&str, &[u8])) {
+        let Some(secure) = &mut self.secure else {
+            let line = self.handle(now, frame.source, frame.class, frame.id, &frame.payload);
+            on_message(&line, &frame.raw);
+            return;
+        };
+        match secure.open(&frame.data, millis(now)) {
+            Incoming::Plain(plain) => match PprzV2::new().view(&plain) {
+                Ok(f) => {
+                    let (source, class, id) = (f.source(), f.class(), f.msg_id());
+                    let payload = f.payload().to_vec();
+                    let line = self.handle(now, source, class, id, &payload);
+                    on_message(&line, &plain);
+                }
+                // The channel gives well-formed frames only.
+                Err(_) => self.secure_rejected(now, Reject::Malformed),
+            },
+            Incoming::Handshake { event, reply } => {
+                if let Some(reply) = reply {
+                    if self.secure_out.len() >= MAX_SECURE_OUT {
+                        self.secure_out.pop_front();
+                    }
+                    self.secure_out.push_back(reply);
+                }
+                match event {
+                    HandshakeEvent::Established => {
+                        let completed = secure.status().stats.handshake.completed;
+                        self.event(now, Event::SecureSession { completed });
+                    }
+                    HandshakeEvent::Resend => {}
+                    HandshakeEvent::Refused(HandshakeError::Duplicate) => {}
+                    HandshakeEvent::Refused(e) => {
+                        self.notice(now, Notice::HandshakeRefused(e));
+                    }
+                }
+            }
+            Incoming::Rejected(reason) => self.secure_rejected(now, reason),
+        }
+    }
+
+    /// Notes a rejected secure frame; a run of rejections for one reason shares a notice.
+    fn secure_rejected(&mut self, now: f64, reason: Reject) {
+        if let Some((at, Notice::SecureRejected { reason: r, count })) = self.notices.back_mut()
+            && *r == reason
+            && now - *at < REJECT_COALESCE
+        {
+            *count = count.saturating_add(1);
+            return;
+        }
+        self.notice(now, Notice::SecureRejected { reason, count: 1 });
     }
 
     /// Input was dropped under overload just before the next bytes: counts it, notes it
@@ -467,6 +594,8 @@ impl Monitor {
             + self.notices.capacity() * std::mem::size_of::<(f64, Notice)>()
             + self.pings.capacity() * 8
             + self.settings.pending() * 64
+            + self.secure.as_ref().map_or(0, |_| std::mem::size_of::<GroundSecure>() + 2048)
+            + self.secure_out.iter().map(Vec::capacity).sum::<usize>()
     }
 
     /// The status line: time, byte rate and every counter of lost or rejected input.
@@ -541,10 +670,20 @@ impl Monitor {
         out
     }
 
+    /// The secure link's status lines, if the monitor has one.
+    pub fn secure_lines(&self) -> Vec<String> {
+        self.secure_status()
+            .map(|s| s.lines().to_vec())
+            .unwrap_or_default()
+    }
+
     /// The live view: the status, a table of messages, the latest events and notices.
     pub fn render(&self, now: f64) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "{}", self.status(now));
+        for line in self.secure_lines() {
+            let _ = writeln!(s, "{line}");
+        }
         for line in self.uplink_status() {
             let _ = writeln!(s, "{line}");
         }
@@ -591,13 +730,41 @@ impl Monitor {
     /// overload), PING and SETTING statistics, and messages per priority level.
     pub fn summary(&self, now: f64) -> String {
         let mut s = self.status(now);
-        for line in self.uplink_status() {
+        for line in self.secure_lines().into_iter().chain(self.uplink_status()) {
             s.push('\n');
             s.push_str(&line);
         }
         s.push('\n');
         s.push_str(&self.priority_summary());
         s
+    }
+}
+
+/// A time in seconds as milliseconds (saturating; NaN and negative times are 0).
+fn millis(now: f64) -> u64 {
+    (now * 1000.0) as u64
+}
+
+/// What the monitor keeps of a decoded frame (the decoder's frame borrows the decoder).
+struct Received {
+    source: u8,
+    class: u8,
+    id: u8,
+    payload: Vec<u8>,
+    data: Vec<u8>,
+    raw: Vec<u8>,
+}
+
+impl Received {
+    fn of(frame: &pprz_transports::Frame<'_>) -> Self {
+        Self {
+            source: frame.source(),
+            class: frame.class(),
+            id: frame.msg_id(),
+            payload: frame.payload().to_vec(),
+            data: frame.data().to_vec(),
+            raw: frame.raw().to_vec(),
+        }
     }
 }
 
@@ -637,6 +804,9 @@ pub fn describe_event(e: &Event) -> String {
                 }
             }
         }
+        Event::SecureSession { completed } => {
+            format!("secure session established (handshake {completed})")
+        }
     }
 }
 
@@ -666,6 +836,10 @@ pub fn describe_notice(n: &Notice) -> String {
             "input overload: dropped {} bytes in {} reads",
             d.bytes, d.reads
         ),
+        Notice::SecureRejected { reason, count } => {
+            format!("{count} frame(s) rejected by the secure link: {reason}")
+        }
+        Notice::HandshakeRefused(e) => format!("key exchange from the aircraft refused: {e}"),
     }
 }
 
