@@ -15,7 +15,7 @@ cd "$(dirname "$0")/.."
 
 modes=("$@")
 if [ ${#modes[@]} -eq 0 ]; then
-    modes=(encode parse parse-buffered downlink arena-10 arena-50 arena-90)
+    modes=(encode parse parse-buffered downlink arena-10 arena-50 arena-90 secure-seal secure-open)
 fi
 
 command -v valgrind >/dev/null || { echo "valgrind is not installed" >&2; exit 1; }

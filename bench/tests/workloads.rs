@@ -141,3 +141,28 @@ fn the_overload_simulation_accounts_for_every_message() {
     let table = overload::render(&report);
     assert!(table.contains("ack p99 vs target"));
 }
+
+#[test]
+fn the_secure_workload_seals_frames_that_open_back_to_the_plain_frames() {
+    use pprz_bench::secure;
+    let (mut air, mut ground) = secure::session();
+    let plain = secure::plain_frames(100);
+    let mut sealed = vec![[0u8; secure::SEALED_FRAME_LEN]; plain.len()];
+    assert_eq!(secure::seal_frames(&mut air, &plain, &mut sealed), 100);
+    for (p, s) in plain.iter().zip(&sealed) {
+        assert_eq!((p.len(), s.len()), (48, 69));
+        assert_eq!(
+            (s[0], s[1], s[2]),
+            (0x99, 69, 0x55),
+            "an encrypted v2 frame"
+        );
+        assert_ne!(&s[9..51], &p[4..46], "the message is encrypted");
+    }
+    assert_eq!(
+        secure::open_frames(&mut ground, &sealed),
+        secure::expected_open_summary(100)
+    );
+    // Replayed, every frame is rejected.
+    let replay = secure::open_frames(&mut ground, &sealed);
+    assert_eq!((replay.opened, replay.rejected), (0, 100));
+}

@@ -12,7 +12,7 @@
 //! the function's instruction count by.
 //!
 //! Modes: `encode`, `parse` (`Decoder::feed_borrowed`), `parse-buffered` (`Decoder::feed`),
-//! `downlink`, `arena-10`, `arena-50`, `arena-90`, `arena` (the
+//! `downlink`, `arena-10`, `arena-50`, `arena-90`, `secure-seal`, `secure-open`, `arena` (the
 //! three fill levels and the fill at the first failure), `overload`, `radio`, `all` (default).
 
 use std::hint::black_box;
@@ -21,7 +21,8 @@ use std::process::ExitCode;
 use pprz_bench::arena::{self, ChurnSummary, CostArena, FillState};
 use pprz_bench::downlink::{self, Sink};
 use pprz_bench::stream::{self, MESSAGES, ParseSummary};
-use pprz_bench::{overload, radio};
+use pprz_bench::{overload, radio, secure};
+use pprz_secure::SecureChannel;
 use pprz_telemetry::stats::DeviceStats;
 
 /// Workload 1, measured: encode [`MESSAGES`] messages into `out`.
@@ -75,6 +76,25 @@ fn workload_arena_90(state: &mut FillState<'_>) -> ChurnSummary {
     let summary = arena::churn(state);
     assert_eq!(summary.percent, 90);
     summary
+}
+
+/// Workload 8, measured: seal the plain frames on an installed session.
+#[inline(never)]
+fn workload_secure_seal(
+    channel: &mut SecureChannel,
+    plain: &[secure::PlainFrame],
+    sealed: &mut [secure::SealedFrame],
+) -> usize {
+    secure::seal_frames(channel, plain, sealed)
+}
+
+/// Workload 8, measured: open (verify, decrypt) the sealed frames on an installed session.
+#[inline(never)]
+fn workload_secure_open(
+    channel: &mut SecureChannel,
+    sealed: &[secure::SealedFrame],
+) -> secure::OpenSummary {
+    secure::open_frames(channel, sealed)
 }
 
 /// Workload 4 (figures come from the simulation, not from an instruction count).
@@ -178,6 +198,51 @@ fn run_arena_fill() {
     }
 }
 
+/// The sealed frames of workload 8 and the channel that opens them (sealed unmeasured
+/// for `secure-open`).
+fn secure_setup(measure_seal: bool) -> (SecureChannel, Vec<secure::SealedFrame>) {
+    let (mut air, ground) = secure::session();
+    let plain = secure::plain_frames(secure::FRAMES);
+    let mut sealed = vec![[0u8; secure::SEALED_FRAME_LEN]; secure::FRAMES];
+    let n = if measure_seal {
+        workload_secure_seal(&mut air, black_box(&plain), black_box(&mut sealed))
+    } else {
+        secure::seal_frames(&mut air, &plain, &mut sealed)
+    };
+    assert_eq!(n, secure::FRAMES);
+    assert_eq!(air.stats().encrypted as usize, secure::FRAMES);
+    (ground, sealed)
+}
+
+fn run_secure_seal() {
+    let (mut ground, sealed) = secure_setup(true);
+    // Check (unmeasured): every sealed frame opens back to its plain frame.
+    let summary = secure::open_frames(&mut ground, &sealed);
+    assert_eq!(summary, secure::expected_open_summary(secure::FRAMES));
+    println!(
+        "secure-seal: {} frames of {} field bytes ({} -> {} bytes) sealed",
+        secure::FRAMES,
+        secure::FIELDS_LEN,
+        secure::PLAIN_FRAME_LEN,
+        secure::SEALED_FRAME_LEN
+    );
+    println!("units workload_secure_seal {} frame", secure::FRAMES);
+}
+
+fn run_secure_open() {
+    let (mut ground, sealed) = secure_setup(false);
+    let summary = workload_secure_open(&mut ground, black_box(&sealed));
+    assert_eq!(summary, secure::expected_open_summary(secure::FRAMES));
+    println!(
+        "secure-open: {} frames of {} bytes opened ({} field bytes each), digest {:016x}",
+        summary.opened,
+        secure::SEALED_FRAME_LEN,
+        secure::FIELDS_LEN,
+        summary.digest
+    );
+    println!("units workload_secure_open {} frame", secure::FRAMES);
+}
+
 fn run_overload() {
     let report = workload_overload();
     print!("{}", overload::render(&report));
@@ -190,7 +255,7 @@ fn run_radio() {
     }
 }
 
-const USAGE: &str = "usage: workloads [--mode encode|parse|parse-buffered|downlink|arena-10|arena-50|arena-90|arena|overload|radio|all]";
+const USAGE: &str = "usage: workloads [--mode encode|parse|parse-buffered|downlink|arena-10|arena-50|arena-90|secure-seal|secure-open|arena|overload|radio|all]";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -214,6 +279,8 @@ fn main() -> ExitCode {
         "arena-10" => run_arena_level(10),
         "arena-50" => run_arena_level(50),
         "arena-90" => run_arena_level(90),
+        "secure-seal" => run_secure_seal(),
+        "secure-open" => run_secure_open(),
         "arena" => {
             for p in [10, 50, 90] {
                 run_arena_level(p);
@@ -231,6 +298,8 @@ fn main() -> ExitCode {
                 run_arena_level(p);
             }
             run_arena_fill();
+            run_secure_seal();
+            run_secure_open();
             run_overload();
             run_radio();
         }
