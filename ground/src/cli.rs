@@ -90,9 +90,17 @@ pub struct Args {
     /// With --tcp or --serial they go back on the same stream.
     #[arg(long, value_name = "ADDR")]
     pub uplink: Option<SocketAddr>,
-    /// Aircraft id for PING/SETTING.
+    /// Aircraft id for PING/SETTING (and the only aircraft accepted with --secure).
     #[arg(long, default_value_t = 7)]
     pub ac_id: u8,
+    /// Secure link: encrypted and authenticated PPRZ v2 (Paparazzi's secure transport)
+    /// with the ground keys (GCS_PRIVATE, UAV_PUBLIC) of this key file. The monitor
+    /// performs the key exchange with --ac-id (again every second until it completes),
+    /// decrypts the telemetry, rejects and counts every frame that is not authenticated,
+    /// and encrypts its PINGs and SETTINGs (sent once the session is up). Needs
+    /// --transport pprz2 and a link to the aircraft.
+    #[arg(long, value_name = "KEYFILE")]
+    pub secure: Option<PathBuf>,
     /// Send a PING every this many seconds (0.05 to 3600) and show the round-trip time.
     #[arg(long, value_name = "SECONDS", value_parser = parse_ping_period, allow_negative_numbers = true)]
     pub ping: Option<f64>,
@@ -112,8 +120,8 @@ pub struct Args {
 }
 
 impl Args {
-    /// Checks the combinations of options that clap cannot: PINGs and SETTINGs need a
-    /// link to the aircraft.
+    /// Checks the combinations of options that clap cannot: PINGs, SETTINGs and the
+    /// secure link need a link to the aircraft, and the secure link PPRZ v2.
     ///
     /// # Errors
     /// A message naming the problem.
@@ -127,6 +135,19 @@ impl Args {
                 "--ping and --setting need a link to the aircraft: --tcp, --serial, or --udp with --uplink"
                     .into(),
             );
+        }
+        if self.secure.is_some() {
+            if self.transport != Transport::Pprz2 {
+                return Err(
+                    "--secure needs --transport pprz2 (the secure link is PPRZ v2 only)".into(),
+                );
+            }
+            if !has_uplink {
+                return Err(
+                    "--secure needs a link to the aircraft for the key exchange: --tcp, --serial, or --udp with --uplink"
+                        .into(),
+                );
+            }
         }
         if self.uplink.is_some() && self.udp.is_none() {
             return Err("--uplink goes with --udp (with --tcp or --serial, uplink frames go back on the same stream)".into());
@@ -270,6 +291,35 @@ mod tests {
         assert_eq!(a.settings, [(3, 1.5)]);
         assert_eq!(a.check(), Ok(()));
         assert_eq!(parse(&["--ping", "3600"]).unwrap().ping, Some(3600.0));
+    }
+
+    #[test]
+    fn secure_needs_pprz2_and_an_uplink() {
+        let base = ["--udp", "127.0.0.1:4242", "--uplink", "127.0.0.1:4243"];
+        let with = |extra: &[&str]| {
+            let mut v = base.to_vec();
+            v.extend_from_slice(extra);
+            parse(&v).unwrap().check()
+        };
+        assert_eq!(with(&["--secure", "k.keys"]), Ok(()));
+        assert_eq!(
+            parse(&["--tcp", "127.0.0.1:1", "--secure", "k.keys", "--ac-id", "9"])
+                .unwrap()
+                .check(),
+            Ok(())
+        );
+        for t in ["pprz1", "xbee", "xbee868", "pprzlog"] {
+            let e = with(&["--secure", "k.keys", "--transport", t]).unwrap_err();
+            assert!(e.contains("--secure needs --transport pprz2"), "{e}");
+        }
+        for args in [
+            &["--udp", "127.0.0.1:4242", "--secure", "k"][..],
+            &["--file", "x", "--secure", "k"],
+            &["--stdin", "--secure", "k"],
+        ] {
+            let e = parse(args).unwrap().check().unwrap_err();
+            assert!(e.contains("--secure needs a link"), "{e}");
+        }
     }
 
     #[test]

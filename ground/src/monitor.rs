@@ -594,7 +594,10 @@ impl Monitor {
             + self.notices.capacity() * std::mem::size_of::<(f64, Notice)>()
             + self.pings.capacity() * 8
             + self.settings.pending() * 64
-            + self.secure.as_ref().map_or(0, |_| std::mem::size_of::<GroundSecure>() + 2048)
+            + self
+                .secure
+                .as_ref()
+                .map_or(0, |_| std::mem::size_of::<GroundSecure>() + 2048)
             + self.secure_out.iter().map(Vec::capacity).sum::<usize>()
     }
 

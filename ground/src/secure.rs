@@ -36,9 +36,8 @@ use std::path::{Path, PathBuf};
 use pprz_secure::frame::MAX_FRAME_LEN;
 use pprz_secure::rand_core::{CryptoRng, OsRng, UnwrapErr};
 use pprz_secure::{
-    GroundKeys, HandshakeError, Initiator, InitiatorEvent, InitiatorState, KeyError,
-    KeyExchange, KeyFile, KeyFileError, OVERHEAD, Policy, Reject, SealError, SecureChannel,
-    SecureStats,
+    GroundKeys, HandshakeError, Initiator, InitiatorEvent, InitiatorState, KeyError, KeyExchange,
+    KeyFile, KeyFileError, OVERHEAD, Policy, Reject, SealError, SecureChannel, SecureStats,
 };
 
 /// Longest key file read, in bytes (a key file is a few hundred bytes).

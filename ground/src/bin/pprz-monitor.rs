@@ -2,7 +2,8 @@
 //! port, a file or standard input, with any `messages.xml`.
 //!
 //! Exit status: 0 after a complete run (end of input, `--duration`, Ctrl-C), 1 when
-//! the input, the output or the recording failed, 2 for invalid options.
+//! the input, the output or the recording failed, 2 for invalid options (an unusable
+//! `--secure` key file included).
 
 use std::fs::File;
 use std::io::{BufWriter, ErrorKind, Write};
@@ -21,6 +22,7 @@ use pprz_ground::monitor::{
     IDLE_FLUSH, MAX_EVENTS, Monitor, Notice, describe_event, describe_notice,
 };
 use pprz_ground::record::{self, FileId, Recorder};
+use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_transports::AnyTransport;
@@ -189,13 +191,100 @@ fn report_new(monitor: &Monitor, seen: &mut (u64, u64)) {
     *seen = (monitor.event_count(), monitor.notice_count());
 }
 
+/// Seconds between two reports of the secure link's counters in `--lines` mode (a
+/// change of state is reported at once).
+const SECURE_REPORT_PERIOD: f64 = 5.0;
+
+/// In `--lines` mode, writes the secure link's status to standard error when its state
+/// changes, and its counters every [`SECURE_REPORT_PERIOD`] when they changed.
+#[derive(Default)]
+struct SecureReport {
+    last: Option<(pprz_secure::InitiatorState, [String; 2])>,
+    next: f64,
+}
+
+impl SecureReport {
+    fn update(&mut self, monitor: &Monitor, t: f64) {
+        let Some(status) = monitor.secure_status() else {
+            return;
+        };
+        let lines = status.lines();
+        let (changed_state, changed) = match &self.last {
+            Some((state, last)) => (*state != status.state, *last != lines),
+            None => (true, true),
+        };
+        if changed_state || (changed && t >= self.next) {
+            for line in &lines {
+                eprintln!("[{t:7.1}s] {line}");
+            }
+            self.last = Some((status.state, lines));
+            self.next = t + SECURE_REPORT_PERIOD;
+        }
+    }
+}
+
+/// Builds uplink message `name`, seals it on a secure link, and writes it; `false`
+/// (reported on standard error) if it was not sent.
+fn send(
+    monitor: &mut Monitor,
+    sink: &mut UplinkSink,
+    transport: AnyTransport,
+    ac_id: u8,
+    name: &str,
+    values: &[(&str, f64)],
+) -> bool {
+    let frame = match uplink::frame(monitor.set(), transport, ac_id, name, values) {
+        Ok(frame) => frame,
+        Err(e) => {
+            eprintln!("cannot build {name}: {}", escape::lines(&e.to_string()));
+            return false;
+        }
+    };
+    let frame = match monitor.seal_uplink(&frame) {
+        Ok(frame) => frame,
+        Err(e) => {
+            eprintln!("cannot send {name}: {e}");
+            return false;
+        }
+    };
+    match sink.send(&frame) {
+        Ok(()) => true,
+        Err(e) => {
+            eprintln!("cannot send {name}: {}", escape::lines(&e.to_string()));
+            false
+        }
+    }
+}
+
+/// Writes the secure link's handshake frames due at `t`.
+fn send_secure(monitor: &mut Monitor, sink: &mut UplinkSink, t: f64) {
+    for frame in monitor.poll_secure(t) {
+        if let Err(e) = sink.send(&frame) {
+            eprintln!(
+                "cannot send the key exchange: {}",
+                escape::lines(&e.to_string())
+            );
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if let Err(e) = args.check() {
         eprintln!("error: {e}");
         return ExitCode::from(2);
     }
-    match run(&args) {
+    let secure = match &args.secure {
+        Some(path) => match GroundSecure::from_key_file(path, args.ac_id) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                eprintln!("error: --secure: {}", escape::lines(&e.to_string()));
+                return ExitCode::from(2);
+            }
+        },
+        None => None,
+    };
+    match run(&args, secure) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", escape::lines(&e));
@@ -204,7 +293,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(args: &Args) -> Result<(), String> {
+fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
     let set = RuntimeSet::load(&args.messages)
         .map_err(|e| format!("{e}\n(give the messages.xml of the aircraft with --messages)"))?;
     let transport: AnyTransport = args.transport.any();
@@ -241,6 +330,9 @@ fn run(args: &Args) -> Result<(), String> {
     let start = Instant::now();
     let now = || start.elapsed().as_secs_f64();
     let mut monitor = Monitor::new(set, transport);
+    if let Some(secure) = secure {
+        monitor = monitor.with_secure(secure).map_err(|e| e.to_string())?;
+    }
     let mut out = Output {
         lines: args.lines,
         stdout: BufWriter::new(std::io::stdout()),
@@ -249,31 +341,9 @@ fn run(args: &Args) -> Result<(), String> {
         record_path: args.record.clone(),
         record_error: None,
     };
-    let mut send = |name: &str, values: &[(&str, f64)]| match uplink::frame(
-        &set, transport, args.ac_id, name, values,
-    ) {
-        Ok(frame) => match uplink_sink.send(&frame) {
-            Ok(()) => true,
-            Err(e) => {
-                eprintln!("cannot send {name}: {}", escape::lines(&e.to_string()));
-                false
-            }
-        },
-        Err(e) => {
-            eprintln!("cannot build {name}: {}", escape::lines(&e.to_string()));
-            false
-        }
-    };
-    for (index, value) in &args.settings {
-        let values = [
-            ("index", f64::from(*index)),
-            ("ac_id", f64::from(args.ac_id)),
-            ("value", f64::from(*value)),
-        ];
-        if send("SETTING", &values) {
-            monitor.setting_value_sent(now(), *index, f64::from(*value));
-        }
-    }
+    // The SETTINGs go at start, or once the secure session is up.
+    let mut settings_pending = true;
+    let mut secure_report = SecureReport::default();
     let mut next_ping = args.ping.map(|_| 0.0);
     let mut next_render = 0.0;
     let mut next_flush = 0.0;
@@ -287,10 +357,45 @@ fn run(args: &Args) -> Result<(), String> {
             break;
         }
         monitor.tick(t);
+        send_secure(&mut monitor, &mut uplink_sink, t);
+        if args.lines {
+            secure_report.update(&monitor, t);
+        }
+        if settings_pending && monitor.uplink_ready() {
+            settings_pending = false;
+            for (index, value) in &args.settings {
+                let values = [
+                    ("index", f64::from(*index)),
+                    ("ac_id", f64::from(args.ac_id)),
+                    ("value", f64::from(*value)),
+                ];
+                let sink = &mut uplink_sink;
+                if send(
+                    &mut monitor,
+                    sink,
+                    transport,
+                    args.ac_id,
+                    "SETTING",
+                    &values,
+                ) {
+                    monitor.setting_value_sent(now(), *index, f64::from(*value));
+                }
+            }
+        }
         if let (Some(period), Some(at)) = (args.ping, next_ping)
             && t >= at
         {
-            if send("PING", &[]) {
+            // On a secure link, no PING before the session is up.
+            if monitor.uplink_ready()
+                && send(
+                    &mut monitor,
+                    &mut uplink_sink,
+                    transport,
+                    args.ac_id,
+                    "PING",
+                    &[],
+                )
+            {
                 monitor.ping_sent(now());
             }
             // After a stall, the next PING is one period from now, not a burst.
@@ -334,6 +439,7 @@ fn run(args: &Args) -> Result<(), String> {
         }
         if args.lines {
             report_new(&monitor, &mut seen);
+            secure_report.update(&monitor, now());
         }
         let t = now();
         if args.lines && (live || t >= next_flush) {
