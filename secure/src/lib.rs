@@ -20,6 +20,8 @@ pub mod frame;
 pub mod handshake;
 pub mod initiator;
 pub mod keys;
+#[cfg(feature = "embassy")]
+pub mod link;
 pub mod responder;
 pub mod stats;
 

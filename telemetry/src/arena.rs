@@ -532,6 +532,15 @@ impl FrameBuf<'_> {
         }
     }
 
+    /// Sets the logical length to the whole block (its [`capacity`](Self::capacity), at
+    /// most `u16::MAX`) and returns it: the spare bytes after a frame, for a link layer
+    /// that lengthens the frame in place. They hold whatever the block held before
+    /// (possibly an older frame's bytes; never uninitialised, invariant 6).
+    pub(crate) fn set_len_to_capacity(&mut self) -> usize {
+        self.len = u16::try_from(self.capacity()).unwrap_or(u16::MAX);
+        self.len()
+    }
+
     /// Pointer to the first byte of the block.
     fn ptr(&self) -> *mut u8 {
         // `wrapping_add` cannot leave the storage: `start * GRANULARITY < UNITS *
@@ -843,6 +852,31 @@ mod tests {
     use std::vec::Vec;
 
     type Arena<const N: usize> = FrameArena<CriticalSectionRawMutex, N>;
+
+    #[test]
+    fn a_frame_grows_back_to_its_block_and_no_further() {
+        let arena: Arena<1024> = FrameArena::new();
+        let empty = arena.stats();
+        let mut a = arena.alloc(13).unwrap();
+        let mut b = arena.alloc(8).unwrap();
+        b.fill(0xBB);
+        a.fill(0xAA);
+        a.truncate(5);
+        // The whole block (13 rounded up to 16), writable to its last byte.
+        assert_eq!(a.set_len_to_capacity(), 16);
+        assert_eq!(a.len(), 16);
+        assert_eq!(&a[..13], &[0xAA; 13]);
+        a[15] = 0x55;
+        a.truncate(14);
+        assert_eq!(a.len(), 14);
+        // The neighbour's bytes are untouched.
+        assert_eq!(&b[..], &[0xBB; 8]);
+        drop(a);
+        b.fill(0);
+        drop(b);
+        assert_eq!(arena.stats().used, empty.used);
+        assert_eq!(arena.stats().live, 0);
+    }
 
     #[test]
     fn classes_are_exact_up_to_32_units_and_monotonic() {

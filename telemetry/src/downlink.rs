@@ -62,6 +62,7 @@ use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, TxMeta, TxSta
 
 use crate::arena::{AllocError, ArenaStats, FrameArena, FrameBuf};
 use crate::delivery::{DeliveryStats, DeliveryWindow, Outstanding};
+use crate::layer::LinkLayer;
 use crate::queue::{FrameQueue, MessageKey, Pushed};
 use crate::stats::{DeviceStats, DropReason};
 
@@ -252,6 +253,12 @@ pub struct DeviceConfig {
     /// their status in the modem (`None`: frames are written without frame ids, the
     /// modem sends no status). See [`delivery`](crate::delivery).
     pub delivery: Option<DeliveryWindow>,
+    /// Spare bytes allocated after every frame of this device, for a
+    /// [`LinkLayer`](crate::layer::LinkLayer) that lengthens frames when the writer takes
+    /// them for the wire (the secure link's 21 bytes of counter, tag and crypto byte). A
+    /// message whose frame would not fit the transport with them is refused at `send`
+    /// ([`DropReason::TooLarge`]).
+    pub reserve: u8,
 }
 
 impl DeviceConfig {
@@ -265,7 +272,14 @@ impl DeviceConfig {
             replies: Some(ReplyLimit::DEFAULT),
             pacing: None,
             delivery: None,
+            reserve: 0,
         }
+    }
+
+    /// With `bytes` spare bytes after every frame; see [`reserve`](Self::reserve).
+    pub const fn reserve(mut self, bytes: u8) -> Self {
+        self.reserve = bytes;
+        self
     }
 
     /// With this transmit-status window (`None`: none); it applies to transports with
@@ -567,8 +581,8 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 });
                 continue;
             }
-            let transport = self.devices[device].transport;
-            let built = self.build(msg, &meta, payload_len, transport, priority, &frames);
+            let config = &self.devices[device];
+            let built = self.build(msg, &meta, payload_len, config, priority, &frames);
             match built {
                 Ok(frame) => {
                     // `frames` has room for one frame per device.
@@ -620,14 +634,22 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         msg: &dyn EncodeFields,
         meta: &TxMeta,
         payload_len: usize,
-        transport: AnyTransport,
+        config: &DeviceConfig,
         priority: u8,
         built: &[(usize, FrameBuf<'a>)],
     ) -> Result<FrameBuf<'a>, DropReason> {
+        let transport = config.transport;
+        let reserve = usize::from(config.reserve);
         let frame_len = transport
             .frame_len(payload_len)
             .map_err(|_| DropReason::TooLarge)?;
-        let mut frame = self.alloc(frame_len, priority)?;
+        if reserve > 0 {
+            // The frame as the layer will lengthen it must still fit the transport.
+            transport
+                .frame_len(payload_len + reserve)
+                .map_err(|_| DropReason::TooLarge)?;
+        }
+        let mut frame = self.alloc(frame_len + reserve, priority)?;
         if let Some((_, same)) = built
             .iter()
             .find(|(d, _)| self.devices[*d].transport == transport)
@@ -651,6 +673,9 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         let len = transport
             .finish_frame(meta, &mut frame, n)
             .map_err(|_| DropReason::Encode)?;
+        if len > frame_len {
+            return Err(DropReason::Encode);
+        }
         frame.truncate(len);
         Ok(frame)
     }
@@ -745,7 +770,7 @@ trait Core: Sync {
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
     /// Runs `f` on device `device`'s outstanding frames (nothing for a bad index).
     fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
-    fn complete(&self, device: usize, len: usize, written: bool);
+    fn complete(&self, device: usize, len: usize, outcome: Result<(), DropReason>);
 }
 
 impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M, D, Q> {
@@ -796,9 +821,9 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         }
     }
 
-    fn complete(&self, device: usize, len: usize, written: bool) {
+    fn complete(&self, device: usize, len: usize, outcome: Result<(), DropReason>) {
         if let Some(q) = self.queues.get(device) {
-            q.complete(len, written);
+            q.complete(len, outcome);
         }
     }
 }
@@ -1154,13 +1179,46 @@ impl Outgoing<'_> {
         &mut self.frame
     }
 
+    /// Lets `layer` rewrite the frame for the wire in place, in the whole of its arena
+    /// block (the frame plus the spare bytes its device reserves,
+    /// [`DeviceConfig::reserve`]). `Err` if the layer refused it: the frame must not be
+    /// written (its bytes are unspecified) and is to be [`refused`](Self::refuse).
+    pub(crate) fn seal_with<L: LinkLayer + ?Sized>(&mut self, layer: &L) -> Result<(), ()> {
+        let len = self.frame.len();
+        let capacity = self.frame.set_len_to_capacity();
+        match layer.seal(&mut self.frame, len) {
+            Ok(sealed) if sealed <= capacity => {
+                self.frame.truncate(sealed);
+                Ok(())
+            }
+            _ => {
+                self.frame.truncate(len);
+                Err(())
+            }
+        }
+    }
+
     /// Counts the frame as sent (`written`) or as a
     /// [`DropReason::WriteError`] drop, and releases its memory.
-    pub fn finish(mut self, written: bool) {
+    pub fn finish(self, written: bool) {
+        self.finish_with(if written {
+            Ok(())
+        } else {
+            Err(DropReason::WriteError)
+        });
+    }
+
+    /// Counts the frame as a [`DropReason::Refused`] drop (the device's link layer would
+    /// not send it) and releases its memory.
+    pub fn refuse(self) {
+        self.finish_with(Err(DropReason::Refused));
+    }
+
+    fn finish_with(mut self, outcome: Result<(), DropReason>) {
         self.done = true;
         self.device
             .core
-            .complete(self.device.index(), self.frame.len(), written);
+            .complete(self.device.index(), self.frame.len(), outcome);
     }
 }
 
@@ -1175,9 +1233,11 @@ impl core::ops::Deref for Outgoing<'_> {
 impl Drop for Outgoing<'_> {
     fn drop(&mut self) {
         if !self.done {
-            self.device
-                .core
-                .complete(self.device.index(), self.frame.len(), false);
+            self.device.core.complete(
+                self.device.index(),
+                self.frame.len(),
+                Err(DropReason::WriteError),
+            );
         }
         // The frame's memory returns to the arena after this, when its fields drop.
     }

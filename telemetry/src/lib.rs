@@ -6,6 +6,7 @@
 pub mod arena;
 pub mod delivery;
 pub mod downlink;
+pub mod layer;
 pub mod link;
 mod queue;
 pub mod reader;
@@ -24,6 +25,7 @@ pub use downlink::{
     Device, DeviceConfig, Downlink, FrameAlloc, Outgoing, Pacing, Port, PortsTaken, ReplyLimit,
     SendError, Sender, Targets,
 };
+pub use layer::{Layered, LinkLayer, Plain};
 pub use link::{Link, LinkMutex, LinkStats};
 pub use stats::{DeviceStats, DropReason};
-pub use writer::run_writer;
+pub use writer::{run_writer, run_writer_with};

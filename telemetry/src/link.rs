@@ -63,11 +63,12 @@ use pprz_transports::{AnyTransport, PprzV2};
 use crate::arena::ArenaStats;
 use crate::delivery::DeliveryStats;
 use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, Port, PortsTaken, SendError, Sender};
+use crate::layer::{Layered, LinkLayer, Plain};
 use crate::reader::{Datalink, Inbox, Reader, UplinkStats};
 use crate::registry::{Filter, Received, RegistryFull, Subscriber};
 use crate::services::{ServiceStats, Services, Settings};
 use crate::stats::DeviceStats;
-use crate::writer::run_writer;
+use crate::writer::run_writer_with;
 
 /// The mutex of a [`Link`] (a critical section: the link may be used from any task and
 /// from interrupts); also the one to give its [`FrameArena`](crate::FrameArena).
@@ -223,6 +224,23 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
     /// Returns at once with [`PortsTaken`] if the link is running already: a device has
     /// one writer.
     pub async fn run<W: Write, R: Read>(&'a self, tx: W, rx: R) -> Result<Infallible, PortsTaken> {
+        self.run_with_layer(tx, rx, &Plain).await
+    }
+
+    /// [`run`](Self::run) with a [`LinkLayer`] on the device (the secure link of
+    /// `pprz-secure`): the writer seals each frame with `layer` as it takes it for the
+    /// wire, and the reader opens each received frame with it before the services and
+    /// subscribers see it. Create the link [`with_device`](Self::with_device) and a
+    /// configuration that [reserves](DeviceConfig::reserve) the layer's overhead.
+    ///
+    /// # Errors
+    /// As [`run`](Self::run).
+    pub async fn run_with_layer<W: Write, R: Read, L: LinkLayer + ?Sized>(
+        &'a self,
+        tx: W,
+        rx: R,
+        layer: &L,
+    ) -> Result<Infallible, PortsTaken> {
         let port = match self.port.lock(Cell::take) {
             Some(port) => port,
             None => {
@@ -240,7 +258,8 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
         let transport = port.device().config().transport;
         let mut reader: Reader<'a, R, AnyTransport> = Reader::new(rx, transport, port.device());
         let inbox = LinkInbox { link: self };
-        match select(run_writer(port, tx), reader.run(&inbox)).await {
+        let inbox = Layered::new(layer, &inbox);
+        match select(run_writer_with(port, tx, layer), reader.run(&inbox)).await {
             Either::First(never) | Either::Second(never) => never,
         }
     }

@@ -169,6 +169,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                         arena_full: 0,
                         write_error: 0,
                         rate_limited: 0,
+                        refused: 0,
                     },
                     evicted: crate::stats::EvictCounts {
                         queue_full: 0,
@@ -348,18 +349,22 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         })
     }
 
-    /// Reports the outcome of writing the in-flight frame of `len` bytes.
-    pub fn complete(&self, len: usize, written: bool) {
+    /// Reports the outcome of writing the in-flight frame of `len` bytes: sent, or lost
+    /// for `reason` (a write error, or refused by the device's link layer).
+    pub fn complete(&self, len: usize, outcome: Result<(), DropReason>) {
         self.with(|s| {
             let priority = s.in_flight_priority;
-            if written {
-                s.stats.sent = s.stats.sent.wrapping_add(1);
-                s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
-                let l = s.level(priority);
-                l.sent = l.sent.wrapping_add(1);
-            } else {
-                s.stats.dropped.count(DropReason::WriteError);
-                s.lost(priority);
+            match outcome {
+                Ok(()) => {
+                    s.stats.sent = s.stats.sent.wrapping_add(1);
+                    s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
+                    let l = s.level(priority);
+                    l.sent = l.sent.wrapping_add(1);
+                }
+                Err(reason) => {
+                    s.stats.dropped.count(reason);
+                    s.lost(priority);
+                }
             }
             s.in_flight = false;
             s.update_queued();
@@ -454,7 +459,7 @@ mod tests {
                 ages.push(end - u64::from_le_bytes(at));
                 gaps[i] = gaps[i].max(end - last[i]);
                 last[i] = end;
-                queue.complete(frame.len(), true);
+                queue.complete(frame.len(), Ok(()));
                 link_free_us = end;
             }
         }

@@ -40,6 +40,10 @@ pub enum DropReason {
     /// The device's reply rate limit ([`ReplyLimit`](crate::ReplyLimit)) refused a reply
     /// (a request flood must not starve the device's telemetry).
     RateLimited,
+    /// The device's [`LinkLayer`](crate::layer::LinkLayer) refused the frame when the
+    /// writer took it for the wire (the secure link: no session yet, or the session's
+    /// frame counter used up).
+    Refused,
 }
 
 impl fmt::Display for DropReason {
@@ -52,6 +56,7 @@ impl fmt::Display for DropReason {
             Self::WriteError => "device write error",
             Self::NoDevice => "no device of the downlink among the targets",
             Self::RateLimited => "reply refused by the device's reply rate limit",
+            Self::Refused => "frame refused by the device's link layer",
         })
     }
 }
@@ -72,6 +77,8 @@ pub struct DropCounts {
     pub write_error: u32,
     /// [`DropReason::RateLimited`]: replies refused by the device's reply rate limit.
     pub rate_limited: u32,
+    /// [`DropReason::Refused`]: frames the device's link layer refused at write time.
+    pub refused: u32,
 }
 
 impl DropCounts {
@@ -83,6 +90,7 @@ impl DropCounts {
             .wrapping_add(self.arena_full)
             .wrapping_add(self.write_error)
             .wrapping_add(self.rate_limited)
+            .wrapping_add(self.refused)
     }
 
     pub(crate) fn count(&mut self, reason: DropReason) {
@@ -93,6 +101,7 @@ impl DropCounts {
             DropReason::ArenaFull => &mut self.arena_full,
             DropReason::WriteError => &mut self.write_error,
             DropReason::RateLimited => &mut self.rate_limited,
+            DropReason::Refused => &mut self.refused,
             // Not a device's drop: counted by the downlink (`undeliverable`).
             DropReason::NoDevice => return,
         };

@@ -25,6 +25,10 @@
 //! queue, where a more important one can still overtake them.
 
 //!
+//! # Link layers
+//! [`run_writer_with`] seals every frame with the device's
+//! [`LinkLayer`](crate::layer::LinkLayer) (the secure link) just before writing it.
+//!
 //! # Transmit statuses
 //! For an XBee device configured with a [`DeliveryWindow`], the
 //! writer gives every frame a fresh frame id and waits, before taking the next frame,
@@ -40,11 +44,26 @@ use embedded_io_async::Write;
 
 use crate::delivery::DeliveryWindow;
 use crate::downlink::{Device, Pacing, Port};
+use crate::layer::{LinkLayer, Plain};
 
 /// Runs the writer of `port`'s device forever, writing its frames to `io`. (The port is
 /// borrowed, so it outlives a cancelled writer and can be given to the next one.)
-pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
+pub async fn run_writer<W: Write>(port: &mut Port<'_>, io: W) -> ! {
+    run_writer_with(port, io, &Plain).await
+}
+
+/// [`run_writer`] for a device with a [`LinkLayer`]: each frame is sealed by `layer` when
+/// the writer takes it for the wire (so a frame counter follows the order on the wire,
+/// after priority reordering); a frame the layer refuses is not written and counts as a
+/// [`DropReason::Refused`](crate::DropReason::Refused) drop.
+pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
+    port: &mut Port<'_>,
+    mut io: W,
+    layer: &L,
+) -> ! {
     let device = port.device();
+    // Frames grow by up to this much when sealed: the modem model counts it.
+    let reserve = usize::from(device.config().reserve);
     let config = device.config();
     let mut modem = config.pacing.map(ModemModel::new);
     let window = config.delivery.filter(|_| config.transport.has_tx_status());
@@ -55,7 +74,7 @@ pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
         if let Some(model) = &modem {
             // Wait for room for the most important frame; look again after waiting, as a
             // more important (perhaps longer) frame may have arrived meanwhile.
-            let len = port.ready().await;
+            let len = port.ready().await + reserve;
             let at = model.ready_at(len);
             if at > Instant::now().as_ticks() {
                 Timer::at(Instant::from_ticks(at)).await;
@@ -63,6 +82,10 @@ pub async fn run_writer<W: Write>(port: &mut Port<'_>, mut io: W) -> ! {
             }
         }
         let mut frame = port.next().await;
+        if frame.seal_with(layer).is_err() {
+            frame.refuse();
+            continue;
+        }
         let now = Instant::now().as_ticks();
         if let Some(model) = &mut modem {
             model.add(frame.len(), now);

@@ -1,0 +1,142 @@
+//! Link layers: a step between the queue and the wire on the way down, and between the
+//! decoder and the subscribers on the way up, for a device whose frames are transformed
+//! on the link (the secure link of `pprz-secure` encrypts and authenticates them).
+//!
+//! ```text
+//!  queue ──► writer: layer.seal(frame) ──► device        (counter and encryption at wire time)
+//!  device ──► reader: decoder ──► layer.open(frame) ──► destination filter, services, subscribers
+//! ```
+//!
+//! A layer is shared by the device's writer and reader (`&self`, so it keeps its state
+//! behind a lock of its own). The writer calls [`LinkLayer::seal`] when it takes a frame
+//! for the wire, not when the frame is queued: frames leave the queue in priority order,
+//! so whatever the layer numbers (a frame counter) follows the order on the wire. A
+//! layer that lengthens frames needs room after each one: give the device
+//! [`DeviceConfig::reserve`](crate::DeviceConfig::reserve) spare bytes, allocated with
+//! every frame (a message that cannot fit with them is refused at `send`).
+//!
+//! Every frame stays accounted for: a frame the layer refuses is counted as a
+//! [`DropReason::Refused`](crate::DropReason::Refused) drop of the device; a received
+//! frame the layer rejects or consumes is counted by the layer.
+//!
+//! Without a layer, the writer uses [`Plain`], which changes nothing and costs nothing,
+//! and the reader delivers straight to its inbox.
+
+use pprz_transports::{Frame, Framing, MAX_FRAME_LEN, PprzV2};
+
+use crate::reader::Inbox;
+use crate::registry::Received;
+
+/// Why a [`LinkLayer`] did not let a frame go to the wire (the layer counts its reasons).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Refused;
+
+impl core::fmt::Display for Refused {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("frame refused by the link layer")
+    }
+}
+
+impl core::error::Error for Refused {}
+
+/// A transformation of one device's frames on the link; see the
+/// [module documentation](self).
+pub trait LinkLayer: Sync {
+    /// Rewrites the frame `buf[..len]` in place for the wire, using at most `buf.len()`
+    /// bytes (the frame's whole arena block), and returns the length to write.
+    ///
+    /// # Errors
+    /// [`Refused`]: the frame must not be sent (the writer counts it as
+    /// [`DropReason::Refused`](crate::DropReason::Refused)).
+    fn seal(&self, buf: &mut [u8], len: usize) -> Result<usize, Refused>;
+
+    /// Opens a received frame: what to deliver to the subscribers, if anything (a frame
+    /// rejected, or consumed by the layer itself such as a key exchange, is counted by
+    /// the layer).
+    fn open(&self, frame: &Frame<'_>, out: &mut [u8; MAX_FRAME_LEN]) -> Opened;
+}
+
+/// What [`LinkLayer::open`] made of a received frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Opened {
+    /// Deliver the frame as it was received.
+    Unchanged,
+    /// Deliver the PPRZ v2 frame (`STX LEN src dst comp|class id fields CK_A CK_B`) the
+    /// layer wrote at the start of `out`, of this length.
+    Rewritten(usize),
+    /// Deliver nothing.
+    Withheld,
+}
+
+/// No layer: frames go to the wire as queued and are delivered as decoded.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Plain;
+
+impl LinkLayer for Plain {
+    #[inline]
+    fn seal(&self, _buf: &mut [u8], len: usize) -> Result<usize, Refused> {
+        Ok(len)
+    }
+
+    #[inline]
+    fn open(&self, _frame: &Frame<'_>, _out: &mut [u8; MAX_FRAME_LEN]) -> Opened {
+        Opened::Unchanged
+    }
+}
+
+impl<L: LinkLayer + ?Sized> LinkLayer for &L {
+    #[inline]
+    fn seal(&self, buf: &mut [u8], len: usize) -> Result<usize, Refused> {
+        (**self).seal(buf, len)
+    }
+
+    #[inline]
+    fn open(&self, frame: &Frame<'_>, out: &mut [u8; MAX_FRAME_LEN]) -> Opened {
+        (**self).open(frame, out)
+    }
+}
+
+/// An [`Inbox`] that opens every frame with a [`LinkLayer`] before handing it to
+/// `inbox`: what a device's [`Reader`](crate::reader::Reader) delivers to when the
+/// device has a layer (`reader.run(&Layered::new(&layer, &datalink))`).
+#[derive(Debug)]
+pub struct Layered<'l, L: ?Sized, I: ?Sized> {
+    layer: &'l L,
+    inbox: &'l I,
+}
+
+impl<'l, L: ?Sized, I: ?Sized> Layered<'l, L, I> {
+    /// Frames from the reader go through `layer`, then to `inbox`.
+    pub const fn new(layer: &'l L, inbox: &'l I) -> Self {
+        Self { layer, inbox }
+    }
+}
+
+impl<'d, L: LinkLayer + ?Sized, I: Inbox<'d> + ?Sized> Inbox<'d> for Layered<'_, L, I> {
+    fn deliver(&self, rx: &Received<'_, 'd>) {
+        let mut out = [0u8; MAX_FRAME_LEN];
+        match self.layer.open(&rx.frame, &mut out) {
+            Opened::Unchanged => self.inbox.deliver(rx),
+            Opened::Withheld => {}
+            Opened::Rewritten(len) => {
+                // A layer that returns a bad frame delivers nothing (nothing to count it
+                // under: a bug of the layer, not an input).
+                let Some(bytes) = out.get(..len) else {
+                    return;
+                };
+                if let Ok(frame) = PprzV2::new().view(bytes) {
+                    self.inbox.deliver(&Received {
+                        device: rx.device,
+                        frame,
+                    });
+                }
+            }
+        }
+    }
+
+    fn read_error(&self) {
+        self.inbox.read_error();
+    }
+}
