@@ -97,8 +97,8 @@ pub struct Args {
     /// with the ground keys (GCS_PRIVATE, UAV_PUBLIC) of this key file. The monitor
     /// performs the key exchange with --ac-id (again every second until it completes),
     /// decrypts the telemetry, rejects and counts every frame that is not authenticated,
-    /// and encrypts its PINGs and SETTINGs (sent once the session is up). Needs
-    /// --transport pprz2 and a link to the aircraft.
+    /// and encrypts its PINGs and SETTINGs (sent once the session is up); --record stores
+    /// the decrypted messages. Needs --transport pprz2 and a link to the aircraft.
     #[arg(long, value_name = "KEYFILE")]
     pub secure: Option<PathBuf>,
     /// Send a PING every this many seconds (0.05 to 3600) and show the round-trip time.
