@@ -5,8 +5,8 @@
 //! 48-byte plain PPRZ v2 frame, 69 bytes once sealed (ChaCha20-Poly1305, [`OVERHEAD`]
 //! bytes more). Every value is a function of the frame's index, so the inputs are fixed.
 //!
-//! * [`seal_frames`]: the aircraft's writer. Each plain frame is copied into a frame
-//!   buffer with [`OVERHEAD`] spare bytes and sealed in place
+//! * [`seal_frames`]: the aircraft's writer. Each plain frame, already in a buffer with
+//!   [`OVERHEAD`] spare bytes ([`frame_buffers`]), is sealed in place
 //!   ([`SecureChannel::seal_in_place`]); the sealed frames are kept for the check.
 //! * [`open_frames`]: the ground's reader. The `DATA` of each sealed frame (what the PPRZ
 //!   v2 decoder hands out; the decoder's own cost is workload 2) is verified and decrypted
@@ -77,21 +77,28 @@ pub fn plain_frames(count: usize) -> Vec<PlainFrame> {
     (0..count as u32).map(plain_frame).collect()
 }
 
-/// Seals every frame of `plain` on `channel` into `sealed` (the same number of frames);
-/// returns how many were sealed.
+/// The plain frames of indices `0..count`, each at the start of a buffer with
+/// [`OVERHEAD`] spare bytes, as the writer holds them: [`seal_frames`] seals them in place.
+pub fn frame_buffers(count: usize) -> Vec<SealedFrame> {
+    (0..count as u32)
+        .map(|i| {
+            let mut buf = [0u8; SEALED_FRAME_LEN];
+            buf[..PLAIN_FRAME_LEN].copy_from_slice(&plain_frame(i));
+            buf
+        })
+        .collect()
+}
+
+/// Seals, in place, the plain frame at the start of every buffer of `frames` (from
+/// [`frame_buffers`]) on `channel`; returns how many were sealed.
 ///
 /// # Panics
 /// If a frame does not seal to [`SEALED_FRAME_LEN`] bytes (no session, say).
-pub fn seal_frames(
-    channel: &mut SecureChannel,
-    plain: &[PlainFrame],
-    sealed: &mut [SealedFrame],
-) -> usize {
+pub fn seal_frames(channel: &mut SecureChannel, frames: &mut [SealedFrame]) -> usize {
     let mut n = 0;
-    for (frame, out) in plain.iter().zip(sealed.iter_mut()) {
-        out[..PLAIN_FRAME_LEN].copy_from_slice(frame);
+    for buf in frames.iter_mut() {
         let done = channel
-            .seal_in_place(out, PLAIN_FRAME_LEN)
+            .seal_in_place(buf, PLAIN_FRAME_LEN)
             .expect("an installed session seals");
         assert_eq!(done.len, SEALED_FRAME_LEN);
         n += 1;

@@ -147,8 +147,9 @@ fn the_secure_workload_seals_frames_that_open_back_to_the_plain_frames() {
     use pprz_bench::secure;
     let (mut air, mut ground) = secure::session();
     let plain = secure::plain_frames(100);
-    let mut sealed = vec![[0u8; secure::SEALED_FRAME_LEN]; plain.len()];
-    assert_eq!(secure::seal_frames(&mut air, &plain, &mut sealed), 100);
+    let mut sealed = secure::frame_buffers(100);
+    assert_eq!(sealed[0][..48], plain[0]);
+    assert_eq!(secure::seal_frames(&mut air, &mut sealed), 100);
     for (p, s) in plain.iter().zip(&sealed) {
         assert_eq!((p.len(), s.len()), (48, 69));
         assert_eq!(

@@ -80,12 +80,8 @@ fn workload_arena_90(state: &mut FillState<'_>) -> ChurnSummary {
 
 /// Workload 8, measured: seal the plain frames on an installed session.
 #[inline(never)]
-fn workload_secure_seal(
-    channel: &mut SecureChannel,
-    plain: &[secure::PlainFrame],
-    sealed: &mut [secure::SealedFrame],
-) -> usize {
-    secure::seal_frames(channel, plain, sealed)
+fn workload_secure_seal(channel: &mut SecureChannel, frames: &mut [secure::SealedFrame]) -> usize {
+    secure::seal_frames(channel, frames)
 }
 
 /// Workload 8, measured: open (verify, decrypt) the sealed frames on an installed session.
@@ -202,12 +198,11 @@ fn run_arena_fill() {
 /// for `secure-open`).
 fn secure_setup(measure_seal: bool) -> (SecureChannel, Vec<secure::SealedFrame>) {
     let (mut air, ground) = secure::session();
-    let plain = secure::plain_frames(secure::FRAMES);
-    let mut sealed = vec![[0u8; secure::SEALED_FRAME_LEN]; secure::FRAMES];
+    let mut sealed = secure::frame_buffers(secure::FRAMES);
     let n = if measure_seal {
-        workload_secure_seal(&mut air, black_box(&plain), black_box(&mut sealed))
+        workload_secure_seal(&mut air, black_box(&mut sealed))
     } else {
-        secure::seal_frames(&mut air, &plain, &mut sealed)
+        secure::seal_frames(&mut air, &mut sealed)
     };
     assert_eq!(n, secure::FRAMES);
     assert_eq!(air.stats().encrypted as usize, secure::FRAMES);

@@ -1,0 +1,323 @@
+//! The secure link's costs on an emulated Cortex-M4 (issue 14): each handshake step of
+//! both ends and the per-frame seal and open of a frame with 40 bytes of message fields,
+//! with the firmware backend of `pprz-secure` (`salty`).
+//!
+//! Run under QEMU's `mps2-an386` with `-icount shift=0` (`run.sh`): QEMU then advances
+//! its virtual clock by 1 ns per guest instruction, and the board's timers count that
+//! clock at 25 MHz, so one timer tick is 40 instructions. The firmware first checks this
+//! on a loop of known length (both timer 0 and SysTick), then measures each step on
+//! timer 0 and prints one `result` line per figure on UART0, `done`, and stops QEMU
+//! through semihosting.
+//!
+//! The ephemeral keys come from a fixed-seed ChaCha RNG: benchmark only, so the run is
+//! the same every time (an aircraft uses its hardware RNG).
+
+#![no_std]
+#![no_main]
+
+mod hw;
+
+use core::fmt::Write;
+use core::hint::black_box;
+
+use cortex_m_rt::entry;
+use pprz_secure::keys::INSECURE_TEST_KEY_FILE;
+use pprz_secure::{
+    Initiator, InitiatorEvent, KeyExchange, KeyFile, OVERHEAD, Policy, Responder, ResponderEvent,
+    SecureChannel,
+};
+use pprz_transports::{Encoder, GROUND_ID, MsgHeader, PprzV2, TxMeta};
+use rand_chacha::ChaCha20Rng;
+use rand_chacha::rand_core::SeedableRng;
+
+use hw::{SysTick, Timer, Uart};
+
+/// Instructions per timer tick under `-icount shift=0`: 10^9 ns / 25 MHz.
+const INSTRUCTIONS_PER_TICK: u32 = 1_000_000_000 / hw::SYSCLK_HZ;
+
+/// The benchmark's RNG seed. BENCHMARK ONLY: a fixed seed makes every ephemeral key
+/// predictable; never in an aircraft.
+const BENCH_ONLY_SEED: [u8; 32] = [0x5E; 32];
+
+/// Aircraft id.
+const AC_ID: u8 = 7;
+/// Frames sealed and opened (each figure is their average).
+const FRAMES: usize = 100;
+/// Bytes of message fields per frame.
+const FIELDS_LEN: usize = 40;
+/// Plain PPRZ v2 frame: 8 bytes of framing and header around the fields.
+const PLAIN_LEN: usize = FIELDS_LEN + 8;
+/// Sealed frame.
+const SEALED_LEN: usize = PLAIN_LEN + OVERHEAD;
+/// Handshakes measured (the steps of each are printed).
+const ROUNDS: u64 = 2;
+
+/// A frame buffer: a plain frame with room to seal it in place.
+type FrameBuf = [u8; SEALED_LEN];
+
+#[entry]
+fn main() -> ! {
+    let mut out = Uart::init();
+    let cp = cortex_m::Peripherals::take().unwrap_or_else(|| fail("peripherals taken"));
+    let timer = Timer::start();
+    let systick = SysTick::start(cp.SYST);
+    let _ = writeln!(
+        out,
+        "bench-m4: pprz-secure (salty) on mps2-an386, 1 tick = {INSTRUCTIONS_PER_TICK} \
+         instructions under -icount shift=0"
+    );
+    calibrate(&mut out, &timer, &systick);
+    handshakes(&mut out, &timer);
+    frames(&mut out, &timer);
+    let _ = writeln!(out, "done");
+    hw::exit(true)
+}
+
+/// Prints `message` and stops QEMU with a failure status.
+fn fail(message: &str) -> ! {
+    let _ = writeln!(Uart::init(), "error: {message}");
+    hw::exit(false)
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
+    let _ = writeln!(Uart::init(), "panic: {info}");
+    hw::exit(false)
+}
+
+/// `n` iterations of `subs; bne`: exactly `2 n` instructions (`n` >= 1).
+#[inline(never)]
+fn spin(n: u32) {
+    // Safety: a register-only countdown loop; it touches no memory and no stack.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "subs {n}, {n}, #1",
+            "bne 2b",
+            n = inout(reg) n => _,
+            options(nomem, nostack),
+        );
+    }
+}
+
+/// Ticks of `clock` (counting down, wrapping at `mask`) taken by `f`, and its result.
+#[inline(always)]
+fn ticks<T>(now: impl Fn() -> u32, mask: u32, f: impl FnOnce() -> T) -> (T, u32) {
+    let t0 = now();
+    let result = f();
+    let t1 = now();
+    (result, t0.wrapping_sub(t1) & mask)
+}
+
+/// Checks the tick rate of both clocks on `spin` loops of known length: the difference
+/// between a long and a short loop cancels the call and the clock reads.
+fn calibrate(out: &mut Uart, timer: &Timer, systick: &SysTick) {
+    const SHORT: u32 = 100_000;
+    const LONG: u32 = 1_000_000;
+    let instructions = 2 * u64::from(LONG - SHORT);
+    let clocks: [(&str, &dyn Fn() -> u32, u32); 2] = [
+        ("timer0", &|| timer.now(), u32::MAX),
+        ("systick", &|| systick.now(), 0x00FF_FFFF),
+    ];
+    for (name, now, mask) in clocks {
+        let ((), short) = ticks(now, mask, || spin(black_box(SHORT)));
+        let ((), long) = ticks(now, mask, || spin(black_box(LONG)));
+        let ((), empty) = ticks(now, mask, || ());
+        let per_tick_milli = instructions * 1000 / u64::from(long - short).max(1);
+        let _ = writeln!(
+            out,
+            "calibration {name}: spin({SHORT}) {short} ticks, spin({LONG}) {long} ticks: \
+             {instructions} instructions in {} ticks = {}.{:03} instructions/tick; \
+             empty measurement {empty} ticks",
+            long - short,
+            per_tick_milli / 1000,
+            per_tick_milli % 1000,
+        );
+    }
+}
+
+/// Prints one figure, `result <name> <instructions> <count> <what>`: `instructions` (from
+/// `ticks`) for `count` operations.
+fn result(out: &mut Uart, name: &str, ticks: u32, count: usize, what: &str) {
+    let instructions = u64::from(ticks) * u64::from(INSTRUCTIONS_PER_TICK);
+    let _ = writeln!(out, "result {name} {instructions} {count} {what}");
+}
+
+/// `ROUNDS` complete handshakes between an initiator and a responder, each step
+/// measured. Messages go from one state machine to the other directly (their framing
+/// through the channel is per-frame work, measured by [`frames`]).
+fn handshakes(out: &mut Uart, timer: &Timer) {
+    let keys = KeyFile::parse(INSECURE_TEST_KEY_FILE).unwrap_or_else(|_| fail("key file"));
+    let air_keys = keys.aircraft().unwrap_or_else(|_| fail("aircraft keys"));
+    let ground_keys = keys.ground().unwrap_or_else(|_| fail("ground keys"));
+    let mut rng = ChaCha20Rng::from_seed(BENCH_ONLY_SEED);
+    let mut responder = Responder::new(AC_ID, air_keys);
+    let mut initiator = Initiator::new(AC_ID, ground_keys);
+    let now = || timer.now();
+    for round in 0..ROUNDS {
+        // Past the responder's rate limit (one handshake per second).
+        let now_ms = round * 10_000;
+        initiator.restart();
+        let (msg1, t1) = ticks(now, u32::MAX, || initiator.poll(now_ms, &mut rng));
+        let msg1: KeyExchange = msg1.unwrap_or_else(|| fail("message 1"));
+        let (ev, t2) = ticks(now, u32::MAX, || {
+            responder.handle(black_box(&msg1), now_ms, &mut rng)
+        });
+        let Ok(ResponderEvent::Reply(msg2)) = ev else {
+            fail("message 2")
+        };
+        let (ev, t3) = ticks(now, u32::MAX, || initiator.handle(black_box(&msg2), now_ms));
+        let Ok(InitiatorEvent::Established { keys: _, reply }) = ev else {
+            fail("message 3")
+        };
+        let (ev, t4) = ticks(now, u32::MAX, || {
+            responder.handle(black_box(&reply), now_ms, &mut rng)
+        });
+        let Ok(ResponderEvent::Established(_)) = ev else {
+            fail("session")
+        };
+        let _ = writeln!(out, "handshake {}", round + 1);
+        result(
+            out,
+            "initiator-msg1",
+            t1,
+            1,
+            "ground: ephemeral key (X25519 base point) -> message 1",
+        );
+        result(
+            out,
+            "responder-msg1",
+            t2,
+            1,
+            "aircraft: message 1 -> message 2 (2 X25519, Ed25519 sign)",
+        );
+        result(
+            out,
+            "initiator-msg2",
+            t3,
+            1,
+            "ground: message 2 -> message 3 (X25519, Ed25519 verify + sign)",
+        );
+        result(
+            out,
+            "responder-msg3",
+            t4,
+            1,
+            "aircraft: message 3 -> session (Ed25519 verify)",
+        );
+    }
+}
+
+/// The plain frame `i` from `src` to `dst`, class `class`, with [`FIELDS_LEN`] bytes of
+/// fields that vary with `i`, in a buffer with room to seal it.
+fn plain_frame(i: usize, (src, dst, class, id): (u8, u8, u8, u8)) -> FrameBuf {
+    let mut fields = [0u8; FIELDS_LEN];
+    fields[0] = (FIELDS_LEN - 1) as u8;
+    for (k, v) in fields[1..].iter_mut().enumerate() {
+        *v = (i * 31 + k * 7) as u8;
+    }
+    let meta = TxMeta::new(MsgHeader::new(src, dst, class, id));
+    let mut buf = [0u8; SEALED_LEN];
+    match PprzV2.encode(&meta, &fields, &mut buf) {
+        Ok(PLAIN_LEN) => buf,
+        _ => fail("plain frame"),
+    }
+}
+
+/// Telemetry PAYLOAD (id 114) from the aircraft to the ground.
+const DOWN: (u8, u8, u8, u8) = (AC_ID, GROUND_ID, 1, 114);
+/// A datalink message (class 2, id 114) from the ground to the aircraft.
+const UP: (u8, u8, u8, u8) = (GROUND_ID, AC_ID, 2, 114);
+
+/// The aircraft's per-frame work under an installed session: sealing [`FRAMES`]
+/// telemetry frames in place, and opening [`FRAMES`] datalink frames (their `DATA`, as
+/// the PPRZ decoder hands it out). Each is checked against the other end afterwards.
+fn frames(out: &mut Uart, timer: &Timer) {
+    let keys = KeyFile::parse(INSECURE_TEST_KEY_FILE).unwrap_or_else(|_| fail("key file"));
+    let mut rng = ChaCha20Rng::from_seed(BENCH_ONLY_SEED);
+    let mut responder = Responder::new(
+        AC_ID,
+        keys.aircraft().unwrap_or_else(|_| fail("aircraft keys")),
+    );
+    let mut initiator =
+        Initiator::new(AC_ID, keys.ground().unwrap_or_else(|_| fail("ground keys")));
+    let mut air = SecureChannel::new(Policy::aircraft(AC_ID));
+    let mut ground = SecureChannel::new(Policy::ground(AC_ID));
+    let msg1 = initiator
+        .poll(0, &mut rng)
+        .unwrap_or_else(|| fail("message 1"));
+    let Ok(ResponderEvent::Reply(msg2)) = responder.handle(&msg1, 0, &mut rng) else {
+        fail("message 2")
+    };
+    let Ok(InitiatorEvent::Established { keys, reply }) = initiator.handle(&msg2, 0) else {
+        fail("message 3")
+    };
+    ground.install(keys);
+    let Ok(ResponderEvent::Established(keys)) = responder.handle(&reply, 0, &mut rng) else {
+        fail("session")
+    };
+    air.install(keys);
+
+    let now = || timer.now();
+    // Seal, as the aircraft's writer does when it takes a frame for the wire.
+    let mut down: [FrameBuf; FRAMES] = core::array::from_fn(|i| plain_frame(i, DOWN));
+    let (sealed, t_seal) = ticks(now, u32::MAX, || {
+        let mut sealed = 0;
+        for buf in black_box(&mut down).iter_mut() {
+            if matches!(air.seal_in_place(buf, PLAIN_LEN), Ok(s) if s.len == SEALED_LEN) {
+                sealed += 1;
+            }
+        }
+        sealed
+    });
+    // Check: the ground opens every one back to its plain frame.
+    let mut plain = [0u8; 255];
+    for (i, buf) in down.iter().enumerate() {
+        let back = ground.open(&buf[2..SEALED_LEN - 2], &mut plain);
+        if sealed != FRAMES || !back.is_ok_and(|o| o.frame() == &plain_frame(i, DOWN)[..PLAIN_LEN])
+        {
+            fail("sealed frames do not open back");
+        }
+    }
+
+    // Open, as the aircraft's reader does with each frame the decoder hands out.
+    let mut up: [FrameBuf; FRAMES] = core::array::from_fn(|i| plain_frame(i, UP));
+    for buf in up.iter_mut() {
+        if ground.seal_in_place(buf, PLAIN_LEN).map(|s| s.len) != Ok(SEALED_LEN) {
+            fail("uplink seal");
+        }
+    }
+    let mut opened = [[0u8; 64]; FRAMES];
+    let (ok, t_open) = ticks(now, u32::MAX, || {
+        let mut ok = 0;
+        for (buf, o) in black_box(&up).iter().zip(opened.iter_mut()) {
+            if air.open(&buf[2..SEALED_LEN - 2], o).is_ok() {
+                ok += 1;
+            }
+        }
+        ok
+    });
+    for (i, o) in opened.iter().enumerate() {
+        if ok != FRAMES || o[..PLAIN_LEN] != plain_frame(i, UP)[..PLAIN_LEN] {
+            fail("opened frames differ");
+        }
+    }
+    let _ = writeln!(
+        out,
+        "frames: {FRAMES} of {FIELDS_LEN} field bytes ({PLAIN_LEN} -> {SEALED_LEN} bytes), totals"
+    );
+    result(
+        out,
+        "seal",
+        t_seal,
+        FRAMES,
+        "aircraft: seal_in_place, 48 -> 69 bytes",
+    );
+    result(
+        out,
+        "open",
+        t_open,
+        FRAMES,
+        "aircraft: open, 65 bytes of DATA -> 48-byte frame",
+    );
+}
