@@ -31,7 +31,9 @@ use core::cell::{Cell, RefCell};
 use core::convert::Infallible;
 use core::fmt;
 
-use embassy_futures::select::{Either4, select4};
+use core::future::Future;
+
+use embassy_futures::select::{Either, Either4, select, select4};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker};
@@ -47,7 +49,7 @@ use pprz_telemetry::reader::{Datalink, Reader};
 use pprz_telemetry::registry::RegistryFull;
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
 use pprz_telemetry::services::{LinkReporter, Services, SettingsFull};
-use pprz_telemetry::{Device, Sender};
+use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Sender};
 use pprz_transports::PprzV2;
 
 use crate::vehicle::Vehicle;
@@ -137,6 +139,67 @@ pub async fn run_aircraft<R: Read>(
     radio: Device<'_>,
     radio_rx: R,
     config: Config,
+) -> Result<Infallible, SetupError> {
+    run_with_layer(radio, radio_rx, config, &Plain, core::future::pending()).await
+}
+
+/// [`run_aircraft`] on a secure radio: the reader opens every frame with `secure` (the
+/// radio's writer must seal with the same [`SecureLink`](pprz_secure::link::SecureLink),
+/// `run_writer_with(&mut port, tx, &SECURE)`, and the radio's device be configured with
+/// `SecureLink::DEVICE`), the handshake runs as part of the application with `responder`
+/// and `rng`, and `SECURE_LINK_STATUS` goes to the radio every second. Until a ground
+/// completes the handshake, the radio carries nothing but the key exchange.
+///
+/// # Errors
+/// As [`run_aircraft`].
+#[cfg(feature = "secure")]
+pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
+    radio: Device<'_>,
+    radio_rx: R,
+    config: Config,
+    secure: &pprz_secure::link::SecureLink<M>,
+    mut responder: pprz_secure::Responder,
+    mut rng: G,
+) -> Result<Infallible, SetupError> {
+    use pprz_default::messages::telemetry::SecureLinkStatus;
+    let handshake = secure.run_responder(
+        &mut responder,
+        &mut rng,
+        radio.sender(),
+        pprz_telemetry::Targets::from(radio),
+    );
+    let status = async {
+        let mut ticker = Ticker::every(Duration::from_secs(1));
+        loop {
+            ticker.next().await;
+            let s = secure.status();
+            // Refused before the session (counted), like all telemetry.
+            let _ = radio.send_latest(&SecureLinkStatus {
+                sts_stage: s.stage,
+                sts_error: s.error,
+                counter_err: s.counter_err,
+                decrypt_err: s.decrypt_err,
+                encrypt_err: s.encrypt_err,
+            });
+        }
+    };
+    let extra = async {
+        match embassy_futures::select::select(handshake, status).await {
+            embassy_futures::select::Either::First(never)
+            | embassy_futures::select::Either::Second(never) => never,
+        }
+    };
+    run_with_layer(radio, radio_rx, config, secure, extra).await
+}
+
+/// The application, its reader delivering through `layer`, with `extra` (the secure
+/// link's tasks) running beside it.
+async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
+    radio: Device<'_>,
+    radio_rx: R,
+    config: Config,
+    layer: &L,
+    extra: impl Future<Output = Infallible>,
 ) -> Result<Infallible, SetupError> {
     let out = Out {
         downlink: radio.sender(),
@@ -250,9 +313,12 @@ pub async fn run_aircraft<R: Read>(
         }
     };
     let mut reader = Reader::<R, PprzV2>::new(radio_rx, PprzV2::new(), radio);
-    match select4(scheduler.run(), reader.run(&datalink), dynamics, flood).await {
-        Either4::First(never) | Either4::Second(never) => never,
-        Either4::Third(never) | Either4::Fourth(never) => never,
+    let inbox = Layered::new(layer, &datalink);
+    let app = select4(scheduler.run(), reader.run(&inbox), dynamics, flood);
+    match select(app, extra).await {
+        Either::First(Either4::First(never) | Either4::Second(never)) => never,
+        Either::First(Either4::Third(never) | Either4::Fourth(never)) => never,
+        Either::Second(never) => match never {},
     }
 }
 

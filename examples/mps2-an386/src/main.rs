@@ -13,158 +13,46 @@
 #![no_main]
 #![deny(clippy::undocumented_unsafe_blocks)]
 
+mod board;
 mod time_driver;
 mod uart;
 
-use core::sync::atomic::{AtomicBool, Ordering};
-
-use cortex_m::interrupt::InterruptNumber;
-use cortex_m::peripheral::NVIC;
-use cortex_m_rt::{entry, exception};
-use embassy_executor::raw::Executor;
+use cortex_m_rt::entry;
 use panic_halt as _;
 use pprz_example_app::{AC_ID, Config, M};
 use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use pprz_transports::{AnyTransport, PprzV2};
-use static_cell::StaticCell;
 
-use crate::uart::{Instance, UartRx, UartTx};
-
-/// The system (core and peripheral) clock of the MPS2 board.
-const SYSCLK_HZ: u32 = 25_000_000;
-/// The radio's baud rate.
-const BAUD: u32 = 115_200;
-/// UART0's register block.
-const UART0_BASE: usize = 0x4000_4000;
-/// UART0 buffers: received bytes (uplink) and bytes waiting to be sent (telemetry).
-const UART_RX_BUF: usize = 256;
-const UART_TX_BUF: usize = 512;
-
-/// Device-specific interrupts of the MPS2 AN385/AN386 images that this firmware uses.
-#[derive(Debug, Clone, Copy)]
-#[repr(u16)]
-enum Irq {
-    /// UART0 received a byte.
-    Uart0Rx = 0,
-    /// UART0's TX buffer emptied.
-    Uart0Tx = 1,
-}
-
-// Safety: the numbers are the board's UART0 RX and TX interrupt lines (QEMU `mps2.c`,
-// AN385/AN386: UART0 RX is IRQ 0, TX is RX + 1), valid device interrupts of its NVIC
-// (32 of them).
-unsafe impl InterruptNumber for Irq {
-    fn number(self) -> u16 {
-        self as u16
-    }
-}
-
-type Uart0 = Instance<UART_RX_BUF, UART_TX_BUF>;
-type Dl = Downlink<'static, M, 1, 32>;
-
-// Safety: 0x4000_4000 is UART0's register block on the MPS2 AN386 image (mapped for the
-// whole program), and this `static` is the only code that accesses it.
-static UART0: Uart0 = unsafe { Instance::new(UART0_BASE) };
 /// The frames waiting for the radio.
 static ARENA: FrameArena<M, 4096> = FrameArena::new();
-static DOWNLINK: Dl = Downlink::new(
+static DOWNLINK: Downlink<'static, M, 1, 32> = Downlink::new(
     &ARENA,
     AC_ID,
     [DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()))],
 );
-static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-/// Set when a task was woken (by a task or an interrupt handler) and the executor has
-/// work; the idle loop sleeps only while it is clear.
-static WORK: AtomicBool = AtomicBool::new(false);
-
-/// The executor's pender, called by embassy-executor whenever a task is woken.
-// Safety (of the attribute): embassy-executor's raw executor calls `__pender` with this
-// signature, and this is its only definition (the crate's `executor-thread` and
-// `executor-interrupt` features, which define one, are off).
-#[unsafe(export_name = "__pender")]
-fn pender(_context: *mut ()) {
-    WORK.store(true, Ordering::Release);
-}
-
-/// Runs the executor forever, sleeping with WFI while no task is ready.
-///
-/// Not the thread-mode `Executor` of embassy-executor: it sleeps with WFE, which QEMU
-/// executes as a no-op, so the guest would spin on a host core, and on a loaded host
-/// QEMU would then fall behind with SysTick (coalescing its interrupts, so the guest
-/// clock would lag). WFI halts the emulated core until an interrupt.
-fn run(executor: &'static Executor) -> ! {
-    loop {
-        // Safety: `poll` is called only here, never reentrantly: the pender only sets a
-        // flag.
-        unsafe { executor.poll() };
-        // With interrupts masked, a wake-up cannot slip in between the check and WFI;
-        // WFI still returns when an interrupt becomes pending, which then runs.
-        cortex_m::interrupt::free(|_| {
-            if !WORK.swap(false, Ordering::AcqRel) {
-                cortex_m::asm::wfi();
-            }
-        });
-    }
-}
 
 /// Sends the downlink's frames on UART0.
 #[embassy_executor::task]
-async fn radio_writer(mut port: Port<'static>, tx: UartTx<UART_RX_BUF, UART_TX_BUF>) {
+async fn radio_writer(mut port: Port<'static>, tx: board::Tx) {
     run_writer(&mut port, tx).await
 }
 
 /// The application, reading the uplink from UART0.
 #[embassy_executor::task]
-async fn aircraft(radio: Device<'static>, rx: UartRx<UART_RX_BUF, UART_TX_BUF>) {
+async fn aircraft(radio: Device<'static>, rx: board::Rx) {
     let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
     panic!("the aircraft application cannot start: {e}");
 }
 
 #[entry]
 fn main() -> ! {
-    let Some(core) = cortex_m::Peripherals::take() else {
-        panic!("core peripherals taken twice");
-    };
-    time_driver::init(core.SYST, SYSCLK_HZ);
-    let Some((rx, tx)) = UART0.take(SYSCLK_HZ, BAUD) else {
-        panic!("UART0 taken twice");
-    };
-    // Safety: unmasking can break a critical section only if it runs inside one; this
-    // runs before the executor, with interrupts enabled. The handler (`DefaultHandler`)
-    // uses only UART0's `Instance`, which is ready.
-    unsafe {
-        NVIC::unmask(Irq::Uart0Rx);
-        NVIC::unmask(Irq::Uart0Tx);
-    }
+    let (rx, tx, executor) = board::init();
     let Ok([radio]) = DOWNLINK.ports() else {
         panic!("the downlink's ports are taken once, here");
     };
     let radio_device = radio.device();
-    let executor: &'static Executor = EXECUTOR.init(Executor::new(core::ptr::null_mut()));
     let spawner = executor.spawner();
     spawner.spawn(radio_writer(radio, tx).expect("one radio writer"));
     spawner.spawn(aircraft(radio_device, rx).expect("one aircraft"));
-    run(executor)
-}
-
-#[exception]
-fn SysTick() {
-    time_driver::on_systick();
-}
-
-/// The device interrupts. Without a peripheral access crate for this board, cortex-m-rt
-/// routes every device interrupt to the default handler, with its number.
-///
-/// # Safety
-///
-/// cortex-m-rt requires this handler to be `unsafe` because it would also serve the
-/// non-maskable interrupt, which can preempt a critical section: it is never raised on
-/// this board, and the handler panics on any exception but the UART's.
-#[exception]
-unsafe fn DefaultHandler(irqn: i16) {
-    if irqn == Irq::Uart0Rx as i16 || irqn == Irq::Uart0Tx as i16 {
-        UART0.on_interrupt();
-    } else {
-        panic!("unexpected exception");
-    }
+    board::run(executor)
 }

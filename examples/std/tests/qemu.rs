@@ -21,10 +21,12 @@ use pprz_default::messages::telemetry::{DlValue, GpsInt};
 use pprz_default::periodic::SCHEDULE;
 use pprz_example_app::AC_ID;
 use pprz_ground::monitor::{Event, Monitor};
+use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::Answer;
 use pprz_ground::uplink;
 use pprz_messages::{Decode, Message};
+use pprz_secure::KeyFile;
 use pprz_transports::{AnyTransport, Decoder, PprzV2};
 
 /// Guest time over which the periodic rates are measured, in ms (GPS_INT `tow`).
@@ -102,20 +104,73 @@ fn skip(reason: &str) {
     let _ = writeln!(std::io::stderr(), "qemu test skipped: {reason}");
 }
 
-/// `PPRZ_QEMU_FIRMWARE`, else the release build in the firmware crate's own target
-/// directory, else in `CARGO_TARGET_DIR` (where it lands when that is set).
-fn firmware_path() -> PathBuf {
+/// The firmware binary `name`: `PPRZ_QEMU_FIRMWARE` (with `-secure` appended for the
+/// secure one), else the release build in the firmware crate's own target directory,
+/// else in `CARGO_TARGET_DIR` (where it lands when that is set).
+fn firmware_path(name: &str) -> PathBuf {
     if let Some(path) = std::env::var_os("PPRZ_QEMU_FIRMWARE") {
+        let mut path = path;
+        path.push(name.strip_prefix("aircraft").unwrap_or_default());
         return PathBuf::from(path);
     }
-    let elf = "thumbv7em-none-eabihf/release/aircraft";
+    let elf = format!("thumbv7em-none-eabihf/release/{name}");
     let local = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../mps2-an386/target")
-        .join(elf);
+        .join(&elf);
     match std::env::var_os("CARGO_TARGET_DIR") {
         Some(dir) if !local.is_file() => Path::new(&dir).join(elf),
         _ => local,
     }
+}
+
+/// Boots firmware `name` under QEMU and connects to its UART0, or `None` (the test is
+/// skipped, or fails where QEMU is required) when QEMU or the firmware is missing.
+fn boot(name: &str) -> Option<(Qemu, TcpStream)> {
+    let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
+    let firmware = firmware_path(name);
+    if !firmware.is_file() {
+        skip(&format!(
+            "no firmware at {} (build it: cd examples/mps2-an386 && cargo build --release)",
+            firmware.display()
+        ));
+        return None;
+    }
+    if Command::new(&qemu)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .map_or(true, |s| !s.success())
+    {
+        skip(&format!("{qemu} is not installed"));
+        return None;
+    }
+    // Start QEMU and connect; a port taken between our probe and QEMU's bind makes QEMU
+    // exit, then another port is tried.
+    let mut attempts = Vec::new();
+    let (guard, stream) = loop {
+        let port = free_port();
+        let mut guard = Qemu::start(&qemu, &firmware, port).expect("QEMU starts");
+        match guard.connect(port) {
+            Ok(stream) => break (guard, stream),
+            Err(e) if attempts.len() < 2 => attempts.push(e),
+            Err(e) => panic!("{e} (earlier attempts: {attempts:?})"),
+        }
+    };
+    stream
+        .set_read_timeout(Some(Duration::from_millis(20)))
+        .expect("socket timeout");
+    let _ = stream.set_nodelay(true);
+    Some((guard, stream))
+}
+
+/// The project's default message set, as the ground tools load it.
+fn default_set() -> RuntimeSet {
+    RuntimeSet::load(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../default/messages.xml"
+    ))
+    .expect("messages.xml loads")
 }
 
 /// A loopback TCP port that was free a moment ago.
@@ -133,48 +188,10 @@ struct Received {
 
 #[test]
 fn firmware_answers_and_sends_telemetry_at_configured_rates() {
-    let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
-    let firmware = firmware_path();
-    if !firmware.is_file() {
-        skip(&format!(
-            "no firmware at {} (build it: cd examples/mps2-an386 && cargo build --release)",
-            firmware.display()
-        ));
+    let Some((_qemu, mut stream)) = boot("aircraft") else {
         return;
-    }
-    if Command::new(&qemu)
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .map_or(true, |s| !s.success())
-    {
-        skip(&format!("{qemu} is not installed"));
-        return;
-    }
-
-    // Start QEMU and connect; a port taken between our probe and QEMU's bind makes QEMU
-    // exit, then another port is tried.
-    let mut attempts = Vec::new();
-    let (_qemu, mut stream) = loop {
-        let port = free_port();
-        let mut guard = Qemu::start(&qemu, &firmware, port).expect("QEMU starts");
-        match guard.connect(port) {
-            Ok(stream) => break (guard, stream),
-            Err(e) if attempts.len() < 2 => attempts.push(e),
-            Err(e) => panic!("{e} (earlier attempts: {attempts:?})"),
-        }
     };
-    stream
-        .set_read_timeout(Some(Duration::from_millis(20)))
-        .expect("socket timeout");
-    let _ = stream.set_nodelay(true);
-
-    let set = RuntimeSet::load(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../default/messages.xml"
-    ))
-    .expect("messages.xml loads");
+    let set = default_set();
     let transport = AnyTransport::from(PprzV2::new());
     let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");
     let setting = uplink::frame(
@@ -272,6 +289,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
                         && *value == f64::from(GAIN)
                         && matches!(answer, Answer::Acknowledged { .. });
                 }
+                Event::SecureSession { .. } => panic!("a secure session on a plain link"),
             }
         }
         if pong_rtt.is_some()
@@ -366,5 +384,114 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         rtt * 1e3,
         ack_after * 1e3,
         report.join(", ")
+    );
+}
+
+/// The secure firmware (`aircraft-secure`): nothing but its key exchange until this test,
+/// as the ground, completes the handshake with the published test keys; then encrypted
+/// telemetry, an encrypted PING answered by an encrypted PONG, and an encrypted SETTING
+/// acknowledged. Every frame on the wire is secure (`0x55` encrypted or `0xAA` key
+/// exchange), and none is rejected by the ground.
+#[test]
+fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
+    let Some((_qemu, mut stream)) = boot("aircraft-secure") else {
+        return;
+    };
+    let keys = KeyFile::parse(pprz_secure::keys::INSECURE_TEST_KEY_FILE).expect("test keys");
+    let ground = GroundSecure::new(AC_ID, keys.ground().expect("ground keys"));
+    let set = default_set();
+    let transport = AnyTransport::from(PprzV2::new());
+    let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");
+    let setting = uplink::frame(
+        &set,
+        transport,
+        AC_ID,
+        "SETTING",
+        &[
+            ("index", f64::from(GAIN_INDEX)),
+            ("ac_id", f64::from(AC_ID)),
+            ("value", f64::from(GAIN)),
+        ],
+    )
+    .expect("SETTING frame");
+    let mut monitor = Monitor::new(set, transport)
+        .with_secure(ground)
+        .expect("PPRZ v2 takes a secure link");
+    let mut wire: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+    let mut crypto_bytes = Vec::new();
+    let mut session_at = None;
+    let mut pong_rtt = None;
+    let mut acked = false;
+    let mut next_request = 0.0;
+    let mut buf = [0u8; 1024];
+    let start = Instant::now();
+    while start.elapsed() < DEADLINE && !(pong_rtt.is_some() && acked) {
+        let now = start.elapsed().as_secs_f64();
+        for frame in monitor.poll_secure(now) {
+            stream.write_all(&frame).expect("send a key exchange");
+        }
+        if monitor.uplink_ready() && now >= next_request {
+            let request = if pong_rtt.is_none() { &ping } else { &setting };
+            let sealed = monitor.seal_uplink(request).expect("a session seals");
+            stream.write_all(&sealed).expect("send a request");
+            if pong_rtt.is_none() {
+                monitor.ping_sent(now);
+            } else {
+                monitor.setting_value_sent(now, GAIN_INDEX, f64::from(GAIN));
+            }
+            next_request = now + 1.0;
+        }
+        let n = match stream.read(&mut buf) {
+            Ok(0) => panic!("QEMU closed the serial connection"),
+            Ok(n) => n,
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
+            Err(e) => panic!("reading QEMU's serial port: {e}"),
+        };
+        let bytes = &buf[..n];
+        let mut input = bytes;
+        while let Some(frame) = wire.feed(&mut input) {
+            crypto_bytes.push(frame.data()[0]);
+        }
+        let now = start.elapsed().as_secs_f64();
+        monitor.feed(now, bytes, |_, _| {});
+        for (_, event) in monitor.events() {
+            match event {
+                Event::SecureSession { .. } => {
+                    session_at.get_or_insert(now);
+                }
+                Event::Pong { rtt } => {
+                    pong_rtt.get_or_insert(*rtt);
+                }
+                Event::DlValue { index, answer, .. } => {
+                    acked |= *index == GAIN_INDEX && matches!(answer, Answer::Acknowledged { .. });
+                }
+            }
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let session_at = session_at
+        .unwrap_or_else(|| panic!("no session in {wall:.1} s: {:?}", monitor.secure_lines()));
+    let rtt = pong_rtt.unwrap_or_else(|| panic!("no encrypted PONG in {wall:.1} s"));
+    assert!(
+        acked,
+        "no DL_VALUE acknowledging the encrypted SETTING in {wall:.1} s"
+    );
+    let status = monitor.secure_status().expect("secure");
+    assert!(status.stats.channel.decrypted > 0);
+    assert_eq!(status.stats.channel.rejected(), 0, "{:?}", status.stats);
+    assert!(
+        crypto_bytes.iter().all(|&b| b == 0x55 || b == 0xAA),
+        "a frame in the clear: {crypto_bytes:x?}"
+    );
+    assert_eq!(monitor.decoder_stats().errors(), 0);
+    assert_eq!(monitor.unknown(), 0, "unknown messages");
+    let _ = writeln!(
+        std::io::stderr(),
+        "qemu secure: session after {:.0} ms, encrypted PONG after {:.1} ms, {} frames \
+         decrypted, {} in plaintext (key exchange)",
+        session_at * 1e3,
+        rtt * 1e3,
+        status.stats.channel.decrypted,
+        crypto_bytes.iter().filter(|&&b| b == 0xAA).count(),
     );
 }
