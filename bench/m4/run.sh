@@ -21,7 +21,9 @@ timeout_s=${BENCH_M4_TIMEOUT:-60}
 command -v "$qemu" >/dev/null || { echo "$qemu is not installed" >&2; exit 1; }
 
 cargo build -q --release
-elf=target/thumbv7em-none-eabihf/release/bench-m4
+target_dir=$(cargo metadata -q --format-version 1 --no-deps |
+    sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')
+elf=$target_dir/thumbv7em-none-eabihf/release/bench-m4
 
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
