@@ -233,6 +233,10 @@ fn contradictory_radio_options_are_refused() {
             &["--pacing-budget", "--pacing on"],
         ),
         (
+            &["--transport", "xbee", "--secure", TEST_KEYS],
+            &["--secure", "--transport pprz2"],
+        ),
+        (
             &[
                 "--pacing",
                 "on",
@@ -456,6 +460,79 @@ fn xbee_transmit_statuses_over_a_flooded_link() {
     assert!(high_received + 1 >= high_sent, "{out}");
     assert!(level_row(&out, "low")[2] > 0, "the flood is shed:\n{out}");
     services_answered(&out);
+}
+
+/// The published test key set.
+const TEST_KEYS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../secure/keys/INSECURE-TEST-ONLY.keys"
+);
+
+/// `--secure`: the in-process ground completes the handshake with the aircraft, the
+/// telemetry arrives decrypted, PINGs and the SETTING go up encrypted and are answered;
+/// the telemetry the aircraft produced before the session was refused (counted), never
+/// sent in the clear; the summary has the aircraft's secure figures.
+#[test]
+fn secure_radio_handshake_and_services() {
+    let (out, json) = run_sitl_json("secure", "6", "3", &["--secure", TEST_KEYS]);
+    services_answered(&out);
+    assert!(out.contains("7 telemetry GPS_INT "), "{out}");
+    assert!(
+        out.contains("secure link (aircraft): session up, handshakes started 1, completed 1"),
+        "{out}"
+    );
+    assert!(
+        out.contains("ground station secure link: session up"),
+        "{out}"
+    );
+    assert!(out.contains("rejected 0 (bad tag 0"), "{out}");
+    assert_eq!(json["secure"]["session"], Value::Bool(true), "{json:#}");
+    assert!(uint(&json, "/secure/decrypted") >= 3, "{json:#}");
+    assert_eq!(uint(&json, "/secure/rejected"), 0, "{json:#}");
+    assert!(uint(&json, "/secure/encrypted") > 0);
+    // Before the session, the aircraft's telemetry was refused at the wire (at least its
+    // first ALIVE), and counted.
+    assert!(uint(&json, "/downlink/refused") >= 1, "{json:#}");
+}
+
+/// Key files that cannot serve: exit code 2 and the reason, before the run.
+#[test]
+fn secure_key_file_errors_are_reported() {
+    let dir = std::env::temp_dir();
+    let bad = dir.join(format!("pprz-sitl-{}-bad.keys", std::process::id()));
+    std::fs::write(&bad, "UAV_PUBLIC = 12\n").unwrap();
+    let aircraft_only = dir.join(format!("pprz-sitl-{}-aircraft.keys", std::process::id()));
+    let test_keys = std::fs::read_to_string(TEST_KEYS).unwrap();
+    let without_ground: String = test_keys
+        .lines()
+        .filter(|l| !l.starts_with("GCS_PRIVATE"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&aircraft_only, without_ground).unwrap();
+    let missing = dir.join("pprz-sitl-no-such.keys");
+    for (path, headless, expected) in [
+        (&bad, true, "64 hex digits"),
+        (&missing, true, "cannot read"),
+        (&aircraft_only, false, "ground keys"),
+    ] {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_sitl"));
+        cmd.arg("--secure").arg(path).args(["--duration", "1"]);
+        if headless {
+            cmd.arg("--headless");
+        } else {
+            // Ports of our own: the key file is checked before any socket is opened.
+            cmd.args(["--ground", "127.0.0.1:9", "--uplink", "127.0.0.1:9"]);
+        }
+        let out = cmd.output().expect("sitl starts");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{path:?}: {stderr}");
+        assert!(
+            stderr.contains(expected),
+            "{path:?}: no `{expected}` in {stderr}"
+        );
+    }
+    let _ = std::fs::remove_file(&bad);
+    let _ = std::fs::remove_file(&aircraft_only);
 }
 
 /// The in-process ground's services worked (`--lines` output): it PINGs every second and

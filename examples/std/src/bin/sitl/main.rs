@@ -39,6 +39,7 @@ use embassy_sync::pipe::Pipe;
 use embassy_time::{Duration, Instant, MockDriver, Ticker, Timer};
 use embedded_io_async::{Read, Write};
 use pprz_default::messages::MESSAGES;
+use pprz_default::messages::datalink::Ping;
 use pprz_default::messages::telemetry::Payload;
 use pprz_devices::host::{HostConfig, HostDevice};
 use pprz_devices::sim::{
@@ -47,23 +48,27 @@ use pprz_devices::sim::{
 use pprz_example_app::{AC_ID, Config, M};
 use pprz_ground::cli;
 use pprz_ground::monitor::Monitor;
+use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_messages::{Message, VarArray};
+use pprz_secure::link::SecureLink;
+use pprz_secure::rand_core::{OsRng, TryRngCore};
+use pprz_secure::{KeyFile, Responder};
 use pprz_telemetry::delivery::MAX_IN_MODEM;
 use pprz_telemetry::pprz_messages::priority;
 use pprz_telemetry::pprz_transports::{
-    AnyTransport, Decoder, Encoder, MAX_FRAME_LEN, PprzV2, XBee24,
+    AnyTransport, Decoder, Encoder, Framing, MAX_FRAME_LEN, PprzV2, XBee24,
 };
 use pprz_telemetry::{
     DeliveryWindow, Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Pacing, Port, Sender,
-    run_writer,
+    run_writer, run_writer_with,
 };
 use static_cell::StaticCell;
 
 use crate::summary::{
     DeliveryFigures, DownlinkFigures, Level, Levels, MessageFigures, ModemFigures, PingFigures,
-    RunConfig, Summary,
+    RunConfig, SecureFigures, Summary,
 };
 
 /// Simulate an aircraft on a radio link and watch it with a live ground monitor.
@@ -132,6 +137,14 @@ struct Args {
     /// One line per received message instead of the live table.
     #[arg(long)]
     lines: bool,
+    /// Secure the radio with Paparazzi's secure PPRZ link, keys from this key file (see
+    /// pprz-secure's keygen; `secure/keys/INSECURE-TEST-ONLY.keys` for a try): the
+    /// aircraft sends nothing but its key exchange until a ground completes the
+    /// handshake; the in-process ground uses the same file (with `--headless`, an
+    /// external ground such as `pprz-monitor --secure` does the handshake over UDP).
+    /// PPRZ v2 only.
+    #[arg(long, value_name = "KEYFILE")]
+    secure: Option<PathBuf>,
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))]
     messages: PathBuf,
@@ -282,13 +295,37 @@ static ARENA: FrameArena<M, 8192> = FrameArena::new();
 static DOWNLINK: StaticCell<Dl> = StaticCell::new();
 static RADIO: StaticCell<Radio> = StaticCell::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+/// `--secure`: the radio's secure link (its writer seals, the application's reader
+/// opens, the application runs its handshake).
+static SECURE: SecureLink<M> = SecureLink::aircraft(AC_ID);
 /// XBee: the uplink messages, re-framed as PPRZ v2 for the application's reader.
 static UPLINK_PIPE: Pipe<M, 1024> = Pipe::new();
 
-/// The radio device's writer.
+/// The radio device's writer (sealing every frame with `secure`, if given).
 #[embassy_executor::task]
-async fn radio_writer(mut port: Port<'static>, tx: SimTx<'static, M, RADIO_RING>) {
-    run_writer(&mut port, tx).await
+async fn radio_writer(
+    mut port: Port<'static>,
+    tx: SimTx<'static, M, RADIO_RING>,
+    secure: Option<&'static SecureLink<M>>,
+) {
+    match secure {
+        Some(layer) => run_writer_with(&mut port, tx, layer).await,
+        None => run_writer(&mut port, tx).await,
+    }
+}
+
+/// The application on a secure radio (PPRZ v2), with its handshake.
+#[embassy_executor::task]
+async fn secure_aircraft(
+    radio: Device<'static>,
+    rx: SimRx<'static, M, RADIO_RING>,
+    config: Config,
+    responder: Responder,
+) {
+    let rng = OsRng.unwrap_err();
+    let Err(e) =
+        pprz_example_app::run_secure_aircraft(radio, rx, config, &SECURE, responder, rng).await;
+    panic!("the aircraft application cannot start: {e}");
 }
 
 /// The application reading its uplink from the radio (PPRZ v2).
@@ -366,7 +403,12 @@ async fn xbee_flood(downlink: Sender<'static>, bytes_per_s: u32) {
 /// the record, and to re-frame XBee as PPRZ v2 for UDP) and what goes up (PINGs, and
 /// XBee framing of the uplink).
 #[embassy_executor::task]
-async fn ground_bridge(ground: SimEnd<'static, M, RADIO_RING>, udp: HostDevice, xbee: bool) {
+async fn ground_bridge(
+    ground: SimEnd<'static, M, RADIO_RING>,
+    udp: HostDevice,
+    xbee: bool,
+    secure: bool,
+) {
     let (mut radio_rx, mut radio_tx) = ground.split();
     let (mut udp_rx, mut udp_tx) = udp.split();
     let radio_transport = if xbee {
@@ -387,7 +429,10 @@ async fn ground_bridge(ground: SimEnd<'static, M, RADIO_RING>, udp: HostDevice, 
             let mut input = &buf[..n];
             out.clear();
             while let Some(f) = decoder.feed(&mut input) {
-                record::received(f.class(), f.msg_id(), f.payload(), now);
+                // Secure frames are opened by the ground, which records them.
+                if !secure {
+                    record::received(f.class(), f.msg_id(), f.payload(), now);
+                }
                 if xbee && let Ok(len) = v2.encode(&f.tx_meta(), f.payload(), &mut frame) {
                     out.extend_from_slice(&frame[..len]);
                 }
@@ -411,7 +456,9 @@ async fn ground_bridge(ground: SimEnd<'static, M, RADIO_RING>, udp: HostDevice, 
                     let mut input = &buf[..n];
                     out.clear();
                     while let Some(f) = decoder.feed(&mut input) {
-                        record::uplink(f.class(), f.msg_id(), now);
+                        if !secure {
+                            record::uplink(f.class(), f.msg_id(), now);
+                        }
                         if xbee
                             && let Ok(len) =
                                 radio_transport.encode(&f.tx_meta(), f.payload(), &mut frame)
@@ -463,6 +510,8 @@ struct RadioPlan {
     pacing: Option<Pacing>,
     window: Option<DeliveryWindow>,
     flood_bytes_per_s: u32,
+    /// `--secure`: the radio reserves the secure overhead after every frame.
+    secure: bool,
 }
 
 impl RadioPlan {
@@ -484,6 +533,12 @@ impl RadioPlan {
             None if xbee => DEFAULT_XBEE_BUFFER,
             None => DEFAULT_MODEM_BUFFER,
         };
+        if args.secure.is_some() && xbee {
+            return Err(
+                "--secure needs --transport pprz2 (the secure link is Paparazzi's secure PPRZ v2)"
+                    .to_owned(),
+            );
+        }
         if args.in_modem.is_some() && !xbee {
             return Err(
                 "--in-modem needs --transport xbee (only XBee API frames have transmit statuses)"
@@ -521,6 +576,7 @@ impl RadioPlan {
             pacing,
             window,
             flood_bytes_per_s,
+            secure: args.secure.is_some(),
         })
     }
 
@@ -558,9 +614,15 @@ impl RadioPlan {
 
     /// The radio device of the downlink.
     fn device_config(&self) -> DeviceConfig {
+        let reserve = if self.secure {
+            SecureLink::<M>::DEVICE.reserve
+        } else {
+            0
+        };
         DeviceConfig::new(self.transport.any())
             .pacing(self.pacing)
             .delivery(self.window)
+            .reserve(reserve)
     }
 }
 
@@ -579,6 +641,17 @@ fn main() -> ExitCode {
             Err(e) => {
                 eprintln!("sitl: cannot write the summary to {}: {e}", path.display());
                 return ExitCode::FAILURE;
+            }
+        },
+        None => None,
+    };
+    // The key file: both ends' keys (the aircraft's only with --headless).
+    let keys = match &args.secure {
+        Some(path) => match load_keys(path, args.headless) {
+            Ok(keys) => Some(keys),
+            Err(e) => {
+                eprintln!("sitl: --secure {}: {e}", path.display());
+                return ExitCode::from(2);
             }
         },
         None => None,
@@ -645,11 +718,19 @@ fn main() -> ExitCode {
     pace(args.speed);
     let xbee = plan.xbee();
     let flood = plan.flood_bytes_per_s;
+    let (responder, ground_keys) = match keys {
+        Some(k) => (Some(Responder::new(AC_ID, k.aircraft)), k.ground),
+        None => (None, None),
+    };
+    let secure = responder.is_some();
     std::thread::spawn(move || {
         let executor = EXECUTOR.init(Executor::new());
         executor.run(|spawner| {
-            spawner.spawn(radio_writer(radio_port, air_tx).unwrap());
-            if xbee {
+            let layer = secure.then_some(&SECURE);
+            spawner.spawn(radio_writer(radio_port, air_tx, layer).unwrap());
+            if let Some(responder) = responder {
+                spawner.spawn(secure_aircraft(radio_device, air_rx, config, responder).unwrap());
+            } else if xbee {
                 spawner.spawn(xbee_reader(air_rx, radio_device).unwrap());
                 spawner.spawn(aircraft_piped(radio_device, config).unwrap());
                 if flood > 0 {
@@ -658,7 +739,7 @@ fn main() -> ExitCode {
             } else {
                 spawner.spawn(aircraft(radio_device, air_rx, config).unwrap());
             }
-            spawner.spawn(ground_bridge(ground, udp, xbee).unwrap());
+            spawner.spawn(ground_bridge(ground, udp, xbee, secure).unwrap());
         })
     });
 
@@ -672,7 +753,21 @@ fn main() -> ExitCode {
     let wall_limit = args.duration / args.speed;
 
     let monitor = match (ground_socket, set) {
-        (Some(socket), Some(set)) => Some(run_ground(&args, socket, set, &stop, start)),
+        (Some(socket), Some(set)) => {
+            let transport = PprzV2::new().into();
+            let monitor = Monitor::new(set, transport);
+            let monitor = match ground_keys {
+                Some(keys) => match monitor.with_secure(GroundSecure::new(AC_ID, keys)) {
+                    Ok(m) => m,
+                    Err(e) => {
+                        eprintln!("sitl: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                },
+                None => monitor,
+            };
+            Some(run_ground(&args, socket, monitor, &stop, start))
+        }
         _ => {
             println!(
                 "aircraft {AC_ID} running: telemetry to UDP {}, uplink on UDP {} (Ctrl-C to stop)",
@@ -699,6 +794,9 @@ fn main() -> ExitCode {
             pings.answered(),
             pings.lost()
         );
+        for line in m.secure_lines() {
+            println!("  ground station {line}");
+        }
     }
     if let Some((path, file)) = &mut summary_file
         && let Err(e) = file.write_all(summary.json().as_bytes())
@@ -709,19 +807,42 @@ fn main() -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// The keys of `--secure`: the aircraft's, and the ground's unless `headless`.
+struct SitlKeys {
+    aircraft: pprz_secure::AircraftKeys,
+    ground: Option<pprz_secure::GroundKeys>,
+}
+
+/// Reads and checks the key file (at most 64 KiB of UTF-8 text).
+fn load_keys(path: &std::path::Path, headless: bool) -> Result<SitlKeys, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read it: {e}"))?;
+    if bytes.len() > 64 * 1024 {
+        return Err("larger than a key file can be (64 KiB)".to_owned());
+    }
+    let text = String::from_utf8(bytes).map_err(|_| "not UTF-8 text".to_owned())?;
+    let file = KeyFile::parse(&text).map_err(|e| e.to_string())?;
+    let aircraft = file.aircraft().map_err(|e| format!("aircraft keys: {e}"))?;
+    let ground = if headless {
+        None
+    } else {
+        Some(file.ground().map_err(|e| format!("ground keys: {e}"))?)
+    };
+    Ok(SitlKeys { aircraft, ground })
+}
+
 /// The ground station in this process, until the end of the run: PINGs, one SETTING,
 /// the live table or one line per message.
 fn run_ground(
     args: &Args,
     socket: UdpSocket,
-    set: RuntimeSet,
+    mut monitor: Monitor,
     stop: &AtomicBool,
     start: StdInstant,
 ) -> Monitor {
     let sim_now = |speed: f64| start.elapsed().as_secs_f64() * speed;
     let wall_limit = args.duration / args.speed;
     let transport = PprzV2::new().into();
-    let mut monitor = Monitor::new(set, transport);
+    let secure = monitor.secure_status().is_some();
     let _ = socket.set_read_timeout(Some(StdDuration::from_millis(20)));
     let mut buf = [0u8; 2048];
     let ping_period = 1.0 / args.ping_rate;
@@ -730,19 +851,30 @@ fn run_ground(
     let mut next_render = 0.0;
     while !stop.load(Ordering::SeqCst) && start.elapsed().as_secs_f64() < wall_limit {
         let t = sim_now(args.speed);
-        // Every PING due by now (a flood sends many per pass; a slow pass skips none).
+        // The key exchange (--secure): message 1 until answered, message 3.
+        for frame in monitor.poll_secure(t) {
+            let _ = socket.send_to(&frame, args.uplink);
+        }
+        // Every PING due by now (a flood sends many per pass; a slow pass skips none);
+        // on a secure link, from the session on, sealed.
         while t >= next_ping {
-            if let Ok(frame) = uplink::frame(monitor.set(), transport, AC_ID, "PING", &[])
+            if monitor.uplink_ready()
+                && let Ok(frame) = uplink::frame(monitor.set(), transport, AC_ID, "PING", &[])
+                && let Ok(frame) = monitor.seal_uplink(&frame)
                 && socket.send_to(&frame, args.uplink).is_ok()
             {
                 monitor.ping_sent(t);
+                if secure {
+                    record::uplink(Ping::CLASS_ID, Ping::ID, Instant::now());
+                }
             }
             next_ping += ping_period;
         }
-        if !setting_sent && t >= 3.0 {
+        if !setting_sent && t >= 3.0 && monitor.uplink_ready() {
             // Setting 2 is the example's `gain`.
             let values = [("index", 2.0), ("ac_id", f64::from(AC_ID)), ("value", 2.5)];
             if let Ok(frame) = uplink::frame(monitor.set(), transport, AC_ID, "SETTING", &values)
+                && let Ok(frame) = monitor.seal_uplink(&frame)
                 && socket.send_to(&frame, args.uplink).is_ok()
             {
                 monitor.setting_value_sent(t, 2, 2.5);
@@ -750,9 +882,14 @@ fn run_ground(
             setting_sent = true;
         }
         if let Ok((n, _)) = socket.recv_from(&mut buf) {
-            monitor.feed(sim_now(args.speed), &buf[..n], |line, _| {
+            monitor.feed(sim_now(args.speed), &buf[..n], |line, frame| {
                 if args.lines {
                     println!("{line}");
+                }
+                // A secure link's frames are recorded here, opened (the radio's bridge
+                // sees them encrypted).
+                if secure && let Ok(f) = PprzV2::new().view(frame) {
+                    record::received(f.class(), f.msg_id(), f.payload(), Instant::now());
                 }
             });
         }
@@ -876,6 +1013,7 @@ fn collect_summary(
             arena_full: stats.dropped.arena_full,
             too_large: stats.dropped.too_large,
             rate_limited: stats.dropped.rate_limited,
+            refused: stats.dropped.refused,
             evicted: stats.evicted.total(),
             superseded: stats.superseded,
             queued: stats.queued,
@@ -890,5 +1028,18 @@ fn collect_summary(
         delivery,
         ping,
         messages,
+        secure: plan.secure.then(|| {
+            let k = SECURE.stats().secure;
+            SecureFigures {
+                session: k.session,
+                handshakes_started: k.handshake.started,
+                handshakes_completed: k.handshake.completed,
+                handshakes_refused: k.handshake.refused(),
+                encrypted: k.channel.encrypted,
+                decrypted: k.channel.decrypted,
+                rejected: k.channel.rejected(),
+                counter_space_left: k.counter_space_left,
+            }
+        }),
     }
 }

@@ -27,6 +27,31 @@ pub struct Summary {
     pub ping: PingFigures,
     /// Per message type submitted or received, by class and id.
     pub messages: Vec<MessageFigures>,
+    /// The aircraft's end of the secure link (`--secure`; `None`, JSON `null`, without).
+    pub secure: Option<SecureFigures>,
+}
+
+/// The aircraft's end of the secure link.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SecureFigures {
+    /// Whether a session was established at the end.
+    pub session: bool,
+    /// Handshakes the aircraft answered with fresh keys.
+    pub handshakes_started: u32,
+    /// Handshakes completed (sessions installed).
+    pub handshakes_completed: u32,
+    /// Key-exchange messages refused (malformed, wrong address, unexpected, rate
+    /// limited, bad key, tag or signature).
+    pub handshakes_refused: u32,
+    /// Frames encrypted and sent.
+    pub encrypted: u32,
+    /// Frames received and decrypted.
+    pub decrypted: u32,
+    /// Received frames rejected (bad tag, replayed, plaintext not allowed or unsecured,
+    /// malformed, wrong address, no session).
+    pub rejected: u32,
+    /// Frames the current session can still send.
+    pub counter_space_left: u32,
 }
 
 /// The options of the run.
@@ -141,6 +166,9 @@ pub struct DownlinkFigures {
     pub too_large: u32,
     /// Replies refused by the reply rate limit.
     pub rate_limited: u32,
+    /// Refused by the secure link when taken for the wire (no session yet, or the
+    /// session's counter used up).
+    pub refused: u32,
     /// Messages evicted for more important ones.
     pub evicted: u32,
     /// State samples superseded.
@@ -263,16 +291,31 @@ impl Summary {
         let d = &self.downlink;
         let _ = writeln!(
             s,
-            "  downlink: sent {}, dropped {} (queue full {}, arena full {}, too large {}, replies over the rate limit {}), evicted {}, still queued {}",
+            "  downlink: sent {}, dropped {} (queue full {}, arena full {}, too large {}, replies over the rate limit {}, refused by the secure link {}), evicted {}, still queued {}",
             d.sent,
             d.dropped,
             d.queue_full,
             d.arena_full,
             d.too_large,
             d.rate_limited,
+            d.refused,
             d.evicted,
             d.queued
         );
+        if let Some(k) = &self.secure {
+            let _ = writeln!(
+                s,
+                "  secure link (aircraft): session {}, handshakes started {}, completed {}, refused {}; frames encrypted {}, decrypted {}, rejected {}; counter space left {}",
+                if k.session { "up" } else { "none" },
+                k.handshakes_started,
+                k.handshakes_completed,
+                k.handshakes_refused,
+                k.encrypted,
+                k.decrypted,
+                k.rejected,
+                k.counter_space_left
+            );
+        }
         let m = &self.modem;
         let _ = writeln!(
             s,
