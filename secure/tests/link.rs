@@ -138,7 +138,7 @@ impl Ground {
     fn send_kx(&mut self, kx: &KeyExchange, uplink: &RefCell<VecDeque<u8>>) {
         let mut buf = [0u8; 255];
         let n = kx.write_frame(&mut buf).unwrap();
-        self.send(&buf[..n].to_vec(), uplink);
+        self.send(&buf[..n], uplink);
     }
 
     /// One step of the ground at `now_ms`: handshake timers, then the downlink's bytes.

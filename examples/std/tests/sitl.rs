@@ -199,7 +199,7 @@ fn ping_flood_is_rate_limited_in_the_summary() {
     let refused: u64 = out
         .split("replies over the rate limit ")
         .nth(1)
-        .and_then(|rest| rest.split(')').next())
+        .and_then(|rest| rest.split([',', ')']).next())
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no rate-limit count in the summary:\n{out}"));
     assert!(refused > 1000, "{refused} refused:\n{out}");

@@ -12,6 +12,12 @@
 //!   priorities; unplugged, its writes fail fast and are counted.
 //! * The application of `pprz-example-app`: simulated sensors and rotorcraft state,
 //!   periodic telemetry from the project's `telemetry.xml`, settings.
+//! * With the cargo feature `secure`, the radio is a secure PPRZ link (pprz-secure,
+//!   `salty` backend): nothing but the key exchange until the ground completes the
+//!   handshake, then every radio frame encrypted and authenticated; the handshake's
+//!   ephemeral keys come from the hardware RNG; keys embedded at build time from the key
+//!   file named by `PPRZ_SECURE_KEYS` (the published INSECURE test keys, with a build
+//!   warning, without it). The USB output stays plain (a cable, not the air).
 
 #![no_std]
 #![no_main]
@@ -37,10 +43,33 @@ use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
 use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Pacing, Port, run_writer};
 use static_cell::StaticCell;
 
+#[cfg(not(feature = "secure"))]
 bind_interrupts!(struct Irqs {
     USART2 => BufferedInterruptHandler<USART2>;
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
 });
+#[cfg(feature = "secure")]
+bind_interrupts!(struct Irqs {
+    USART2 => BufferedInterruptHandler<USART2>;
+    OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+    RNG => embassy_stm32::rng::InterruptHandler<embassy_stm32::peripherals::RNG>;
+});
+
+/// The radio's configuration: PPRZ v2, paced without flow control; with `secure`, room
+/// for the secure overhead after every frame.
+#[cfg(not(feature = "secure"))]
+const RADIO: DeviceConfig = DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new()));
+#[cfg(feature = "secure")]
+const RADIO: DeviceConfig = pprz_secure::link::SecureLink::<M>::DEVICE;
+
+/// The radio's secure link (feature `secure`), shared by its writer, its reader and the
+/// handshake.
+#[cfg(feature = "secure")]
+static SECURE: pprz_secure::link::SecureLink<M> = pprz_secure::link::SecureLink::aircraft(AC_ID);
+/// The aircraft's keys (feature `secure`), embedded by build.rs.
+#[cfg(feature = "secure")]
+static KEYS: pprz_secure::KeyFile =
+    pprz_secure::const_key_file!(include_str!(concat!(env!("OUT_DIR"), "/aircraft.keys")));
 
 /// Whether the radio UART uses hardware flow control (RTS/CTS): cargo feature
 /// `flow-control`, on by default; build with `--no-default-features` for a radio whose
@@ -72,7 +101,7 @@ static DOWNLINK: Dl = Downlink::new(
     &ARENA,
     AC_ID,
     [
-        DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())).pacing(RADIO_PACING),
+        RADIO.pacing(RADIO_PACING),
         DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())).depth(16),
     ],
 );
@@ -91,7 +120,10 @@ static CDC_STATE: StaticCell<State> = StaticCell::new();
 
 #[embassy_executor::task]
 async fn radio_writer(mut port: Port<'static>, tx: BufferedUartTx<'static>) {
-    run_writer(&mut port, tx).await
+    #[cfg(not(feature = "secure"))]
+    run_writer(&mut port, tx).await;
+    #[cfg(feature = "secure")]
+    pprz_telemetry::run_writer_with(&mut port, tx, &SECURE).await
 }
 
 #[embassy_executor::task]
@@ -104,9 +136,35 @@ async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
     device.run().await
 }
 
+#[cfg(not(feature = "secure"))]
 #[embassy_executor::task]
 async fn aircraft(radio: Device<'static>, rx: UartRx<'static, BufferedUartRx<'static>>) {
     let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+    panic!("the aircraft application cannot start: {e}");
+}
+
+/// The application on the secure radio, its handshake's keys from the hardware RNG.
+#[cfg(feature = "secure")]
+#[embassy_executor::task]
+async fn aircraft(
+    radio: Device<'static>,
+    rx: UartRx<'static, BufferedUartRx<'static>>,
+    rng: embassy_stm32::rng::Rng<'static, embassy_stm32::peripherals::RNG>,
+) {
+    let keys = match KEYS.aircraft() {
+        Ok(keys) => keys,
+        Err(e) => panic!("the aircraft's keys: {e}"),
+    };
+    let responder = pprz_secure::Responder::new(AC_ID, keys);
+    let Err(e) = pprz_example_app::run_secure_aircraft(
+        radio,
+        rx,
+        Config::default(),
+        &SECURE,
+        responder,
+        rng,
+    )
+    .await;
     panic!("the aircraft application cannot start: {e}");
 }
 
@@ -201,5 +259,15 @@ async fn main(spawner: Spawner) {
     spawner.spawn(usb_device(device).unwrap());
     spawner.spawn(radio_writer(radio, radio_tx).unwrap());
     spawner.spawn(usb_writer(usb, usb_tx).unwrap());
+    #[cfg(not(feature = "secure"))]
     spawner.spawn(aircraft(radio_device, radio_rx).unwrap());
+    #[cfg(feature = "secure")]
+    spawner.spawn(
+        aircraft(
+            radio_device,
+            radio_rx,
+            embassy_stm32::rng::Rng::new(p.RNG, Irqs),
+        )
+        .unwrap(),
+    );
 }
