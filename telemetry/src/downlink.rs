@@ -254,7 +254,7 @@ pub struct DeviceConfig {
     /// modem sends no status). See [`delivery`](crate::delivery).
     pub delivery: Option<DeliveryWindow>,
     /// Spare bytes allocated after every frame of this device, for a
-    /// [`LinkLayer`](crate::layer::LinkLayer) that lengthens frames when the writer takes
+    /// [`LinkLayer`] that lengthens frames when the writer takes
     /// them for the wire (the secure link's 21 bytes of counter, tag and crypto byte). A
     /// message whose frame would not fit the transport with them is refused at `send`
     /// ([`DropReason::TooLarge`]).

@@ -27,7 +27,7 @@
 //!
 //! # Link layers
 //! [`run_writer_with`] seals every frame with the device's
-//! [`LinkLayer`](crate::layer::LinkLayer) (the secure link) just before writing it.
+//! [`LinkLayer`] (the secure link) just before writing it.
 //!
 //! # Transmit statuses
 //! For an XBee device configured with a [`DeliveryWindow`], the
