@@ -377,11 +377,14 @@ impl GroundSecure {
     }
 }
 
-/// Reads the ground's keys from a key file.
+/// Reads and parses a key file: at most [`MAX_KEY_FILE_LEN`] bytes of UTF-8 text, read
+/// at once into a buffer that is cleared afterwards (no copies of private keys left
+/// behind); a directory, an unreadable, too long or non-UTF-8 file is a
+/// [`SecureSetupError::Read`], a malformed line a [`SecureSetupError::Parse`].
 ///
 /// # Errors
-/// The file cannot be read, does not parse, or lacks valid ground keys.
-pub fn ground_keys_from_file(path: &Path) -> Result<GroundKeys, SecureSetupError> {
+/// As described.
+pub fn key_file_from_path(path: &Path) -> Result<KeyFile, SecureSetupError> {
     use std::io::Read as _;
     let read_error = |error| SecureSetupError::Read {
         path: path.to_owned(),
@@ -398,12 +401,12 @@ pub fn ground_keys_from_file(path: &Path) -> Result<GroundKeys, SecureSetupError
         .take(MAX_KEY_FILE_LEN + 1)
         .read_to_end(&mut bytes)
         .map_err(read_error);
-    let result = read.and_then(|_| parse_ground_keys(path, &bytes));
+    let result = read.and_then(|_| parse_key_file(path, &bytes));
     bytes.fill(0);
     result
 }
 
-fn parse_ground_keys(path: &Path, bytes: &[u8]) -> Result<GroundKeys, SecureSetupError> {
+fn parse_key_file(path: &Path, bytes: &[u8]) -> Result<KeyFile, SecureSetupError> {
     let read_error = |error| SecureSetupError::Read {
         path: path.to_owned(),
         error,
@@ -419,12 +422,21 @@ fn parse_ground_keys(path: &Path, bytes: &[u8]) -> Result<GroundKeys, SecureSetu
             "not UTF-8 text",
         ))
     })?;
-    let file = KeyFile::parse(text).map_err(|error| SecureSetupError::Parse {
-        path: path.to_owned(),
-        error,
-    })?;
-    file.ground().map_err(|error| SecureSetupError::Keys {
+    KeyFile::parse(text).map_err(|error| SecureSetupError::Parse {
         path: path.to_owned(),
         error,
     })
+}
+
+/// Reads the ground's keys from a key file.
+///
+/// # Errors
+/// The file cannot be read, does not parse, or lacks valid ground keys.
+pub fn ground_keys_from_file(path: &Path) -> Result<GroundKeys, SecureSetupError> {
+    key_file_from_path(path)?
+        .ground()
+        .map_err(|error| SecureSetupError::Keys {
+            path: path.to_owned(),
+            error,
+        })
 }

@@ -48,13 +48,13 @@ use pprz_devices::sim::{
 use pprz_example_app::{AC_ID, Config, M};
 use pprz_ground::cli;
 use pprz_ground::monitor::Monitor;
-use pprz_ground::secure::GroundSecure;
+use pprz_ground::secure::{GroundSecure, key_file_from_path};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_messages::{Message, VarArray};
+use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
 use pprz_secure::rand_core::{OsRng, TryRngCore};
-use pprz_secure::{KeyFile, Responder};
 use pprz_telemetry::delivery::MAX_IN_MODEM;
 use pprz_telemetry::pprz_messages::priority;
 use pprz_telemetry::pprz_transports::{
@@ -813,14 +813,10 @@ struct SitlKeys {
     ground: Option<pprz_secure::GroundKeys>,
 }
 
-/// Reads and checks the key file (at most 64 KiB of UTF-8 text).
+/// Reads the key file (`pprz_ground::secure::key_file_from_path`: bounded, UTF-8,
+/// cleared after parsing) and takes the keys each end needs.
 fn load_keys(path: &std::path::Path, headless: bool) -> Result<SitlKeys, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read it: {e}"))?;
-    if bytes.len() > 64 * 1024 {
-        return Err("larger than a key file can be (64 KiB)".to_owned());
-    }
-    let text = String::from_utf8(bytes).map_err(|_| "not UTF-8 text".to_owned())?;
-    let file = KeyFile::parse(&text).map_err(|e| e.to_string())?;
+    let file = key_file_from_path(path).map_err(|e| e.to_string())?;
     let aircraft = file.aircraft().map_err(|e| format!("aircraft keys: {e}"))?;
     let ground = if headless {
         None
