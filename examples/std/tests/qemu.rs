@@ -164,6 +164,25 @@ fn boot(name: &str) -> Option<(Qemu, TcpStream)> {
     Some((guard, stream))
 }
 
+/// The ground's requests: a PING, and the SETTING of the gain to [`GAIN`] (plain frames).
+fn requests(set: &RuntimeSet) -> (Vec<u8>, Vec<u8>) {
+    let transport = AnyTransport::from(PprzV2::new());
+    let ping = uplink::frame(set, transport, AC_ID, "PING", &[]).expect("PING frame");
+    let setting = uplink::frame(
+        set,
+        transport,
+        AC_ID,
+        "SETTING",
+        &[
+            ("index", f64::from(GAIN_INDEX)),
+            ("ac_id", f64::from(AC_ID)),
+            ("value", f64::from(GAIN)),
+        ],
+    )
+    .expect("SETTING frame");
+    (ping, setting)
+}
+
 /// The project's default message set, as the ground tools load it.
 fn default_set() -> RuntimeSet {
     RuntimeSet::load(concat!(
@@ -193,19 +212,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
     };
     let set = default_set();
     let transport = AnyTransport::from(PprzV2::new());
-    let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");
-    let setting = uplink::frame(
-        &set,
-        transport,
-        AC_ID,
-        "SETTING",
-        &[
-            ("index", f64::from(GAIN_INDEX)),
-            ("ac_id", f64::from(AC_ID)),
-            ("value", f64::from(GAIN)),
-        ],
-    )
-    .expect("SETTING frame");
+    let (ping, setting) = requests(&set);
 
     // The ground tool's monitor (PONG and DL_VALUE events) and a typed decoder (guest
     // time stamps) read the same bytes.
@@ -401,19 +408,7 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
     let ground = GroundSecure::new(AC_ID, keys.ground().expect("ground keys"));
     let set = default_set();
     let transport = AnyTransport::from(PprzV2::new());
-    let ping = uplink::frame(&set, transport, AC_ID, "PING", &[]).expect("PING frame");
-    let setting = uplink::frame(
-        &set,
-        transport,
-        AC_ID,
-        "SETTING",
-        &[
-            ("index", f64::from(GAIN_INDEX)),
-            ("ac_id", f64::from(AC_ID)),
-            ("value", f64::from(GAIN)),
-        ],
-    )
-    .expect("SETTING frame");
+    let (ping, setting) = requests(&set);
     let mut monitor = Monitor::new(set, transport)
         .with_secure(ground)
         .expect("PPRZ v2 takes a secure link");
