@@ -3,30 +3,12 @@
 //! and text that tries to reach the terminal.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
 
 use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
 
-const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml");
+mod common;
 
-fn monitor() -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"));
-    cmd.stdin(Stdio::null());
-    cmd
-}
-
-fn run(cmd: &mut Command) -> (Option<i32>, String, String) {
-    let Output {
-        status,
-        stdout,
-        stderr,
-    } = cmd.output().expect("the monitor runs");
-    (
-        status.code(),
-        String::from_utf8_lossy(&stdout).into_owned(),
-        String::from_utf8_lossy(&stderr).into_owned(),
-    )
-}
+use common::{MESSAGES, monitor, run};
 
 /// A fresh temporary directory for one test.
 fn temp_dir(name: &str) -> PathBuf {

@@ -7,7 +7,9 @@ use std::process::Command;
 use pprz_messages::{Message, VarArray};
 use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
 
-const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml");
+mod common;
+
+use common::MESSAGES;
 
 fn monitor(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"))
@@ -46,7 +48,7 @@ fn stream() -> Vec<u8> {
         out.extend_from_slice(&[0x42]);
     };
     let mut fields = [0u8; 64];
-    let gps = pprz_ground_test_messages::gps();
+    let gps = common::gps();
     let n = gps.encode(&mut fields).unwrap();
     push(8, &fields[..n]);
     push(31, &[4, 0, 0, 0x20, 0x40]); // DL_VALUE index 4, value 2.5
@@ -62,17 +64,6 @@ fn stream() -> Vec<u8> {
 mod pprz_ground_test_messages {
     use super::*;
     use pprz_default::messages::telemetry::{Alive, Gps};
-
-    pub fn gps() -> Gps {
-        Gps {
-            mode: 3,
-            utm_east: 37_712_345,
-            utm_north: 482_112_000,
-            alt: 152_300,
-            utm_zone: 31,
-            ..Gps::default()
-        }
-    }
 
     pub fn alive() -> Alive<'static> {
         Alive {

@@ -5,7 +5,6 @@
 //! refused combinations, bad key files, and a whole run over loopback UDP.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
 
 use pprz_ground::cli::Transport;
 use pprz_ground::monitor::{Event, Monitor, Notice};
@@ -20,7 +19,10 @@ use pprz_secure::{
 };
 use pprz_transports::{AnyTransport, Encoder, Framing, MsgHeader, PprzV2, TxMeta};
 
-const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml");
+mod common;
+
+use common::{MESSAGES, monitor, run};
+
 const KEY_FILE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../secure/keys/INSECURE-TEST-ONLY.keys"
@@ -246,18 +248,9 @@ fn handshake_then_encrypted_telemetry_and_ping() {
 }
 
 fn gps_fields() -> Vec<u8> {
-    use pprz_default::messages::telemetry::Gps;
     use pprz_messages::Message as _;
-    let gps = Gps {
-        mode: 3,
-        utm_east: 37_712_345,
-        utm_north: 482_112_000,
-        alt: 152_300,
-        utm_zone: 31,
-        ..Gps::default()
-    };
     let mut buf = [0u8; 64];
-    let n = gps.encode(&mut buf).unwrap();
+    let n = common::gps().encode(&mut buf).unwrap();
     buf[..n].to_vec()
 }
 
@@ -502,29 +495,10 @@ fn secure_needs_pprz_v2() {
     }
 }
 
-fn monitor_cmd() -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"));
-    cmd.stdin(Stdio::null());
-    cmd
-}
-
-fn run(cmd: &mut Command) -> (Option<i32>, String, String) {
-    let Output {
-        status,
-        stdout,
-        stderr,
-    } = cmd.output().expect("the monitor runs");
-    (
-        status.code(),
-        String::from_utf8_lossy(&stdout).into_owned(),
-        String::from_utf8_lossy(&stderr).into_owned(),
-    )
-}
-
 #[test]
 fn the_command_line_refuses_bad_secure_setups() {
     let link = ["--udp", "127.0.0.1:0", "--uplink", "127.0.0.1:9"];
-    let (code, _, err) = run(monitor_cmd()
+    let (code, _, err) = run(monitor()
         .args(["--messages", MESSAGES, "--secure", KEY_FILE])
         .args(link)
         .args(["--transport", "pprz1"]));
@@ -532,7 +506,7 @@ fn the_command_line_refuses_bad_secure_setups() {
     assert!(err.contains("--secure needs --transport pprz2"), "{err}");
 
     let (code, _, err) =
-        run(monitor_cmd().args(["--messages", MESSAGES, "--stdin", "--secure", KEY_FILE]));
+        run(monitor().args(["--messages", MESSAGES, "--stdin", "--secure", KEY_FILE]));
     assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("--secure needs a link to the aircraft"),
@@ -542,19 +516,19 @@ fn the_command_line_refuses_bad_secure_setups() {
     let dir = temp_dir("cli");
     let bad = dir.join("bad.keys");
     std::fs::write(&bad, "GCS_PRIVATE = zz\n").unwrap();
-    let (code, _, err) = run(monitor_cmd()
+    let (code, _, err) = run(monitor()
         .args(["--messages", MESSAGES, "--secure", bad.to_str().unwrap()])
         .args(link));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("line 1"), "{err}");
-    let (code, _, err) = run(monitor_cmd()
+    let (code, _, err) = run(monitor()
         .args(["--messages", MESSAGES, "--secure", "/nonexistent/k.keys"])
         .args(link));
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("cannot read the key file"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 
-    let (code, help, _) = run(monitor_cmd().arg("--help"));
+    let (code, help, _) = run(monitor().arg("--help"));
     assert_eq!(code, Some(0));
     assert!(help.contains("--secure <KEYFILE>"), "{help}");
 }
@@ -618,7 +592,7 @@ fn a_secure_run_over_udp() {
         }
         air
     });
-    let (code, out, err) = run(monitor_cmd().args([
+    let (code, out, err) = run(monitor().args([
         "--messages",
         MESSAGES,
         "--udp",
