@@ -216,7 +216,7 @@ impl<M: RawMutex> SecureLink<M> {
                 Ok(ResponderEvent::Reply(reply)) => {
                     // A drop (queue full of replies, ...) is counted by the downlink;
                     // the ground repeats message 1.
-                    let _ = out.send_to(&KeyExchangeUav(&reply), targets, KEY_EXCHANGE_PRIORITY);
+                    let _ = out.send_on(&KeyExchangeUav(&reply), targets, KEY_EXCHANGE_PRIORITY);
                 }
                 Ok(ResponderEvent::Established(keys)) => {
                     self.channel.lock(|c| c.borrow_mut().install(keys));

@@ -45,7 +45,7 @@
 //! let attitude = Attitude { phi: 0.1, psi: 0.0, theta: 0.0 };
 //! tx.send(&attitude).unwrap(); // every device
 //! radio.device().send_with_priority(&attitude, 200).unwrap(); // only the radio
-//! tx.send_to(&attitude, Targets::from(log.device()), 10).unwrap();
+//! tx.send_on(&attitude, Targets::from(log.device()), 10).unwrap();
 //! assert_eq!(radio.device().stats().queued, 2);
 //! assert_eq!(log.device().stats().queued, 2);
 //! ```
@@ -58,12 +58,13 @@ use core::task::{Context, Poll};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use pprz_messages::Message;
-use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, TxMeta, TxStatus};
+use pprz_transports::{AnyTransport, Encoder, Frame, GROUND_ID, MsgHeader, TxMeta, TxStatus};
 
 use crate::arena::{AllocError, ArenaStats, FrameArena, FrameBuf};
 use crate::delivery::{DeliveryStats, DeliveryWindow, Outstanding};
 use crate::layer::LinkLayer;
 use crate::queue::{FrameQueue, MessageKey, Pushed};
+use crate::relay::Routes;
 use crate::stats::{DeviceStats, DropReason};
 
 /// Allocation of frame memory: implemented by [`FrameArena`] of any size, so a
@@ -96,6 +97,20 @@ trait EncodeFields {
     fn encode_fields(&self, buf: &mut [u8]) -> Option<usize>;
 }
 
+/// The fields of a frame being forwarded, copied as they are (never decoded).
+struct RawFields<'p>(&'p [u8]);
+
+impl EncodeFields for RawFields<'_> {
+    fn fields_len(&self) -> usize {
+        self.0.len()
+    }
+
+    fn encode_fields(&self, buf: &mut [u8]) -> Option<usize> {
+        buf.get_mut(..self.0.len())?.copy_from_slice(self.0);
+        Some(self.0.len())
+    }
+}
+
 impl<Msg: Message> EncodeFields for Msg {
     #[inline]
     fn fields_len(&self) -> usize {
@@ -108,9 +123,10 @@ impl<Msg: Message> EncodeFields for Msg {
     }
 }
 
-/// Class, id and priority of a send, whether it answers a request (subject to the
-/// devices' [`ReplyLimit`]) and whether it is a state message (a newer one supersedes a
-/// waiting older one), passed as one word to the shared send path.
+/// Class, id, destination and priority of a send, whether it answers a request (subject
+/// to the devices' [`ReplyLimit`]), whether it is a state message (a newer one supersedes
+/// a waiting older one) and, for another aircraft's frame being forwarded, its source
+/// and component, passed as two words to the shared send path.
 #[derive(Clone, Copy)]
 struct Route {
     class: u8,
@@ -118,6 +134,15 @@ struct Route {
     priority: u8,
     reply: bool,
     latest: bool,
+    to: u8,
+    relayed: Option<Relayed>,
+}
+
+/// The header fields a forwarded frame keeps: its source and component.
+#[derive(Clone, Copy)]
+struct Relayed {
+    source: u8,
+    component: u8,
 }
 
 impl Route {
@@ -129,6 +154,30 @@ impl Route {
             priority,
             reply: false,
             latest: false,
+            to: GROUND_ID,
+            relayed: None,
+        }
+    }
+
+    /// The same, addressed to `to`.
+    #[inline]
+    fn to(self, to: u8) -> Self {
+        Self { to, ..self }
+    }
+
+    /// Another aircraft's `frame`, forwarded with `priority`.
+    fn forward(frame: &Frame<'_>, priority: u8) -> Self {
+        Self {
+            class: frame.class(),
+            msg_id: frame.msg_id(),
+            priority,
+            reply: false,
+            latest: false,
+            to: frame.destination().unwrap_or(GROUND_ID),
+            relayed: Some(Relayed {
+                source: frame.source(),
+                component: frame.component(),
+            }),
         }
     }
 
@@ -399,6 +448,8 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     outstanding: [Mutex<M, RefCell<Outstanding>>; D],
     /// PPRZLOG time stamps, in 100 µs ticks.
     clock: fn() -> u32,
+    /// Which devices lead to which aircraft.
+    routes: Routes<'a>,
 }
 
 fn no_clock() -> u32 {
@@ -444,7 +495,22 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             reply_tat: [const { Mutex::new(Cell::new(0)) }; D],
             outstanding: [const { Mutex::new(RefCell::new(Outstanding::new())) }; D],
             clock: no_clock,
+            routes: Routes::DIRECT,
         }
+    }
+
+    /// Sets the route table: which devices lead to the ground, to each other aircraft
+    /// and to broadcast ([`Routes`]; by default every device leads everywhere). Used by
+    /// [`send`](Self::send) and [`send_to`](Self::send_to), and by the
+    /// [relay](crate::relay) to forward other aircraft's frames.
+    pub const fn with_routes(mut self, routes: Routes<'a>) -> Self {
+        self.routes = routes;
+        self
+    }
+
+    /// The route table.
+    pub fn routes(&self) -> Routes<'a> {
+        self.routes
     }
 
     /// Sets the clock that stamps PPRZLOG records (100 µs ticks, e.g. from
@@ -494,12 +560,14 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         self.undeliverable.lock(Cell::get)
     }
 
-    /// Sends `msg` to every device at the message's own priority. Never blocks.
+    /// Sends `msg` to the ground at the message's own priority, on the devices of the
+    /// ground's route (every device unless [routes](Self::with_routes) say otherwise).
+    /// Never blocks.
     ///
     /// # Errors
     /// The message was dropped for at least one device (counted there).
     pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.send_to(msg, Targets::ALL, Msg::PRIORITY)
+        self.send_on(msg, self.routes.to(GROUND_ID), Msg::PRIORITY)
     }
 
     /// Sends `msg`, a **state** message (a periodic sample: attitude, position, status),
@@ -516,10 +584,35 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     /// # Errors
     /// The message was dropped for at least one device (counted there).
     pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.send_fields(msg, Route::latest::<Msg>(Msg::PRIORITY), Targets::ALL)
+        self.send_fields(
+            msg,
+            Route::latest::<Msg>(Msg::PRIORITY),
+            self.routes.to(GROUND_ID),
+        )
     }
 
-    /// Sends `msg` to the devices in `targets` (indices beyond the last device are
+    /// Sends `msg` to aircraft `destination` (or [`GROUND_ID`], or
+    /// [`BROADCAST_ID`](pprz_transports::BROADCAST_ID) for every aircraft) with
+    /// `priority`, on the devices the [route table](Self::with_routes) gives for it.
+    /// Never blocks.
+    ///
+    /// # Errors
+    /// As [`send_on`](Self::send_on).
+    #[inline]
+    pub fn send_to<Msg: Message>(
+        &self,
+        msg: &Msg,
+        destination: u8,
+        priority: u8,
+    ) -> Result<(), SendError> {
+        self.send_fields(
+            msg,
+            Route::of::<Msg>(priority).to(destination),
+            self.routes.to(destination),
+        )
+    }
+
+    /// Sends `msg` on the devices in `targets` (indices beyond the last device are
     /// ignored) with `priority`, addressed to the ground. Never blocks.
     ///
     /// The message is encoded once per distinct transport among the targets, directly
@@ -530,7 +623,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     /// named no device at all ([`DropReason::NoDevice`], counted in
     /// [`undeliverable`](Self::undeliverable)).
     #[inline]
-    pub fn send_to<Msg: Message>(
+    pub fn send_on<Msg: Message>(
         &self,
         msg: &Msg,
         targets: Targets,
@@ -539,7 +632,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         self.send_fields(msg, Route::of::<Msg>(priority), targets)
     }
 
-    /// The send path of every message type: [`send_to`](Self::send_to) is a thin generic
+    /// The send path of every message type: [`send_on`](Self::send_on) is a thin generic
     /// wrapper around it, so this is compiled once per downlink type instead of once per
     /// message type (about 450 bytes of flash each on a Cortex-M), for two indirect calls
     /// through the message's vtable (`fields_len`, and `encode_fields` per transport).
@@ -555,7 +648,13 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             priority,
             reply,
             latest,
+            to,
+            relayed,
         } = route;
+        let (source, component, relay) = match relayed {
+            Some(r) => (r.source, r.component, true),
+            None => (self.ac_id, pprz_transports::COMPONENT_BROADCAST, false),
+        };
         let latest = latest.then_some(MessageKey { class, msg_id });
         if targets.bits() & Self::DEVICE_BITS == 0 {
             self.undeliverable.lock(|n| n.set(n.get().wrapping_add(1)));
@@ -564,7 +663,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 reason: DropReason::NoDevice,
             });
         }
-        let header = MsgHeader::new(self.ac_id, GROUND_ID, class, msg_id);
+        let header = MsgHeader::new(source, to, class, msg_id).with_component(component);
         let meta = TxMeta::new(header).at((self.clock)());
         let payload_len = msg.fields_len();
         let seq = self.next_seq();
@@ -574,7 +673,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         let mut frames: heapless::Vec<(usize, FrameBuf<'a>), D> = heapless::Vec::new();
         for device in (0..D).filter(|&d| targets.contains(d)) {
             if reply && !self.admit_reply(device) {
-                self.queues[device].count_dropped(DropReason::RateLimited, priority);
+                self.queues[device].count_dropped(DropReason::RateLimited, priority, relay);
                 error = Some(SendError {
                     device,
                     reason: DropReason::RateLimited,
@@ -589,7 +688,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                     let _ = frames.push((device, frame));
                 }
                 Err(reason) => {
-                    self.queues[device].count_dropped(reason, priority);
+                    self.queues[device].count_dropped(reason, priority, relay);
                     error = Some(SendError { device, reason });
                 }
             }
@@ -599,7 +698,8 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 0 => Q,
                 depth => depth,
             };
-            if self.queues[device].push(priority, seq, latest, frame, depth) == Pushed::Dropped {
+            if self.queues[device].push(priority, seq, latest, relay, frame, depth) == Pushed::Dropped
+            {
                 error = Some(SendError {
                     device,
                     reason: DropReason::QueueFull,
@@ -755,6 +855,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
 /// [`Downlink`] of any mutex, device count and queue capacity.
 trait Core: Sync {
     fn ac_id(&self) -> u8;
+    fn routes(&self) -> Routes<'_>;
     fn device_count(&self) -> usize;
     fn config(&self, device: usize) -> Option<DeviceConfig>;
     fn send_fields(
@@ -776,6 +877,10 @@ trait Core: Sync {
 impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M, D, Q> {
     fn ac_id(&self) -> u8 {
         self.ac_id
+    }
+
+    fn routes(&self) -> Routes<'_> {
+        self.routes
     }
 
     fn device_count(&self) -> usize {
@@ -845,22 +950,41 @@ impl fmt::Debug for Sender<'_> {
 }
 
 impl<'d> Sender<'d> {
-    /// Sends `msg` to every device at the message's own priority; see
-    /// [`Downlink::send`].
+    /// Sends `msg` to the ground at the message's own priority; see [`Downlink::send`].
     ///
     /// # Errors
     /// The message was dropped for at least one device (counted there).
     #[inline]
     pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.send_to(msg, Targets::ALL, Msg::PRIORITY)
+        self.send_on(msg, self.core.routes().to(GROUND_ID), Msg::PRIORITY)
     }
 
-    /// Sends `msg` to `targets` with `priority`; see [`Downlink::send_to`].
+    /// Sends `msg` to aircraft `destination` with `priority`, on the devices of its
+    /// route; see [`Downlink::send_to`].
     ///
     /// # Errors
     /// The message was dropped for at least one device (counted there).
     #[inline]
     pub fn send_to<Msg: Message>(
+        &self,
+        msg: &Msg,
+        destination: u8,
+        priority: u8,
+    ) -> Result<(), SendError> {
+        self.core.send_fields(
+            msg,
+            Route::of::<Msg>(priority).to(destination),
+            self.core.routes().to(destination),
+        )
+    }
+
+    /// Sends `msg` on `targets` with `priority`, to the ground; see
+    /// [`Downlink::send_on`].
+    ///
+    /// # Errors
+    /// The message was dropped for at least one device (counted there).
+    #[inline]
+    pub fn send_on<Msg: Message>(
         &self,
         msg: &Msg,
         targets: Targets,
@@ -870,15 +994,40 @@ impl<'d> Sender<'d> {
             .send_fields(msg, Route::of::<Msg>(priority), targets)
     }
 
-    /// Sends the state message `msg` to every device, superseding a waiting older one;
+    /// Sends the state message `msg` to the ground, superseding a waiting older one;
     /// see [`Downlink::send_latest`].
     ///
     /// # Errors
     /// The message was dropped for at least one device (counted there).
     #[inline]
     pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.core
-            .send_fields(msg, Route::latest::<Msg>(Msg::PRIORITY), Targets::ALL)
+        self.core.send_fields(
+            msg,
+            Route::latest::<Msg>(Msg::PRIORITY),
+            self.core.routes().to(GROUND_ID),
+        )
+    }
+
+    /// Forwards another aircraft's `frame` on `targets` with `priority`: the same
+    /// header (source, destination, class, component, id) and the fields copied as they
+    /// are, re-framed for each device's transport; counted as relayed
+    /// ([`RelayedStats`](crate::stats::RelayedStats)).
+    pub(crate) fn forward(
+        &self,
+        frame: &Frame<'_>,
+        targets: Targets,
+        priority: u8,
+    ) -> Result<(), SendError> {
+        self.core.send_fields(
+            &RawFields(frame.payload()),
+            Route::forward(frame, priority),
+            targets,
+        )
+    }
+
+    /// The downlink's route table.
+    pub fn routes(&self) -> Routes<'d> {
+        self.core.routes()
     }
 
     /// Our aircraft id.
@@ -977,15 +1126,31 @@ impl<'d> Device<'d> {
     }
 
     /// Sends `msg`, an answer to a request received on this device, to this device at
-    /// the message's own priority, within the device's [`ReplyLimit`].
+    /// the message's own priority, within the device's [`ReplyLimit`], addressed to the
+    /// ground.
     ///
     /// # Errors
     /// The reply was dropped, [`DropReason::RateLimited`] among the reasons (counted in
     /// this device's statistics).
     #[inline]
     pub fn reply<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.core
-            .send_fields(msg, Route::reply::<Msg>(), Targets::from(*self))
+        self.reply_to(msg, GROUND_ID)
+    }
+
+    /// [`reply`](Self::reply) addressed to `destination`: the sender of the request
+    /// (the ground, or another aircraft; [`Received::reply`] answers its source).
+    ///
+    /// # Errors
+    /// As [`reply`](Self::reply).
+    ///
+    /// [`Received::reply`]: crate::registry::Received::reply
+    #[inline]
+    pub fn reply_to<Msg: Message>(&self, msg: &Msg, destination: u8) -> Result<(), SendError> {
+        self.core.send_fields(
+            msg,
+            Route::reply::<Msg>().to(destination),
+            Targets::from(*self),
+        )
     }
 
     /// A transmit status the radio sent for one of this device's frames (the device's

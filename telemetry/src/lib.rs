@@ -11,6 +11,7 @@ pub mod link;
 mod queue;
 pub mod reader;
 pub mod registry;
+pub mod relay;
 pub mod scheduler;
 pub mod services;
 pub mod stats;
@@ -27,5 +28,6 @@ pub use downlink::{
 };
 pub use layer::{Layered, LinkLayer, Plain};
 pub use link::{Link, LinkMutex, LinkStats};
-pub use stats::{DeviceStats, DropReason};
+pub use relay::{Relay, RelayStats, Routes};
+pub use stats::{DeviceStats, DropReason, RelayedStats};
 pub use writer::{run_writer, run_writer_with};

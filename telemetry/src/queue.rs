@@ -35,12 +35,16 @@ use embassy_sync::waitqueue::WakerRegistration;
 use crate::arena::FrameBuf;
 use crate::stats::{DeviceStats, DropReason};
 
-/// A queued frame: its priority, its global sequence number (age), its bytes, and for a
-/// state message (latest value wins) the message it carries.
+/// A queued frame: its priority, its global sequence number (age), its bytes, for a
+/// state message (latest value wins) the message it carries, and whether it is another
+/// aircraft's frame being forwarded (counted apart as well, [`RelayedStats`]).
+///
+/// [`RelayedStats`]: crate::stats::RelayedStats
 struct Entry<'a> {
     priority: u8,
     seq: u32,
     latest: Option<MessageKey>,
+    relayed: bool,
     frame: FrameBuf<'a>,
 }
 
@@ -96,9 +100,11 @@ struct State<'a, const Q: usize> {
     /// Invariant: sorted by priority ascending, and within a priority by age descending
     /// (newest first), so the last entry is the most important and oldest.
     entries: heapless::Vec<Entry<'a>, Q>,
-    /// Whether the writer holds a frame taken from this queue, and its priority.
+    /// Whether the writer holds a frame taken from this queue, its priority, and
+    /// whether it is a forwarded one.
     in_flight: bool,
     in_flight_priority: u8,
+    in_flight_relayed: bool,
     waker: WakerRegistration,
     stats: DeviceStats,
 }
@@ -115,15 +121,56 @@ impl<'a, const Q: usize> State<'a, Q> {
         &mut self.stats.levels[pprz_messages::priority::level(priority)]
     }
 
-    fn submitted(&mut self, priority: u8) {
+    fn relayed_level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
+        &mut self.stats.relayed.levels[pprz_messages::priority::level(priority)]
+    }
+
+    fn submitted(&mut self, priority: u8, relayed: bool) {
         self.stats.submitted = self.stats.submitted.wrapping_add(1);
         let l = self.level(priority);
         l.submitted = l.submitted.wrapping_add(1);
+        if relayed {
+            let r = &mut self.stats.relayed;
+            r.submitted = r.submitted.wrapping_add(1);
+            let l = self.relayed_level(priority);
+            l.submitted = l.submitted.wrapping_add(1);
+        }
     }
 
-    fn lost(&mut self, priority: u8) {
+    fn lost(&mut self, priority: u8, relayed: bool) {
         let l = self.level(priority);
         l.lost = l.lost.wrapping_add(1);
+        if relayed {
+            let l = self.relayed_level(priority);
+            l.lost = l.lost.wrapping_add(1);
+        }
+    }
+
+    /// Counts a frame of `priority` dropped for `reason`.
+    fn dropped(&mut self, reason: DropReason, priority: u8, relayed: bool) {
+        self.stats.dropped.count(reason);
+        if relayed {
+            self.stats.relayed.dropped.count(reason);
+        }
+        self.lost(priority, relayed);
+    }
+
+    /// Counts a queued frame evicted because the queue (`queue_full`) or the arena was
+    /// full.
+    fn evicted(&mut self, entry: &Entry<'_>, queue_full: bool) {
+        let count = |e: &mut crate::stats::EvictCounts| {
+            let c = if queue_full {
+                &mut e.queue_full
+            } else {
+                &mut e.arena_full
+            };
+            *c = c.wrapping_add(1);
+        };
+        count(&mut self.stats.evicted);
+        if entry.relayed {
+            count(&mut self.stats.relayed.evicted);
+        }
+        self.lost(entry.priority, entry.relayed);
     }
 
     fn update_queued(&mut self) {
@@ -157,6 +204,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 entries: heapless::Vec::new(),
                 in_flight: false,
                 in_flight_priority: 0,
+                in_flight_relayed: false,
                 waker: WakerRegistration::new(),
                 stats: DeviceStats {
                     submitted: 0,
@@ -185,6 +233,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                         lost: 0,
                         superseded: 0,
                     }; 3],
+                    relayed: crate::stats::RelayedStats::ZERO,
                 },
             })),
         }
@@ -199,13 +248,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         self.with(|s| s.stats)
     }
 
-    /// Counts a message of `priority` submitted for this device that was dropped before
-    /// reaching the queue.
-    pub fn count_dropped(&self, reason: DropReason, priority: u8) {
+    /// Counts a message of `priority` (a forwarded one if `relayed`) submitted for this
+    /// device that was dropped before reaching the queue.
+    pub fn count_dropped(&self, reason: DropReason, priority: u8, relayed: bool) {
         self.with(|s| {
-            s.submitted(priority);
-            s.stats.dropped.count(reason);
-            s.lost(priority);
+            s.submitted(priority, relayed);
+            s.dropped(reason, priority, relayed);
         });
     }
 
@@ -215,12 +263,14 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// out when the old one would have). Otherwise, when the queue holds `depth` frames
     /// (clamped to `1..=Q`), the oldest of its least important frames is evicted if it is
     /// strictly less important than `priority`; otherwise the new frame is dropped.
-    /// Either way it is counted. Never blocks.
+    /// Either way it is counted (also as forwarded if `relayed`). Never blocks.
+    #[allow(clippy::too_many_arguments)]
     pub fn push(
         &self,
         priority: u8,
         seq: u32,
         latest: Option<MessageKey>,
+        relayed: bool,
         frame: FrameBuf<'a>,
         depth: usize,
     ) -> Pushed {
@@ -228,7 +278,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         // Evicted, superseded or rejected frames are released after the lock is let go.
         let mut released = None;
         let result = self.with(|s| {
-            s.submitted(priority);
+            s.submitted(priority, relayed);
             if latest.is_some()
                 && let Some(old) = s
                     .entries
@@ -247,14 +297,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 match s.candidate() {
                     Some(i) if s.entries[i].priority < priority => {
                         let victim = s.entries.remove(i);
-                        s.lost(victim.priority);
+                        s.evicted(&victim, true);
                         released = Some(victim.frame);
-                        s.stats.evicted.queue_full = s.stats.evicted.queue_full.wrapping_add(1);
                         result = Pushed::QueuedEvicting;
                     }
                     _ => {
-                        s.stats.dropped.count(DropReason::QueueFull);
-                        s.lost(priority);
+                        s.dropped(DropReason::QueueFull, priority, relayed);
                         s.update_queued();
                         return (Pushed::Dropped, Some(frame));
                     }
@@ -266,12 +314,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 priority,
                 seq,
                 latest,
+                relayed,
                 frame,
             };
             if let Err(entry) = s.entries.insert(at, entry) {
                 // Unreachable while depth <= Q; counted rather than lost if it ever is.
-                s.stats.dropped.count(DropReason::QueueFull);
-                s.lost(priority);
+                s.dropped(DropReason::QueueFull, priority, relayed);
                 s.update_queued();
                 return (Pushed::Dropped, Some(entry.frame));
             }
@@ -307,8 +355,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 return None;
             }
             let entry = s.entries.remove(i);
-            s.lost(entry.priority);
-            s.stats.evicted.arena_full = s.stats.evicted.arena_full.wrapping_add(1);
+            s.evicted(&entry, false);
             s.update_queued();
             Some(entry)
         });
@@ -337,6 +384,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             Some(entry) => {
                 s.in_flight = true;
                 s.in_flight_priority = entry.priority;
+                s.in_flight_relayed = entry.relayed;
                 s.update_queued();
                 Some(entry.frame)
             }
@@ -354,17 +402,20 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     pub fn complete(&self, len: usize, outcome: Result<(), DropReason>) {
         self.with(|s| {
             let priority = s.in_flight_priority;
+            let relayed = s.in_flight_relayed;
             match outcome {
                 Ok(()) => {
                     s.stats.sent = s.stats.sent.wrapping_add(1);
                     s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
                     let l = s.level(priority);
                     l.sent = l.sent.wrapping_add(1);
+                    if relayed {
+                        s.stats.relayed.sent = s.stats.relayed.sent.wrapping_add(1);
+                        let l = s.relayed_level(priority);
+                        l.sent = l.sent.wrapping_add(1);
+                    }
                 }
-                Err(reason) => {
-                    s.stats.dropped.count(reason);
-                    s.lost(priority);
-                }
+                Err(reason) => s.dropped(reason, priority, relayed),
             }
             s.in_flight = false;
             s.update_queued();
@@ -444,7 +495,7 @@ mod tests {
                     drop(old);
                 }
                 seq += 1;
-                queue.push(128, seq, key, frame, 32);
+                queue.push(128, seq, key, false, frame, 32);
             }
             // The link takes the most important frame whenever it is free.
             while link_free_us <= now_us {

@@ -57,6 +57,14 @@ impl<'f, 'd> Received<'f, 'd> {
         self.frame.msg_id()
     }
 
+    /// Who sent it: the ground ([`GROUND_ID`]) or an aircraft id (for PPRZ v1, the
+    /// frame's sender id).
+    ///
+    /// [`GROUND_ID`]: pprz_transports::GROUND_ID
+    pub fn source(&self) -> u8 {
+        self.frame.source()
+    }
+
     /// The message fields.
     pub fn payload(&self) -> &'f [u8] {
         self.frame.payload()
@@ -77,13 +85,19 @@ impl<'f, 'd> Received<'f, 'd> {
         M::decode(self.payload())
     }
 
-    /// Sends `msg` on the device the message came in on, at `msg`'s priority, within that
-    /// device's reply rate limit ([`Device::reply`]); never blocks.
+    /// Sends `msg` on the device the message came in on, addressed to its
+    /// [`source`](Self::source) (the ground for a PPRZ v1 frame, which names no
+    /// destination), at `msg`'s priority, within that device's reply rate limit
+    /// ([`Device::reply_to`]); never blocks.
     ///
     /// # Errors
     /// The reply was dropped (counted in that device's statistics).
     pub fn reply<M: Message>(&self, msg: &M) -> Result<(), SendError> {
-        self.device.reply(msg)
+        let to = match self.frame.destination() {
+            Some(_) => self.frame.source(),
+            None => pprz_transports::GROUND_ID,
+        };
+        self.device.reply_to(msg, to)
     }
 }
 

@@ -82,6 +82,17 @@ pub struct DropCounts {
 }
 
 impl DropCounts {
+    /// Zero counters, in `const` contexts.
+    pub(crate) const ZERO: Self = Self {
+        too_large: 0,
+        encode: 0,
+        queue_full: 0,
+        arena_full: 0,
+        write_error: 0,
+        rate_limited: 0,
+        refused: 0,
+    };
+
     /// Sum of all reasons.
     pub fn total(&self) -> u32 {
         self.too_large
@@ -120,6 +131,12 @@ pub struct EvictCounts {
 }
 
 impl EvictCounts {
+    /// Zero counters, in `const` contexts.
+    pub(crate) const ZERO: Self = Self {
+        queue_full: 0,
+        arena_full: 0,
+    };
+
     /// Sum of both causes.
     pub fn total(&self) -> u32 {
         self.queue_full.wrapping_add(self.arena_full)
@@ -138,6 +155,16 @@ pub struct LevelStats {
     pub lost: u32,
     /// Replaced while waiting by a newer instance of the same state message.
     pub superseded: u32,
+}
+
+impl LevelStats {
+    /// Zero counters, in `const` contexts.
+    pub(crate) const ZERO: Self = Self {
+        submitted: 0,
+        sent: 0,
+        lost: 0,
+        superseded: 0,
+    };
 }
 
 /// Statistics of one device of the downlink (a snapshot).
@@ -168,6 +195,51 @@ pub struct DeviceStats {
     /// [`pprz_messages::priority::level`]): `submitted - sent - lost - superseded` of a
     /// level are still queued.
     pub levels: [LevelStats; 3],
+    /// The part of all this that other aircraft's frames forwarded onto this device
+    /// (the route's report: [`relay`](crate::relay)); included in the figures above.
+    pub relayed: RelayedStats,
+}
+
+/// Frames of other aircraft forwarded onto one device (a route of the
+/// [`relay`](crate::relay)): what was submitted, sent, dropped by reason and shed, per
+/// priority level. Forwarded frames are never state messages, so none is superseded.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RelayedStats {
+    /// Forwarded frames accepted for sending on the device.
+    pub submitted: u32,
+    /// Written completely.
+    pub sent: u32,
+    /// Dropped before the queue or by the writer, by reason.
+    pub dropped: DropCounts,
+    /// Evicted from the queue by more important frames (the relay's own messages or other
+    /// forwarded ones).
+    pub evicted: EvictCounts,
+    /// Per priority level; a level's `lost` is what the relay shed of it.
+    pub levels: [LevelStats; 3],
+}
+
+impl RelayedStats {
+    /// Zero counters, in `const` contexts.
+    pub(crate) const ZERO: Self = Self {
+        submitted: 0,
+        sent: 0,
+        dropped: DropCounts::ZERO,
+        evicted: EvictCounts::ZERO,
+        levels: [LevelStats::ZERO; 3],
+    };
+
+    /// Forwarded frames that will never reach the wire (dropped and evicted).
+    pub fn lost(&self) -> u32 {
+        self.dropped.total().wrapping_add(self.evicted.total())
+    }
+
+    /// Forwarded frames waiting in the queue or being written.
+    pub fn queued(&self) -> u32 {
+        self.submitted
+            .wrapping_sub(self.sent)
+            .wrapping_sub(self.lost())
+    }
 }
 
 impl DeviceStats {
@@ -191,6 +263,23 @@ impl DeviceStats {
                 .wrapping_add(self.superseded)
                 .wrapping_add(queued)
             && levels_queued == queued
+            && self.relayed_is_balanced()
+    }
+
+    /// The forwarded frames' share: its levels add up to its totals, and no more of
+    /// them are queued than frames are.
+    fn relayed_is_balanced(&self) -> bool {
+        let r = &self.relayed;
+        let sum = |f: fn(&LevelStats) -> u32| {
+            r.levels
+                .iter()
+                .fold(0u32, |n, l| n.wrapping_add(f(l)))
+        };
+        sum(|l| l.submitted) == r.submitted
+            && sum(|l| l.sent) == r.sent
+            && sum(|l| l.lost) == r.lost()
+            && sum(|l| l.superseded) == 0
+            && r.queued() <= u32::from(self.queued)
     }
 
     /// Messages that will never reach the wire (dropped and evicted).

@@ -43,7 +43,7 @@ fn thesis_figure_27_trace() {
     let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2()]);
     for (index, priority) in [(1, 0), (2, 1), (3, 0), (4, 1)] {
         downlink
-            .send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+            .send_on(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
             .unwrap();
     }
     let [mut port] = downlink.ports().unwrap();
@@ -57,7 +57,7 @@ fn many_levels_strictly_higher_first_fifo_among_equals() {
     let prios = [5u8, 255, 0, 5, 128, 255, 0, 128, 5, 1];
     for (i, p) in prios.iter().enumerate() {
         downlink
-            .send_to(
+            .send_on(
                 &DlValue {
                     index: i as u8,
                     value: 0.0,
@@ -83,7 +83,7 @@ fn full_queue_evicts_oldest_of_least_important_never_equal() {
     let arena = Arena::new();
     let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2().depth(3)]);
     let send = |index: u8, priority: u8| {
-        downlink.send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+        downlink.send_on(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
     };
     send(1, 10).unwrap();
     send(2, 5).unwrap();
@@ -125,7 +125,7 @@ fn full_arena_evicts_across_devices_least_important_first() {
     // Fill the arena with low-priority frames alternating between the devices.
     let mut queued = 0;
     for i in 0..64 {
-        if downlink.send_to(&payload, Targets::only(i % 2), 1).is_err() {
+        if downlink.send_on(&payload, Targets::only(i % 2), 1).is_err() {
             break;
         }
         queued += 1;
@@ -134,14 +134,14 @@ fn full_arena_evicts_across_devices_least_important_first() {
     // Equal priority cannot get in.
     assert_eq!(
         downlink
-            .send_to(&payload, Targets::only(0), 1)
+            .send_on(&payload, Targets::only(0), 1)
             .unwrap_err()
             .reason,
         DropReason::ArenaFull
     );
     // A more important frame evicts the oldest low-priority frame (device 0's first).
     downlink
-        .send_to(
+        .send_on(
             &DlValue {
                 index: 9,
                 value: 1.0,
@@ -191,7 +191,7 @@ fn too_large_and_encode_errors_are_counted_per_device() {
     let bad = Payload {
         values: VarArray::new(&too_many),
     };
-    let err = downlink.send_to(&bad, Targets::only(0), 1).unwrap_err();
+    let err = downlink.send_on(&bad, Targets::only(0), 1).unwrap_err();
     assert_eq!(err.reason, DropReason::TooLarge);
     for d in 0..2 {
         assert!(downlink.stats(d).unwrap().is_balanced());
@@ -292,7 +292,7 @@ proptest! {
             match op {
                 Op::Send { size, priority, targets } => {
                     let msg = Payload { values: VarArray::new(&bytes[..usize::from(size)]) };
-                    let _ = downlink.send_to(&msg, Targets::from_bits(u32::from(targets)), priority);
+                    let _ = downlink.send_on(&msg, Targets::from_bits(u32::from(targets)), priority);
                 }
                 Op::Write { device, ok } => {
                     if let Some(frame) = ports[usize::from(device)].try_next() {
@@ -433,7 +433,7 @@ fn latest_value_wins_for_state_messages() {
     // The same message at another priority is another stream.
     downlink
         .sender()
-        .send_to(&attitude(9.0), Targets::ALL, Attitude::PRIORITY + 1)
+        .send_on(&attitude(9.0), Targets::ALL, Attitude::PRIORITY + 1)
         .unwrap();
     let s = downlink.stats(0).unwrap();
     assert_eq!((s.submitted, s.superseded, s.queued), (5, 2, 3));

@@ -93,7 +93,7 @@ async fn app(spawner: Spawner, downlink: &'static Dl, done: mpsc::Sender<()>) {
     let sender = downlink.sender();
     for (index, priority) in [(0u8, 9u8), (1, 0), (2, 1), (3, 0), (4, 1)] {
         sender
-            .send_to(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+            .send_on(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
             .unwrap();
         if let Some([radio, log]) = ports.take() {
             assert_eq!((radio.device().index(), log.device().index()), (0, 1));

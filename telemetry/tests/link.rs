@@ -267,14 +267,14 @@ fn device_handles_and_the_type_erased_sender() {
     assert_eq!((sender.ac_id(), sender.devices()), (AC_ID, 2));
     let value = |index: u8| DlValue { index, value: 0.5 };
     sender
-        .send_to(&value(1), Targets::from(d1), priority::LOW)
+        .send_on(&value(1), Targets::from(d1), priority::LOW)
         .unwrap();
     d0.send(&value(2)).unwrap(); // at DL_VALUE's own priority (high)
     d1.send_with_priority(&value(3), priority::NORMAL).unwrap();
     sender.send(&value(4)).unwrap(); // every device, high
     // Nowhere: refused and counted, never accepted silently.
     for nowhere in [Targets::NONE, Targets::only(2), Targets::only(31).with(5)] {
-        let err = d0.sender().send_to(&value(5), nowhere, 0).unwrap_err();
+        let err = d0.sender().send_on(&value(5), nowhere, 0).unwrap_err();
         assert_eq!((err.device, err.reason), (2, DropReason::NoDevice));
     }
     assert_eq!((sender.undeliverable(), downlink.undeliverable()), (3, 3));
@@ -610,7 +610,7 @@ fn a_static_downlink_hands_out_static_handles() {
         // Depth 1: an equal priority cannot get in.
         assert!(
             sender
-                .send_to(
+                .send_on(
                     &DlValue {
                         index: 2,
                         value: 0.0
