@@ -698,7 +698,8 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 0 => Q,
                 depth => depth,
             };
-            if self.queues[device].push(priority, seq, latest, relay, frame, depth) == Pushed::Dropped
+            if self.queues[device].push(priority, seq, latest, relay, frame, depth)
+                == Pushed::Dropped
             {
                 error = Some(SendError {
                     device,

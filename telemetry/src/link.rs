@@ -171,7 +171,8 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
         msg: &Msg,
         priority: u8,
     ) -> Result<(), SendError> {
-        self.downlink.send_to(msg, pprz_transports::GROUND_ID, priority)
+        self.downlink
+            .send_to(msg, pprz_transports::GROUND_ID, priority)
     }
 
     /// A copyable handle that sends through this link, for code that should not name

@@ -270,11 +270,8 @@ impl DeviceStats {
     /// them are queued than frames are.
     fn relayed_is_balanced(&self) -> bool {
         let r = &self.relayed;
-        let sum = |f: fn(&LevelStats) -> u32| {
-            r.levels
-                .iter()
-                .fold(0u32, |n, l| n.wrapping_add(f(l)))
-        };
+        let sum =
+            |f: fn(&LevelStats) -> u32| r.levels.iter().fold(0u32, |n, l| n.wrapping_add(f(l)));
         sum(|l| l.submitted) == r.submitted
             && sum(|l| l.sent) == r.sent
             && sum(|l| l.lost) == r.lost()
