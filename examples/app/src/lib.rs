@@ -49,7 +49,7 @@ use pprz_telemetry::reader::{Datalink, Reader};
 use pprz_telemetry::registry::RegistryFull;
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
 use pprz_telemetry::services::{LinkReporter, Services, SettingsFull};
-use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Sender};
+use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, Sender};
 use pprz_transports::PprzV2;
 
 use crate::vehicle::Vehicle;
@@ -140,7 +140,35 @@ pub async fn run_aircraft<R: Read>(
     radio_rx: R,
     config: Config,
 ) -> Result<Infallible, SetupError> {
-    run_with_layer(radio, radio_rx, config, &Plain, core::future::pending()).await
+    run_with_layer(radio, radio_rx, None, config, &Plain, core::future::pending()).await
+}
+
+/// [`run_aircraft`] for an aircraft that relays for others
+/// ([`relay`](pprz_telemetry::relay)) as `relay` says: a second device, `link`, leads to
+/// other aircraft and is read from `link_rx`; frames for other aircraft (and broadcast frames) arriving
+/// on either device are forwarded by the routes of the downlink
+/// ([`Downlink::with_routes`](pprz_telemetry::Downlink::with_routes)). Its own telemetry
+/// goes to the ground's route. Requests are answered on the device they came in on.
+///
+/// # Errors
+/// As [`run_aircraft`].
+pub async fn run_relay_aircraft<R: Read>(
+    radio: Device<'_>,
+    radio_rx: R,
+    link: Device<'_>,
+    link_rx: R,
+    relay: Relay<'_>,
+    config: Config,
+) -> Result<Infallible, SetupError> {
+    run_with_layer(
+        radio,
+        radio_rx,
+        Some((link, link_rx, relay)),
+        config,
+        &Plain,
+        core::future::pending(),
+    )
+    .await
 }
 
 /// [`run_aircraft`] on a secure radio: the reader opens every frame with `secure` (the
@@ -189,14 +217,16 @@ pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
             | embassy_futures::select::Either::Second(never) => never,
         }
     };
-    run_with_layer(radio, radio_rx, config, secure, extra).await
+    run_with_layer(radio, radio_rx, None, config, secure, extra).await
 }
 
 /// The application, its reader delivering through `layer`, with `extra` (the secure
-/// link's tasks) running beside it.
+/// link's tasks) running beside it; with `link`, a second device read by a second
+/// reader, and the datalink relaying.
 async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
     radio: Device<'_>,
     radio_rx: R,
+    link: Option<(Device<'_>, R, Relay<'_>)>,
     config: Config,
     layer: &L,
     extra: impl Future<Output = Infallible>,
@@ -223,8 +253,13 @@ async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
     // Out-of-range values are clamped (the services refuse NaN and infinities before a
     // setter sees them; the acknowledgement reports the gain in force).
     let set_gain = |x: f32| gain.lock(|c| c.set(x.clamp(0.0, 10.0)));
-    let services: Services<'_, Set, M, 4> = Services::new(AC_ID);
-    let datalink: Datalink<'_, M, { Services::<Set, M, 4>::SUBSCRIPTIONS }> = Datalink::new(AC_ID);
+    // Our id is the downlink's (the example's `AC_ID` unless a fleet says otherwise).
+    let ac_id = radio.sender().ac_id();
+    let services: Services<'_, Set, M, 4> = Services::new(ac_id);
+    let datalink: Datalink<'_, M, { Services::<Set, M, 4>::SUBSCRIPTIONS }> = match link {
+        Some((_, _, relay)) => Datalink::new(ac_id).with_relay(relay),
+        None => Datalink::new(ac_id),
+    };
     let settings = services.settings();
     settings.add_mode("telemetry_mode", modes.setting(main::PROCESS)?)?;
     settings.add("payload_flood", &get_flood, &set_flood)?;
@@ -314,7 +349,20 @@ async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
     };
     let mut reader = Reader::<R, PprzV2>::new(radio_rx, PprzV2::new(), radio);
     let inbox = Layered::new(layer, &datalink);
-    let app = select4(scheduler.run(), reader.run(&inbox), dynamics, flood);
+    let readers = async {
+        match link {
+            Some((link, link_rx, _)) => {
+                // The link to other aircraft carries no layer (the secure link is per
+                // radio, between one aircraft and the ground).
+                let mut relay_reader = Reader::<R, PprzV2>::new(link_rx, PprzV2::new(), link);
+                match select(reader.run(&inbox), relay_reader.run(&datalink)).await {
+                    Either::First(never) | Either::Second(never) => never,
+                }
+            }
+            None => reader.run(&inbox).await,
+        }
+    };
+    let app = select4(scheduler.run(), readers, dynamics, flood);
     match select(app, extra).await {
         Either::First(Either4::First(never) | Either4::Second(never)) => never,
         Either::First(Either4::Third(never) | Either4::Fourth(never)) => never,

@@ -61,14 +61,14 @@ use pprz_telemetry::pprz_transports::{
     AnyTransport, Decoder, Encoder, Framing, MAX_FRAME_LEN, PprzV2, XBee24,
 };
 use pprz_telemetry::{
-    DeliveryWindow, Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Pacing, Port, Sender,
-    run_writer, run_writer_with,
+    DeliveryWindow, Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Pacing, Port, Relay,
+    Routes, Sender, Targets, run_writer, run_writer_with,
 };
 use static_cell::StaticCell;
 
 use crate::summary::{
-    DeliveryFigures, DownlinkFigures, Level, Levels, MessageFigures, ModemFigures, PingFigures,
-    RunConfig, SecureFigures, Summary,
+    AircraftFigures, AircraftLevel, DeliveryFigures, DownlinkFigures, FleetFigures, Level, Levels,
+    MessageFigures, ModemFigures, PingFigures, RouteFigures, RunConfig, SecureFigures, Summary,
 };
 
 /// Simulate an aircraft on a radio link and watch it with a live ground monitor.
@@ -145,6 +145,12 @@ struct Args {
     /// PPRZ v2 only.
     #[arg(long, value_name = "KEYFILE")]
     secure: Option<PathBuf>,
+    /// Aircraft in the simulation, 1 or 2. With 2, aircraft 8 flies beside aircraft 7,
+    /// out of the ground's reach: a second simulated radio (the same as the first) joins
+    /// 7 and 8, and 7 relays between its two radios (PPRZ v2 only). The ground sees both
+    /// aircraft on the same UDP port and PINGs both.
+    #[arg(long, default_value_t = 1, value_parser = parse_fleet)]
+    fleet: u8,
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))]
     messages: PathBuf,
@@ -225,6 +231,10 @@ fn parse_speed(s: &str) -> Result<f64, String> {
 }
 
 /// `--ping-rate`: at most 10 kHz (a flood), at least one PING every 10 s.
+fn parse_fleet(s: &str) -> Result<u8, String> {
+    integer_in(s, 1, 2).map(|n| n as u8)
+}
+
 fn parse_ping_rate(s: &str) -> Result<f64, String> {
     number_in(s, 0.1, 10_000.0)
 }
@@ -286,10 +296,26 @@ const DELIVERY_TIMEOUT_MS: u32 = 500;
 /// flood frames exceed its 96 field bytes).
 const XBEE_FLOOD_FIELDS: usize = 90;
 
-type Dl = Downlink<'static, M, 1, 32>;
+/// Aircraft 7's downlink: device 0 its radio to the ground, device 1 its radio to
+/// aircraft 8 (`--fleet 2`; unused otherwise).
+type Dl = Downlink<'static, M, 2, 32>;
+/// Aircraft 8's downlink: its radio to aircraft 7.
+type Dl8 = Downlink<'static, M, 1, 32>;
 type Radio = SimLink<M, RADIO_RING>;
 
+/// The id of the fleet's second aircraft (`--fleet 2`), reachable only through
+/// aircraft 7 ([`AC_ID`]).
+pub const SECOND_AC_ID: u8 = 8;
+
+/// Aircraft 7's routes with `--fleet 2`: aircraft 8 through its second radio, the ground
+/// (and any other) through the first, broadcast on both.
+static FLEET_ROUTES: [(u8, Targets); 1] = [(SECOND_AC_ID, Targets::only(1))];
+
 static ARENA: FrameArena<M, 8192> = FrameArena::new();
+static ARENA_8: FrameArena<M, 8192> = FrameArena::new();
+static DOWNLINK_8: StaticCell<Dl8> = StaticCell::new();
+/// The radio between aircraft 7 and 8 (side A: 7, side B: 8).
+static LINK_78: StaticCell<Radio> = StaticCell::new();
 /// The downlink, built at start-up from the options (its device configuration is not
 /// known at compile time).
 static DOWNLINK: StaticCell<Dl> = StaticCell::new();
@@ -301,8 +327,8 @@ static SECURE: SecureLink<M> = SecureLink::aircraft(AC_ID);
 /// XBee: the uplink messages, re-framed as PPRZ v2 for the application's reader.
 static UPLINK_PIPE: Pipe<M, 1024> = Pipe::new();
 
-/// The radio device's writer (sealing every frame with `secure`, if given).
-#[embassy_executor::task]
+/// A radio device's writer (sealing every frame with `secure`, if given).
+#[embassy_executor::task(pool_size = 3)]
 async fn radio_writer(
     mut port: Port<'static>,
     tx: SimTx<'static, M, RADIO_RING>,
@@ -328,8 +354,27 @@ async fn secure_aircraft(
     panic!("the aircraft application cannot start: {e}");
 }
 
-/// The application reading its uplink from the radio (PPRZ v2).
+/// Aircraft 7 relaying for aircraft 8 (`--fleet 2`): its radio to the ground and its
+/// radio to 8, both read by one relaying datalink.
 #[embassy_executor::task]
+async fn relay_aircraft(
+    radio: Device<'static>,
+    rx: SimRx<'static, M, RADIO_RING>,
+    link: Device<'static>,
+    link_rx: SimRx<'static, M, RADIO_RING>,
+    config: Config,
+) {
+    let relay = Relay::new(RELAY_PRIORITY).with_messages(&MESSAGES);
+    let Err(e) =
+        pprz_example_app::run_relay_aircraft(radio, rx, link, link_rx, relay, config).await;
+    panic!("the aircraft application cannot start: {e}");
+}
+
+/// Priority of the frames aircraft 7 forwards whose message it does not know.
+const RELAY_PRIORITY: u8 = priority::LOW;
+
+/// The application reading its uplink from the radio (PPRZ v2).
+#[embassy_executor::task(pool_size = 2)]
 async fn aircraft(radio: Device<'static>, rx: SimRx<'static, M, RADIO_RING>, config: Config) {
     let Err(e) = pprz_example_app::run_aircraft(radio, rx, config).await;
     panic!("the aircraft application cannot start: {e}");
@@ -431,7 +476,7 @@ async fn ground_bridge(
             while let Some(f) = decoder.feed(&mut input) {
                 // Secure frames are opened by the ground, which records them.
                 if !secure {
-                    record::received(f.class(), f.msg_id(), f.payload(), now);
+                    record::received(f.source(), f.class(), f.msg_id(), f.payload(), now);
                 }
                 if xbee && let Ok(len) = v2.encode(&f.tx_meta(), f.payload(), &mut frame) {
                     out.extend_from_slice(&frame[..len]);
@@ -457,7 +502,8 @@ async fn ground_bridge(
                     out.clear();
                     while let Some(f) = decoder.feed(&mut input) {
                         if !secure {
-                            record::uplink(f.class(), f.msg_id(), now);
+                            let to = f.destination().unwrap_or(AC_ID);
+                            record::uplink(to, f.class(), f.msg_id(), now);
                         }
                         if xbee
                             && let Ok(len) =
@@ -533,6 +579,12 @@ impl RadioPlan {
             None if xbee => DEFAULT_XBEE_BUFFER,
             None => DEFAULT_MODEM_BUFFER,
         };
+        if args.fleet > 1 && (xbee || args.secure.is_some()) {
+            return Err(
+                "--fleet 2 needs --transport pprz2 without --secure (the relay forwards PPRZ v2 frames; the secure link is between one aircraft and the ground)"
+                    .to_owned(),
+            );
+        }
         if args.secure.is_some() && xbee {
             return Err(
                 "--secure needs --transport pprz2 (the secure link is Paparazzi's secure PPRZ v2)"
@@ -704,8 +756,18 @@ fn main() -> ExitCode {
 
     // The aircraft.
     let radio: &'static Radio = RADIO.init(SimLink::new(plan.sim_config(args.flow_control)));
-    let downlink: &'static Dl = DOWNLINK.init(Downlink::new(&ARENA, AC_ID, [plan.device_config()]));
-    let [radio_port] = match downlink.ports() {
+    let fleet = args.fleet > 1;
+    let routes = if fleet {
+        Routes::new(&FLEET_ROUTES, Targets::only(0))
+    } else {
+        // One aircraft: everything on the radio (device 1 stays idle).
+        Routes::new(&[], Targets::only(0)).broadcast(Targets::only(0))
+    };
+    let downlink: &'static Dl = DOWNLINK.init(
+        Downlink::new(&ARENA, AC_ID, [plan.device_config(), plan.device_config()])
+            .with_routes(routes),
+    );
+    let [radio_port, link_port] = match downlink.ports() {
         Ok(ports) => ports,
         Err(e) => {
             eprintln!("sitl: {e}");
@@ -713,6 +775,32 @@ fn main() -> ExitCode {
         }
     };
     let radio_device = radio_port.device();
+    // `--fleet 2`: aircraft 8, its radio to 7, its application.
+    let second = fleet.then(|| {
+        let link: &'static Radio = LINK_78.init(SimLink::new(plan.sim_config(args.flow_control)));
+        let downlink_8: &'static Dl8 = DOWNLINK_8.init(Downlink::new(
+            &ARENA_8,
+            SECOND_AC_ID,
+            [plan.device_config()],
+        ));
+        (link, downlink_8)
+    });
+    let second_parts = match second {
+        Some((link, downlink_8)) => match downlink_8.ports() {
+            Ok([port_8]) => Some((link, downlink_8, port_8)),
+            Err(e) => {
+                eprintln!("sitl: {e}");
+                return ExitCode::FAILURE;
+            }
+        },
+        None => None,
+    };
+    let fleet_8: Option<(&'static Radio, &'static Dl8)> =
+        second_parts.as_ref().map(|(link, downlink_8, _)| (*link, *downlink_8));
+    let config_8 = Config {
+        observer: Some(record::submitted_by_second),
+        ..config
+    };
     let (air, ground) = radio.endpoints();
     let (air_rx, air_tx) = air.split();
     pace(args.speed);
@@ -728,7 +816,19 @@ fn main() -> ExitCode {
         executor.run(|spawner| {
             let layer = secure.then_some(&SECURE);
             spawner.spawn(radio_writer(radio_port, air_tx, layer).unwrap());
-            if let Some(responder) = responder {
+            if let Some((link, _, port_8)) = second_parts {
+                let (side_7, side_8) = link.endpoints();
+                let (rx_7, tx_7) = side_7.split();
+                let (rx_8, tx_8) = side_8.split();
+                let link_device = link_port.device();
+                let device_8 = port_8.device();
+                spawner.spawn(radio_writer(link_port, tx_7, None).unwrap());
+                spawner.spawn(radio_writer(port_8, tx_8, None).unwrap());
+                spawner.spawn(
+                    relay_aircraft(radio_device, air_rx, link_device, rx_7, config).unwrap(),
+                );
+                spawner.spawn(aircraft(device_8, rx_8, config_8).unwrap());
+            } else if let Some(responder) = responder {
                 spawner.spawn(secure_aircraft(radio_device, air_rx, config, responder).unwrap());
             } else if xbee {
                 spawner.spawn(xbee_reader(air_rx, radio_device).unwrap());
@@ -784,7 +884,7 @@ fn main() -> ExitCode {
     {
         print!("\x1b[2J\x1b[H{}", m.render(sim_now(args.speed)));
     }
-    let summary = collect_summary(&args, &plan, downlink, radio_device, radio);
+    let summary = collect_summary(&args, &plan, downlink, radio_device, radio, fleet_8);
     print!("{}", summary.text());
     if let Some(m) = &monitor {
         let pings = m.pings();
@@ -861,7 +961,7 @@ fn run_ground(
             {
                 monitor.ping_sent(t);
                 if secure {
-                    record::uplink(Ping::CLASS_ID, Ping::ID, Instant::now());
+                    record::uplink(AC_ID, Ping::CLASS_ID, Ping::ID, Instant::now());
                 }
             }
             next_ping += ping_period;
@@ -885,7 +985,13 @@ fn run_ground(
                 // A secure link's frames are recorded here, opened (the radio's bridge
                 // sees them encrypted).
                 if secure && let Ok(f) = PprzV2::new().view(frame) {
-                    record::received(f.class(), f.msg_id(), f.payload(), Instant::now());
+                    record::received(
+                        f.source(),
+                        f.class(),
+                        f.msg_id(),
+                        f.payload(),
+                        Instant::now(),
+                    );
                 }
             });
         }
@@ -904,8 +1010,10 @@ fn collect_summary(
     downlink: &Dl,
     radio_device: Device<'static>,
     radio: &Radio,
+    fleet: Option<(&'static Radio, &'static Dl8)>,
 ) -> Summary {
     let elapsed_us = Instant::now().as_micros();
+    let fleet = fleet.map(|(_, downlink_8)| fleet_figures(downlink, downlink_8));
     let stats: DeviceStats = downlink.stats(0).unwrap_or_default();
     let sim = radio.stats(Direction::AToB);
     let fraction = |busy_us: u64| {
@@ -1037,5 +1145,84 @@ fn collect_summary(
                 counter_space_left: k.counter_space_left,
             }
         }),
+        fleet,
+    }
+}
+
+/// `--fleet 2`: aircraft 7 (relay) and 8 per level, from their downlinks' statistics
+/// (7's radio device counts 8's frames apart: `DeviceStats::relayed`) and the record of
+/// what reached the ground.
+fn fleet_figures(downlink_7: &Dl, downlink_8: &Dl8) -> FleetFigures {
+    let radio_7 = downlink_7.stats(0).unwrap_or_default();
+    let link_7 = downlink_7.stats(1).unwrap_or_default();
+    let radio_8 = downlink_8.stats(0).unwrap_or_default();
+    let record = record::lock();
+    let received = |ac: u8, i: usize| record.aircraft.get(&ac).map_or(0, |a| a.received[i]);
+    let ping = |ac: u8| {
+        record.aircraft.get(&ac).map_or_else(PingFigures::default, |a| PingFigures {
+            sent: a.pings.sent_count(),
+            answered: a.pings.answered(),
+            lost: a.pings.lost(),
+            rtt_p50_ms: a.rtt.percentile_ms(50.0),
+            rtt_p99_ms: a.rtt.percentile_ms(99.0),
+        })
+    };
+    let names = priority::LEVEL_NAMES;
+    let own_7 = |i: usize| {
+        let (all, relayed) = (radio_7.levels[i], radio_7.relayed.levels[i]);
+        AircraftLevel {
+            level: names[i],
+            submitted: all.submitted - relayed.submitted,
+            sent: all.sent - relayed.sent,
+            shed: all.lost - relayed.lost,
+            forwarded: 0,
+            shed_by_relay: 0,
+            received: received(AC_ID, i),
+        }
+    };
+    let of_8 = |i: usize| {
+        let (own, relayed) = (radio_8.levels[i], radio_7.relayed.levels[i]);
+        AircraftLevel {
+            level: names[i],
+            submitted: own.submitted,
+            sent: own.sent,
+            shed: own.lost,
+            forwarded: relayed.submitted,
+            shed_by_relay: relayed.lost,
+            received: received(SECOND_AC_ID, i),
+        }
+    };
+    let route = |to: String, s: &DeviceStats| {
+        let r = &s.relayed;
+        RouteFigures {
+            relay: AC_ID,
+            to,
+            forwarded: r.levels.map(|l| l.submitted),
+            sent: r.sent,
+            shed: r.levels.map(|l| l.lost),
+            queue_full: r.dropped.queue_full,
+            arena_full: r.dropped.arena_full,
+            evicted: r.evicted.total(),
+        }
+    };
+    FleetFigures {
+        aircraft: vec![
+            AircraftFigures {
+                ac_id: AC_ID,
+                relayed_by: None,
+                levels: [own_7(0), own_7(1), own_7(2)],
+                ping: ping(AC_ID),
+            },
+            AircraftFigures {
+                ac_id: SECOND_AC_ID,
+                relayed_by: Some(AC_ID),
+                levels: [of_8(0), of_8(1), of_8(2)],
+                ping: ping(SECOND_AC_ID),
+            },
+        ],
+        routes: vec![
+            route("ground".to_owned(), &radio_7),
+            route(format!("aircraft {SECOND_AC_ID}"), &link_7),
+        ],
     }
 }

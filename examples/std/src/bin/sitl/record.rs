@@ -23,9 +23,12 @@ use embassy_time::Instant;
 use pprz_default::messages::MESSAGES;
 use pprz_default::messages::datalink::Ping;
 use pprz_default::messages::telemetry::Pong;
+use pprz_example_app::AC_ID;
 use pprz_ground::ping::PingTracker;
 use pprz_messages::Message;
 use pprz_telemetry::pprz_messages::priority;
+
+use crate::SECOND_AC_ID;
 
 /// Seconds (simulated) a submission is remembered for matching.
 pub const HORIZON_S: u64 = 120;
@@ -133,6 +136,23 @@ pub struct Record {
     pub pings: PingTracker,
     /// PING round trips through the radio.
     pub rtt: Samples,
+    /// Per aircraft (by id): what it submitted and what reached the ground from it, and
+    /// its PINGs. The figures above are the radio's: every aircraft together, and the
+    /// PINGs of the first aircraft.
+    pub aircraft: BTreeMap<u8, AircraftRecord>,
+}
+
+/// One aircraft of the fleet.
+#[derive(Debug, Default)]
+pub struct AircraftRecord {
+    /// Messages its application submitted, per level.
+    pub submitted: [u64; 3],
+    /// Messages from it decoded at the ground end of the radio, per level.
+    pub received: [u64; 3],
+    /// PINGs to it and its PONGs.
+    pub pings: PingTracker,
+    /// Their round trips.
+    pub rtt: Samples,
 }
 
 static RECORD: LazyLock<Mutex<Record>> = LazyLock::new(Mutex::default);
@@ -144,22 +164,33 @@ pub fn lock() -> MutexGuard<'static, Record> {
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// The observer given to the application: the message `class_id`/`msg_id` with fields
-/// `payload` was submitted at `now`.
+/// The observer given to the application of aircraft [`AC_ID`]: the message
+/// `class_id`/`msg_id` with fields `payload` was submitted at `now`.
 pub fn submitted(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
-    lock().submitted(class_id, msg_id, payload, now.as_micros());
+    lock().submitted(AC_ID, class_id, msg_id, payload, now.as_micros());
 }
 
-/// A frame from the ground went up the radio at `now`: tracked if it is a PING.
-pub fn uplink(class_id: u8, msg_id: u8, now: Instant) {
+/// [`submitted`] for the fleet's second aircraft ([`SECOND_AC_ID`]).
+pub fn submitted_by_second(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
+    lock().submitted(SECOND_AC_ID, class_id, msg_id, payload, now.as_micros());
+}
+
+/// A frame from the ground to `destination` went up the radio at `now`: tracked if it
+/// is a PING.
+pub fn uplink(destination: u8, class_id: u8, msg_id: u8, now: Instant) {
     if (class_id, msg_id) == (Ping::CLASS_ID, Ping::ID) {
-        lock().pings.sent(seconds(now.as_micros()));
+        let mut record = lock();
+        let t = seconds(now.as_micros());
+        if destination == AC_ID {
+            record.pings.sent(t);
+        }
+        record.aircraft.entry(destination).or_default().pings.sent(t);
     }
 }
 
-/// A message arrived at the ground end of the radio at `now`.
-pub fn received(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
-    lock().received(class_id, msg_id, payload, now.as_micros());
+/// A message from `source` arrived at the ground end of the radio at `now`.
+pub fn received(source: u8, class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
+    lock().received(source, class_id, msg_id, payload, now.as_micros());
 }
 
 fn seconds(micros: u64) -> f64 {
@@ -167,7 +198,10 @@ fn seconds(micros: u64) -> f64 {
 }
 
 impl Record {
-    fn submitted(&mut self, class_id: u8, msg_id: u8, payload: &[u8], now_us: u64) {
+    fn submitted(&mut self, ac_id: u8, class_id: u8, msg_id: u8, payload: &[u8], now_us: u64) {
+        if let Some(desc) = MESSAGES.find(class_id, msg_id) {
+            self.aircraft.entry(ac_id).or_default().submitted[priority::level(desc.priority)] += 1;
+        }
         let entry = self
             .submissions
             .entry((class_id, msg_id, payload.to_vec()))
@@ -183,11 +217,20 @@ impl Record {
         }
     }
 
-    fn received(&mut self, class_id: u8, msg_id: u8, payload: &[u8], now_us: u64) {
+    fn received(&mut self, source: u8, class_id: u8, msg_id: u8, payload: &[u8], now_us: u64) {
         let Some(desc) = MESSAGES.find(class_id, msg_id) else {
             self.unknown += 1;
             return;
         };
+        // Only the fleet's aircraft get a record (a forged source cannot grow it).
+        if let Some(aircraft) = self.aircraft.get_mut(&source) {
+            aircraft.received[priority::level(desc.priority)] += 1;
+            if (class_id, msg_id) == (Pong::CLASS_ID, Pong::ID)
+                && let Some(rtt) = aircraft.pings.pong(seconds(now_us))
+            {
+                aircraft.rtt.push((rtt * 1e6).round() as u64);
+            }
+        }
         let level = &mut self.levels[priority::level(desc.priority)];
         level.received += 1;
         let t = self.types.entry((class_id, msg_id)).or_default();
@@ -208,6 +251,7 @@ impl Record {
             }
         }
         if (class_id, msg_id) == (Pong::CLASS_ID, Pong::ID)
+            && source == AC_ID
             && let Some(rtt) = self.pings.pong(seconds(now_us))
         {
             self.rtt.push((rtt * 1e6).round() as u64);
@@ -240,31 +284,36 @@ mod tests {
         let mut r = Record::default();
         let (class, id) = (Attitude::CLASS_ID, Attitude::ID);
         let level = priority::level(Attitude::PRIORITY);
-        r.submitted(class, id, &[1, 2], 1_000);
-        r.submitted(class, id, &[3, 4], 2_000);
-        r.submitted(class, id, &[1, 2], 5_000);
+        r.submitted(AC_ID, class, id, &[1, 2], 1_000);
+        r.submitted(AC_ID, class, id, &[3, 4], 2_000);
+        r.submitted(AC_ID, class, id, &[1, 2], 5_000);
         // [3, 4] was submitted once: exact; [1, 2] twice: from the latest, ambiguous.
-        r.received(class, id, &[3, 4], 12_000);
-        r.received(class, id, &[1, 2], 13_000);
+        r.received(AC_ID, class, id, &[3, 4], 12_000);
+        r.received(AC_ID, class, id, &[1, 2], 13_000);
         // Never submitted: received, not aged.
-        r.received(class, id, &[9], 14_000);
+        r.received(AC_ID, class, id, &[9], 14_000);
         let l = &r.levels[level];
         assert_eq!((l.received, l.ages.count(), l.ambiguous), (3, 2, 1));
         assert_eq!(l.ages.percentile_ms(0.0), Some(8.0));
         assert_eq!(l.ages.percentile_ms(100.0), Some(10.0));
         let t = r.types[&(class, id)];
         assert_eq!((t.submitted, t.received, t.max_gap_us), (3, 3, 1_000));
+        let a = &r.aircraft[&AC_ID];
+        assert_eq!((a.submitted[level], a.received[level]), (3, 3));
+        // A source that is not an aircraft of the fleet gets no record.
+        r.received(99, class, id, &[9], 15_000);
+        assert!(!r.aircraft.contains_key(&99));
     }
 
     #[test]
     fn pong_arrivals_time_the_pings() {
         let mut r = Record::default();
         r.pings.sent(1.0);
-        r.received(Pong::CLASS_ID, Pong::ID, &[], 1_030_000);
+        r.received(AC_ID, Pong::CLASS_ID, Pong::ID, &[], 1_030_000);
         assert_eq!(r.pings.answered(), 1);
         assert_eq!(r.rtt.percentile_ms(50.0), Some(30.0));
         // Unknown message types are counted apart.
-        r.received(0xEE, 0xEE, &[], 2_000_000);
+        r.received(AC_ID, 0xEE, 0xEE, &[], 2_000_000);
         assert_eq!(r.unknown, 1);
     }
 }

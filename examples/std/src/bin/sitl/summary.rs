@@ -29,6 +29,73 @@ pub struct Summary {
     pub messages: Vec<MessageFigures>,
     /// The aircraft's end of the secure link (`--secure`; `None`, JSON `null`, without).
     pub secure: Option<SecureFigures>,
+    /// `--fleet 2`: per aircraft and per level, and the relay's routes (`None`, JSON
+    /// `null`, with one aircraft). The figures above are the radio's: every aircraft's
+    /// frames together.
+    pub fleet: Option<FleetFigures>,
+}
+
+/// A fleet: each aircraft, and what the relay carried on each of its routes.
+#[derive(Debug, Clone, Serialize)]
+pub struct FleetFigures {
+    /// Each aircraft, the one whose radio reaches the ground first.
+    pub aircraft: Vec<AircraftFigures>,
+    /// The relay's routes: what it forwarded for the others on each of its devices.
+    pub routes: Vec<RouteFigures>,
+}
+
+/// One aircraft of the fleet.
+#[derive(Debug, Clone, Serialize)]
+pub struct AircraftFigures {
+    /// Its id.
+    pub ac_id: u8,
+    /// The aircraft relaying its frames to the ground (`null`: its radio reaches it).
+    pub relayed_by: Option<u8>,
+    /// Per level (high, normal, low), most important first.
+    pub levels: [AircraftLevel; 3],
+    /// PINGs from the ground to it.
+    pub ping: PingFigures,
+}
+
+/// One priority level of one aircraft.
+#[derive(Debug, Clone, Serialize)]
+pub struct AircraftLevel {
+    /// `"high"`, `"normal"` or `"low"`.
+    pub level: &'static str,
+    /// Messages submitted to its own radio (the application's, and the services'
+    /// replies).
+    pub submitted: u32,
+    /// Written to its own radio.
+    pub sent: u32,
+    /// Shed on its own radio (dropped or evicted).
+    pub shed: u32,
+    /// Forwarded towards the ground by the relay (accepted into the relay's queue).
+    pub forwarded: u32,
+    /// Shed by the relay (dropped or evicted there).
+    pub shed_by_relay: u32,
+    /// Decoded at the ground end of the ground's radio, with this aircraft as source.
+    pub received: u64,
+}
+
+/// One route of the relay: the frames of other aircraft it forwarded on one device.
+#[derive(Debug, Clone, Serialize)]
+pub struct RouteFigures {
+    /// The relay's id.
+    pub relay: u8,
+    /// What the device leads to (`"ground"`, `"aircraft 8"`).
+    pub to: String,
+    /// Forwarded frames accepted for the device, per level (high, normal, low).
+    pub forwarded: [u32; 3],
+    /// Written.
+    pub sent: u32,
+    /// Shed, per level: dropped or evicted by more important frames.
+    pub shed: [u32; 3],
+    /// Dropped because the queue was full of more important frames.
+    pub queue_full: u32,
+    /// Dropped because the arena was full of more important frames.
+    pub arena_full: u32,
+    /// Evicted by more important frames.
+    pub evicted: u32,
 }
 
 /// The aircraft's end of the secure link.
@@ -347,6 +414,9 @@ impl Summary {
             );
         }
         let _ = writeln!(s);
+        if let Some(fleet) = &self.fleet {
+            fleet.text(&mut s);
+        }
         s
     }
 
@@ -354,5 +424,66 @@ impl Summary {
     pub fn json(&self) -> String {
         // Serialising plain structs of numbers and strings cannot fail.
         serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+}
+
+impl FleetFigures {
+    /// Appends the fleet's table to `s`.
+    fn text(&self, s: &mut String) {
+        use std::fmt::Write as _;
+        let _ = writeln!(s, "Fleet, per aircraft and level:");
+        let _ = writeln!(
+            s,
+            "  {:<10} {:<8} {:>10} {:>10} {:>10} {:>10} {:>14} {:>10}",
+            "aircraft", "level", "submitted", "sent", "shed", "forwarded", "shed by relay", "received"
+        );
+        for a in &self.aircraft {
+            let who = match a.relayed_by {
+                Some(relay) => format!("{} via {relay}", a.ac_id),
+                None => a.ac_id.to_string(),
+            };
+            for l in &a.levels {
+                let _ = writeln!(
+                    s,
+                    "  {:<10} {:<8} {:>10} {:>10} {:>10} {:>10} {:>14} {:>10}",
+                    who, l.level, l.submitted, l.sent, l.shed, l.forwarded, l.shed_by_relay, l.received
+                );
+            }
+            let p = &a.ping;
+            let _ = writeln!(
+                s,
+                "  {:<10} PINGs sent {}, answered {}, lost {}, round trip p50 {} ms, p99 {} ms",
+                who,
+                p.sent,
+                p.answered,
+                p.lost,
+                ms(p.rtt_p50_ms),
+                ms(p.rtt_p99_ms)
+            );
+        }
+        for r in &self.routes {
+            let _ = writeln!(
+                s,
+                "  relay {} -> {}: forwarded {} (high {}, normal {}, low {}), sent {}, shed {} (high {}, normal {}, low {}: queue full {}, arena full {}, evicted {})",
+                r.relay,
+                r.to,
+                r.forwarded.iter().sum::<u32>(),
+                r.forwarded[0],
+                r.forwarded[1],
+                r.forwarded[2],
+                r.sent,
+                r.shed.iter().sum::<u32>(),
+                r.shed[0],
+                r.shed[1],
+                r.shed[2],
+                r.queue_full,
+                r.arena_full,
+                r.evicted
+            );
+        }
+        let _ = writeln!(
+            s,
+            "  (submitted, sent, shed: on the aircraft's own radio, its replies included; forwarded,\n   shed by relay: its frames at the relay, towards the ground; received: at the ground)"
+        );
     }
 }
