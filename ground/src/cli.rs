@@ -383,8 +383,9 @@ mod tests {
             [8, 3, 200]
         );
         for bad in ["256", "-1", "x", ""] {
+            let arg = format!("--ac-id={bad}");
             let mut v = link.to_vec();
-            v.extend_from_slice(&["--ac-id", bad]);
+            v.push(&arg);
             let e = parse(&v).unwrap_err();
             assert!(e.contains("--ac-id"), "{bad}: {e}");
         }
