@@ -32,10 +32,11 @@
 //! [`MAX_AIRCRAFT`] aircraft: frames from further source ids are decoded, shown and
 //! counted with all aircraft and in [`Monitor::untracked_frames`], but get no table of
 //! their own (a flood of frames from every source id costs nothing more). Aircraft the
-//! ground addresses are tracked whatever the input. The worst case is about
-//! `(MAX_AIRCRAFT + 1) * messages in the set * 2.3 KiB` (27 MiB for the 367 messages of
-//! the full PPRZLINK set, every one from 32 aircraft with fields that print to the
-//! longest text); [`retained_bytes`](Monitor::retained_bytes) estimates the total.
+//! ground addresses are tracked whatever the input. The worst case is
+//! `(MAX_AIRCRAFT + 1) * messages in the set` entries of at most about 4 KiB each (tens of
+//! MiB for the 367 messages of the full PPRZLINK set, every one sent by 32 aircraft with
+//! fields that print to the longest text; a few hundred bytes per entry in practice);
+//! [`retained_bytes`](Monitor::retained_bytes) estimates the total.
 //!
 //! Everything printed is escaped ([`escape`](crate::escape)): no line contains a
 //! control character.
@@ -502,7 +503,7 @@ impl Monitor {
     /// Decodes a received frame, after opening it on a secure link.
     fn deliver(&mut self, now: f64, frame: Received, on_message: &mut impl FnMut(&str, &[u8])) {
         let Some(secure) = &mut self.secure else {
-            let line = self.handle(now, &frame.header(), &frame.payload);
+            let line = self.handle(now, &frame.header, &frame.payload);
             on_message(&line, &frame.raw);
             return;
         };
@@ -1312,10 +1313,7 @@ impl Header {
 
 /// What the monitor keeps of a decoded frame (the decoder's frame borrows the decoder).
 struct Received {
-    source: u8,
-    destination: Option<u8>,
-    class: u8,
-    id: u8,
+    header: Header,
     payload: Vec<u8>,
     data: Vec<u8>,
     raw: Vec<u8>,
@@ -1324,22 +1322,10 @@ struct Received {
 impl Received {
     fn of(frame: &pprz_transports::Frame<'_>) -> Self {
         Self {
-            source: frame.source(),
-            destination: frame.destination(),
-            class: frame.class(),
-            id: frame.msg_id(),
+            header: Header::of(frame),
             payload: frame.payload().to_vec(),
             data: frame.data().to_vec(),
             raw: frame.raw().to_vec(),
-        }
-    }
-
-    fn header(&self) -> Header {
-        Header {
-            source: self.source,
-            destination: self.destination,
-            class: self.class,
-            id: self.id,
         }
     }
 }
