@@ -57,8 +57,9 @@ impl Transport {
     }
 }
 
-/// Watch a Paparazzi-compatible aircraft: decode its telemetry live with any
-/// messages.xml, measure PING round trips, send SETTINGs and see them acknowledged.
+/// Watch Paparazzi-compatible aircraft: decode their telemetry live with any
+/// messages.xml (a section per aircraft), measure PING round trips, send SETTINGs and
+/// see them acknowledged.
 #[derive(Debug, Parser)]
 #[command(name = "pprz-monitor", version, about)]
 pub struct Args {
@@ -90,9 +91,12 @@ pub struct Args {
     /// With --tcp or --serial they go back on the same stream.
     #[arg(long, value_name = "ADDR")]
     pub uplink: Option<SocketAddr>,
-    /// Aircraft id for PING/SETTING (and the only aircraft accepted with --secure).
-    #[arg(long, default_value_t = 7)]
-    pub ac_id: u8,
+    /// Aircraft id for PING/SETTING (the frames' destination and the SETTING's ac_id
+    /// field); repeat it or separate ids with commas to PING and SET several aircraft
+    /// (each PONG and DL_VALUE is matched to its source). With --secure, one aircraft
+    /// only: the only one accepted.
+    #[arg(long = "ac-id", value_name = "ID", default_values_t = [7u8], value_delimiter = ',')]
+    pub ac_id: Vec<u8>,
     /// Secure link: encrypted and authenticated PPRZ v2 (Paparazzi's secure transport)
     /// with the ground keys (GCS_PRIVATE, UAV_PUBLIC) of this key file. The monitor
     /// performs the key exchange with --ac-id (again every second until it completes),
@@ -120,6 +124,17 @@ pub struct Args {
 }
 
 impl Args {
+    /// The aircraft addressed (`--ac-id`), in the order given, each once.
+    pub fn aircraft(&self) -> Vec<u8> {
+        let mut out: Vec<u8> = Vec::with_capacity(self.ac_id.len());
+        for id in &self.ac_id {
+            if !out.contains(id) {
+                out.push(*id);
+            }
+        }
+        out
+    }
+
     /// Checks the combinations of options that clap cannot: PINGs, SETTINGs and the
     /// secure link need a link to the aircraft, and the secure link PPRZ v2.
     ///
@@ -137,6 +152,9 @@ impl Args {
             );
         }
         if self.secure.is_some() {
+            if self.aircraft().len() != 1 {
+                return Err("--secure talks to one aircraft: give a single --ac-id".into());
+            }
             if self.transport != Transport::Pprz2 {
                 return Err(
                     "--secure needs --transport pprz2 (the secure link is PPRZ v2 only)".into(),
@@ -348,5 +366,33 @@ mod tests {
                 .check()
                 .is_err()
         );
+    }
+
+    #[test]
+    fn one_or_several_aircraft() {
+        let link = ["--tcp", "127.0.0.1:1"];
+        let with = |extra: &[&str]| {
+            let mut v = link.to_vec();
+            v.extend_from_slice(extra);
+            parse(&v).unwrap()
+        };
+        assert_eq!(with(&[]).aircraft(), [7]);
+        assert_eq!(with(&["--ac-id", "8"]).aircraft(), [8]);
+        assert_eq!(
+            with(&["--ac-id", "8", "--ac-id", "3,8", "--ac-id=200"]).aircraft(),
+            [8, 3, 200]
+        );
+        for bad in ["256", "-1", "x", ""] {
+            let arg = format!("--ac-id={bad}");
+            let mut v = link.to_vec();
+            v.push(&arg);
+            let e = parse(&v).unwrap_err();
+            assert!(e.contains("--ac-id"), "{bad}: {e}");
+        }
+        assert_eq!(with(&["--secure", "k", "--ac-id", "9,9"]).check(), Ok(()));
+        let e = with(&["--secure", "k", "--ac-id", "7,8"])
+            .check()
+            .unwrap_err();
+        assert!(e.contains("one aircraft"), "{e}");
     }
 }

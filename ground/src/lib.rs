@@ -1,12 +1,13 @@
 //! Ground tools of the Paparazzi telemetry stack: decode any `messages.xml` at run time
-//! and watch an aircraft live.
+//! and watch one or several aircraft live.
 //!
 //! * [`set`]: a message set loaded from a `messages.xml` at run time (the full PPRZLINK
 //!   reference included), as descriptors for generic decoding.
 //! * [`format`](mod@format): text forms of decoded messages (values with units and labels).
 //! * [`escape`]: escaping of everything printed that comes from the aircraft or the XML.
 //! * [`monitor`]: the state of the `pprz-monitor` tool: per-message rates and latest
-//!   values, link statistics, PING round trips and SETTING acknowledgements.
+//!   values (for all aircraft and per aircraft), link statistics, PING round trips and
+//!   SETTING acknowledgements per aircraft.
 //! * [`ping`], [`settings`]: matching PONGs to PINGs and DL_VALUEs to SETTINGs.
 //! * [`input`]: the bounded queue between the reading threads and the decoder.
 //! * [`record`]: PPRZLOG recordings that never destroy an input nor lose data silently.

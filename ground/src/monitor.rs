@@ -5,10 +5,37 @@
 //! Time is passed in (seconds since the start of the run), so the state is testable and
 //! a replay reproduces the same output.
 //!
+//! # Several aircraft
+//!
+//! Every frame names its source (PPRZ v2 `source`, PPRZ v1 `sender_id`): the monitor keeps
+//! statistics per message for all aircraft together ([`Monitor::messages`]) and per
+//! aircraft ([`Monitor::aircraft`], [`Monitor::aircraft_state`], [`Aircraft`]). With one
+//! aircraft the live view is one table; with several it has a section per aircraft, and
+//! the events name the aircraft.
+//!
+//! PINGs and SETTINGs can be addressed to an aircraft ([`Monitor::ping_sent_to`],
+//! [`Monitor::setting_value_sent_to`], [`Monitor::get_setting_sent_to`]): a PONG from
+//! aircraft N answers only a PING sent to N, a DL_VALUE from N only a request sent to N.
+//! The forms without an aircraft ([`Monitor::ping_sent`], [`Monitor::setting_value_sent`],
+//! ...) are for a single aircraft: a PONG or DL_VALUE from any aircraft answers them, when
+//! no request addressed to that aircraft is waiting. Only PONGs and DL_VALUEs addressed to
+//! the ground (destination 0, broadcast, or none with PPRZ v1) answer anything: one
+//! aircraft's answer to another, seen on a shared link, does not.
+//!
+//! # Bounds
+//!
 //! Every piece of state is bounded, whatever arrives: one entry per message of the set
-//! (with its latest fields cut at [`format::MAX_FIELDS_LEN`]), rates counted in fixed
-//! time buckets, at most [`MAX_EVENTS`] events and notices, at most
-//! [`crate::ping::MAX_OUTSTANDING`] PINGs and 256 requests outstanding.
+//! (with its latest fields cut at [`format::MAX_FIELDS_LEN`]) for all aircraft and one per
+//! message and tracked aircraft, rates counted in fixed time buckets, at most
+//! [`MAX_EVENTS`] events and notices, at most [`crate::ping::MAX_OUTSTANDING`] PINGs and
+//! 256 requests outstanding per aircraft. Received frames make the monitor track at most
+//! [`MAX_AIRCRAFT`] aircraft: frames from further source ids are decoded, shown and
+//! counted with all aircraft and in [`Monitor::untracked_frames`], but get no table of
+//! their own (a flood of frames from every source id costs nothing more). Aircraft the
+//! ground addresses are tracked whatever the input. The worst case is
+//! `(MAX_AIRCRAFT + 1) * messages in the set` entries of at most about 4 KiB each (tens of
+//! MiB for the 367 messages of the full PPRZLINK set, every one sent by 32 aircraft with
+//! fields that print to the longest text; a few hundred bytes per entry in practice);
 //! [`retained_bytes`](Monitor::retained_bytes) estimates the total.
 //!
 //! Everything printed is escaped ([`escape`](crate::escape)): no line contains a
@@ -20,7 +47,9 @@ use std::fmt::Write as _;
 use pprz_messages::dynamic;
 use pprz_messages::{BaseType, FieldType, MessageDescriptor};
 use pprz_secure::{HandshakeError, Reject, SealError};
-use pprz_transports::{AnyTransport, Decoder, DecoderStats, Framing, PprzV2};
+use pprz_transports::{
+    AnyTransport, BROADCAST_ID, Decoder, DecoderStats, Framing, GROUND_ID, PprzV2,
+};
 
 use crate::format;
 use crate::input::Drops;
@@ -42,6 +71,11 @@ pub const MAX_EVENTS: usize = 8;
 
 /// Handshake frames waiting for [`Monitor::poll_secure`] (the latest ones).
 pub const MAX_SECURE_OUT: usize = 4;
+
+/// Aircraft (source ids) that received frames make the monitor track; frames from
+/// further source ids are counted ([`Monitor::untracked_frames`]), not tracked. Aircraft
+/// the ground addresses (PING, SETTING) are tracked beyond this bound.
+pub const MAX_AIRCRAFT: usize = 32;
 
 /// Seconds during which rejections of the same reason share one notice.
 const REJECT_COALESCE: f64 = 1.0;
@@ -112,6 +146,140 @@ impl MessageStats {
     }
 }
 
+/// What the monitor knows about one aircraft: the frames received from it (by source
+/// id), its messages, and the PINGs and SETTINGs addressed to it.
+///
+/// Got from [`Monitor::aircraft_state`]; the ids tracked are [`Monitor::aircraft`].
+#[derive(Debug, Clone)]
+pub struct Aircraft {
+    id: u8,
+    frames: u64,
+    unknown: u64,
+    malformed: u64,
+    messages: BTreeMap<(u8, u8), MessageStats>,
+    pings: PingTracker,
+    settings: SettingTracker,
+    last_rtt: Option<f64>,
+    last_report: Option<String>,
+}
+
+impl Aircraft {
+    fn new(id: u8, pings: &PingTracker, settings: &SettingTracker) -> Self {
+        Self {
+            id,
+            frames: 0,
+            unknown: 0,
+            malformed: 0,
+            messages: BTreeMap::new(),
+            pings: PingTracker::new(pings.capacity(), pings.timeout()),
+            settings: SettingTracker::new(settings.timeout()),
+            last_rtt: None,
+            last_report: None,
+        }
+    }
+
+    /// The aircraft id (the source id of its frames).
+    pub fn id(&self) -> u8 {
+        self.id
+    }
+
+    /// Frames received from this aircraft (known, unknown and malformed messages).
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// Messages from this aircraft whose class and id the set does not know.
+    pub fn unknown(&self) -> u64 {
+        self.unknown
+    }
+
+    /// Known messages from this aircraft whose payload did not match their definition.
+    pub fn malformed(&self) -> u64 {
+        self.malformed
+    }
+
+    /// Statistics per message of this aircraft, by (class, id).
+    pub fn messages(&self) -> &BTreeMap<(u8, u8), MessageStats> {
+        &self.messages
+    }
+
+    /// The PINGs sent to this aircraft ([`Monitor::ping_sent_to`]) and their PONGs.
+    pub fn pings(&self) -> &PingTracker {
+        &self.pings
+    }
+
+    /// The SETTING and GET_SETTING requests sent to this aircraft
+    /// ([`Monitor::setting_value_sent_to`], [`Monitor::get_setting_sent_to`]).
+    pub fn settings(&self) -> &SettingTracker {
+        &self.settings
+    }
+
+    /// The latest round-trip time measured with a PONG from this aircraft, in seconds
+    /// (of a PING sent to it, or of one sent to no particular aircraft).
+    pub fn last_rtt(&self) -> Option<f64> {
+        self.last_rtt
+    }
+
+    /// The fields of the latest DATALINK_REPORT of this aircraft (escaped).
+    pub fn last_report(&self) -> Option<&str> {
+        self.last_report.as_deref()
+    }
+
+    /// Messages received from this aircraft per priority level, most important first.
+    pub fn per_priority(&self) -> BTreeMap<std::cmp::Reverse<u8>, u64> {
+        per_priority(&self.messages)
+    }
+
+    /// The heap memory this aircraft's state holds, estimated.
+    fn retained_bytes(&self) -> usize {
+        std::mem::size_of::<(u8, Self)>()
+            + messages_bytes(&self.messages)
+            + self.pings.capacity() * 8
+            + self.settings.pending() * 64
+            + self.last_report.as_ref().map_or(0, String::capacity)
+    }
+}
+
+/// Messages per priority level of `messages`, most important first.
+fn per_priority(
+    messages: &BTreeMap<(u8, u8), MessageStats>,
+) -> BTreeMap<std::cmp::Reverse<u8>, u64> {
+    let mut out = BTreeMap::new();
+    for m in messages.values() {
+        *out.entry(std::cmp::Reverse(m.priority)).or_insert(0) += m.count;
+    }
+    out
+}
+
+/// The heap memory of a table of message statistics, estimated.
+fn messages_bytes(messages: &BTreeMap<(u8, u8), MessageStats>) -> usize {
+    let per_message = std::mem::size_of::<((u8, u8), MessageStats)>() + 4 * 8;
+    messages
+        .values()
+        .map(|m| per_message + m.name.capacity() + m.class.capacity() + m.last.capacity())
+        .sum()
+}
+
+/// Counts a message `desc` received at `now` with fields `body` in `messages`.
+fn count_message(
+    messages: &mut BTreeMap<(u8, u8), MessageStats>,
+    desc: &MessageDescriptor<'_>,
+    now: f64,
+    body: String,
+) {
+    let entry = messages
+        .entry((desc.class_id, desc.id))
+        .or_insert_with(|| MessageStats {
+            name: crate::escape::token(desc.name),
+            class: crate::escape::token(desc.class_name),
+            priority: desc.priority,
+            ..MessageStats::default()
+        });
+    entry.count += 1;
+    entry.recent.add(now, 1);
+    entry.last = body;
+}
+
 /// Events worth a line of their own in the live view.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
@@ -164,28 +332,45 @@ pub enum Notice {
     HandshakeRefused(HandshakeError),
 }
 
-/// Pushes `item` at time `now`, keeping the latest [`MAX_EVENTS`].
-fn push_bounded<T>(queue: &mut VecDeque<(f64, T)>, now: f64, item: T) {
+/// An event or notice, the aircraft it concerns (if any), and when it happened.
+#[derive(Debug, Clone)]
+struct Logged<T> {
+    aircraft: Option<u8>,
+    entry: (f64, T),
+}
+
+/// Pushes `item` about `aircraft` at time `now`, keeping the latest [`MAX_EVENTS`].
+fn push_bounded<T>(queue: &mut VecDeque<Logged<T>>, now: f64, aircraft: Option<u8>, item: T) {
     if queue.len() >= MAX_EVENTS {
         queue.pop_front();
     }
-    queue.push_back((now, item));
+    queue.push_back(Logged {
+        aircraft,
+        entry: (now, item),
+    });
 }
 
 /// The decoding monitor.
 pub struct Monitor {
     set: RuntimeSet,
     decoder: Decoder<AnyTransport>,
+    /// All aircraft together.
     messages: BTreeMap<(u8, u8), MessageStats>,
+    aircraft: BTreeMap<u8, Aircraft>,
+    untracked_frames: u64,
+    /// Bit `n` set: frames from source `n` were not tracked.
+    untracked_ids: [u64; 4],
     bytes: u64,
     byte_rate: Rate,
     unknown: u64,
     malformed: u64,
     last_report: Option<String>,
+    last_rtt: Option<f64>,
+    /// PINGs and requests to no particular aircraft.
     pings: PingTracker,
     settings: SettingTracker,
-    events: VecDeque<(f64, Event)>,
-    notices: VecDeque<(f64, Notice)>,
+    events: VecDeque<Logged<Event>>,
+    notices: VecDeque<Logged<Notice>>,
     input_dropped: Drops,
     input_gaps: u64,
     event_count: u64,
@@ -209,11 +394,15 @@ impl Monitor {
             set,
             decoder: Decoder::new(transport),
             messages: BTreeMap::new(),
+            aircraft: BTreeMap::new(),
+            untracked_frames: 0,
+            untracked_ids: [0; 4],
             bytes: 0,
             byte_rate: Rate::default(),
             unknown: 0,
             malformed: 0,
             last_report: None,
+            last_rtt: None,
             pings: PingTracker::default(),
             settings: SettingTracker::default(),
             events: VecDeque::new(),
@@ -281,7 +470,9 @@ impl Monitor {
     }
 
     /// The same monitor with other PING and request trackers (other bounds and
-    /// timeouts).
+    /// timeouts): these track the PINGs and requests to no particular aircraft, and the
+    /// trackers of each aircraft get the same bounds and timeouts (call it before
+    /// feeding the monitor or sending anything).
     pub fn with_trackers(mut self, pings: PingTracker, settings: SettingTracker) -> Self {
         self.pings = pings;
         self.settings = settings;
@@ -312,16 +503,16 @@ impl Monitor {
     /// Decodes a received frame, after opening it on a secure link.
     fn deliver(&mut self, now: f64, frame: Received, on_message: &mut impl FnMut(&str, &[u8])) {
         let Some(secure) = &mut self.secure else {
-            let line = self.handle(now, frame.source, frame.class, frame.id, &frame.payload);
+            let line = self.handle(now, &frame.header, &frame.payload);
             on_message(&line, &frame.raw);
             return;
         };
         match secure.open(&frame.data, millis(now)) {
             Incoming::Plain(plain) => match PprzV2::new().view(&plain) {
                 Ok(f) => {
-                    let (source, class, id) = (f.source(), f.class(), f.msg_id());
+                    let header = Header::of(&f);
                     let payload = f.payload().to_vec();
-                    let line = self.handle(now, source, class, id, &payload);
+                    let line = self.handle(now, &header, &payload);
                     on_message(&line, &plain);
                 }
                 // The channel gives well-formed frames only.
@@ -337,12 +528,14 @@ impl Monitor {
                 match event {
                     HandshakeEvent::Established => {
                         let completed = secure.status().stats.handshake.completed;
-                        self.event(now, Event::SecureSession { completed });
+                        let ac = self.secure.as_ref().map(GroundSecure::ac_id);
+                        self.event(now, ac, Event::SecureSession { completed });
                     }
                     HandshakeEvent::Resend => {}
                     HandshakeEvent::Refused(HandshakeError::Duplicate) => {}
                     HandshakeEvent::Refused(e) => {
-                        self.notice(now, Notice::HandshakeRefused(e));
+                        let ac = self.secure.as_ref().map(GroundSecure::ac_id);
+                        self.notice(now, ac, Notice::HandshakeRefused(e));
                     }
                 }
             }
@@ -352,14 +545,17 @@ impl Monitor {
 
     /// Notes a rejected secure frame; a run of rejections for one reason shares a notice.
     fn secure_rejected(&mut self, now: f64, reason: Reject) {
-        if let Some((at, Notice::SecureRejected { reason: r, count })) = self.notices.back_mut()
+        if let Some(Logged {
+            entry: (at, Notice::SecureRejected { reason: r, count }),
+            ..
+        }) = self.notices.back_mut()
             && *r == reason
             && now - *at < REJECT_COALESCE
         {
             *count = count.saturating_add(1);
             return;
         }
-        self.notice(now, Notice::SecureRejected { reason, count: 1 });
+        self.notice(now, None, Notice::SecureRejected { reason, count: 1 });
     }
 
     /// Input was dropped under overload just before the next bytes: counts it, notes it
@@ -372,39 +568,71 @@ impl Monitor {
         self.input_dropped.bytes += dropped.bytes;
         self.input_dropped.reads += dropped.reads;
         self.input_gaps += 1;
-        self.notice(now, Notice::InputDropped(dropped));
+        self.notice(now, None, Notice::InputDropped(dropped));
         self.flush(now, on_message);
     }
 
-    fn handle(&mut self, now: f64, source: u8, class: u8, id: u8, payload: &[u8]) -> String {
+    /// Counts a frame from aircraft `source`, tracked (created while fewer than
+    /// [`MAX_AIRCRAFT`] are) or not.
+    fn admit(&mut self, source: u8) {
+        if !self.aircraft.contains_key(&source) && self.aircraft.len() >= MAX_AIRCRAFT {
+            self.untracked_frames += 1;
+            self.untracked_ids[usize::from(source / 64)] |= 1 << (source % 64);
+            return;
+        }
+        let (pings, settings) = (&self.pings, &self.settings);
+        let a = self
+            .aircraft
+            .entry(source)
+            .or_insert_with(|| Aircraft::new(source, pings, settings));
+        a.frames += 1;
+    }
+
+    /// The state of aircraft `ac_id`, which the ground addresses: created whatever the
+    /// bound.
+    fn addressed(&mut self, ac_id: u8) -> &mut Aircraft {
+        let (pings, settings) = (&self.pings, &self.settings);
+        self.aircraft
+            .entry(ac_id)
+            .or_insert_with(|| Aircraft::new(ac_id, pings, settings))
+    }
+
+    fn handle(&mut self, now: f64, header: &Header, payload: &[u8]) -> String {
+        let &Header {
+            source, class, id, ..
+        } = header;
+        self.admit(source);
+        let aircraft = self.aircraft.get_mut(&source);
         let Some(desc) = self.set.find(class, id) else {
             self.unknown += 1;
+            if let Some(a) = aircraft {
+                a.unknown += 1;
+            }
             return format::line(source, class, id, None, payload);
         };
         let body = format::fields(desc, payload);
         let line = format::known_line(source, desc, &body);
         let ok = dynamic::check(desc, payload).is_ok();
+        let report = ok && desc.name == "DATALINK_REPORT";
+        if let Some(a) = aircraft {
+            if !ok {
+                a.malformed += 1;
+            }
+            if report {
+                a.last_report = Some(body.clone());
+            }
+            count_message(&mut a.messages, desc, now, body.clone());
+        }
         if !ok {
             self.malformed += 1;
         }
-        let entry = self
-            .messages
-            .entry((class, id))
-            .or_insert_with(|| MessageStats {
-                name: crate::escape::token(desc.name),
-                class: crate::escape::token(desc.class_name),
-                priority: desc.priority,
-                ..MessageStats::default()
-            });
-        entry.count += 1;
-        entry.recent.add(now, 1);
-        entry.last = body;
-        if ok {
+        if report {
+            self.last_report = Some(body.clone());
+        }
+        count_message(&mut self.messages, desc, now, body);
+        if ok && header.to_ground() {
             match desc.name {
-                "PONG" => match self.pings.pong(now) {
-                    Some(rtt) => self.event(now, Event::Pong { rtt }),
-                    None => self.notice(now, Notice::UnexpectedPong),
-                },
+                "PONG" => self.pong(now, source),
                 "DL_VALUE" => {
                     let value = |name| {
                         dynamic::fields(desc, payload)
@@ -418,32 +646,81 @@ impl Monitor {
                         (index.and_then(|i| u8::try_from(i).ok()), number)
                     {
                         let base = scalar_type(Some(desc), "value").unwrap_or(BaseType::F64);
-                        let answer = self.settings.dl_value(now, index, value, base);
-                        self.event(
-                            now,
-                            Event::DlValue {
-                                index,
-                                value,
-                                answer,
-                            },
-                        );
+                        self.dl_value(now, source, index, value, base);
                     }
                 }
-                "DATALINK_REPORT" => self.last_report = Some(entry.last.clone()),
                 _ => {}
             }
         }
         line
     }
 
-    fn event(&mut self, now: f64, event: Event) {
-        self.event_count += 1;
-        push_bounded(&mut self.events, now, event);
+    /// A PONG from `source` at `now`: it answers the oldest PING outstanding to
+    /// `source`, else the oldest one sent to no particular aircraft.
+    fn pong(&mut self, now: f64, source: u8) {
+        self.expire_pings(now, Some(source));
+        self.expire_pings(now, None);
+        let rtt = match self.aircraft.get_mut(&source) {
+            Some(a) if a.pings.outstanding() > 0 => a.pings.pong(now),
+            _ if self.pings.outstanding() > 0 => self.pings.pong(now),
+            // Unexpected: counted by the aircraft if PINGs were sent to it.
+            Some(a) if a.pings.sent_count() > 0 => a.pings.pong(now),
+            _ => self.pings.pong(now),
+        };
+        match rtt {
+            Some(rtt) => {
+                if let Some(a) = self.aircraft.get_mut(&source) {
+                    a.last_rtt = Some(rtt);
+                }
+                self.last_rtt = Some(rtt);
+                self.event(now, Some(source), Event::Pong { rtt });
+            }
+            None => self.notice(now, Some(source), Notice::UnexpectedPong),
+        }
     }
 
-    fn notice(&mut self, now: f64, notice: Notice) {
+    /// A DL_VALUE from `source` at `now`: it answers the request pending on `index` for
+    /// `source`, else the one sent to no particular aircraft.
+    fn dl_value(&mut self, now: f64, source: u8, index: u8, value: f64, base: BaseType) {
+        let answer = match self.aircraft.get_mut(&source) {
+            Some(a) => a.settings.dl_value(now, index, value, base),
+            None => Answer::Unsolicited,
+        };
+        let answer = match answer {
+            Answer::Unsolicited => self.settings.dl_value(now, index, value, base),
+            answer => answer,
+        };
+        let event = Event::DlValue {
+            index,
+            value,
+            answer,
+        };
+        self.event(now, Some(source), event);
+    }
+
+    /// Counts as lost the PINGs to `aircraft` (or to none) older than their timeout at
+    /// `now`, and notes it.
+    fn expire_pings(&mut self, now: f64, aircraft: Option<u8>) {
+        let lost = match aircraft {
+            Some(id) => self
+                .aircraft
+                .get_mut(&id)
+                .map_or(0, |a| a.pings.expire(now)),
+            None => self.pings.expire(now),
+        };
+        if lost > 0 {
+            self.notice(now, aircraft, Notice::PingsLost { count: lost });
+        }
+    }
+
+    fn event(&mut self, now: f64, aircraft: Option<u8>, event: Event) {
+        self.event_count += 1;
+        push_bounded(&mut self.events, now, aircraft, event);
+    }
+
+    fn notice(&mut self, now: f64, aircraft: Option<u8>, notice: Notice) {
         self.notice_count += 1;
-        push_bounded(&mut self.notices, now, notice);
+        push_bounded(&mut self.notices, now, aircraft, notice);
     }
 
     /// Events so far (more than [`events`](Self::events) keeps): the latest
@@ -458,34 +735,90 @@ impl Monitor {
     }
 
     /// Gives up the PINGs and requests older than their timeouts at `now` (counted
-    /// lost, noted for the live view). Call it regularly; the other methods taking
-    /// `now` do it too where it matters.
+    /// lost, noted for the live view), of every aircraft. Call it regularly; the other
+    /// methods taking `now` do it too where it matters.
     pub fn tick(&mut self, now: f64) {
-        let lost = self.pings.expire(now);
-        if lost > 0 {
-            self.notice(now, Notice::PingsLost { count: lost });
-        }
+        self.expire_pings(now, None);
         for e in self.settings.expire(now) {
-            self.notice(now, Notice::RequestExpired(e));
+            self.notice(now, None, Notice::RequestExpired(e));
+        }
+        let ids: Vec<u8> = self.aircraft.keys().copied().collect();
+        for id in ids {
+            self.expire_pings(now, Some(id));
+            if let Some(a) = self.aircraft.get_mut(&id) {
+                for e in a.settings.expire(now) {
+                    self.notice(now, Some(id), Notice::RequestExpired(e));
+                }
+            }
         }
     }
 
-    /// Records that a PING was sent at `now`; the PONGs answer the PINGs outstanding in
-    /// order, oldest first.
+    /// Records that a PING to no particular aircraft (the single-aircraft form) was sent
+    /// at `now`; the PONGs answer the PINGs outstanding in order, oldest first. A PONG
+    /// from any aircraft answers it, when that aircraft has no PING of
+    /// [`ping_sent_to`](Self::ping_sent_to) outstanding. Statistics: [`pings`](Self::pings).
     pub fn ping_sent(&mut self, now: f64) {
         let lost = self.pings.sent(now);
         if lost > 0 {
-            self.notice(now, Notice::PingsLost { count: lost });
+            self.notice(now, None, Notice::PingsLost { count: lost });
         }
     }
 
-    /// Records that a SETTING of `index` to `value` was sent at `now`: only a DL_VALUE
-    /// carrying that value (compared as the type of the `value` fields of SETTING and
-    /// DL_VALUE) acknowledges it; another value is reported as not applied.
+    /// Records that a PING addressed to aircraft `ac_id` (its v2 destination) was sent at
+    /// `now`: only a PONG whose source is `ac_id` answers it (the oldest PING outstanding
+    /// to `ac_id` first). The aircraft is tracked from now on, whatever
+    /// [`MAX_AIRCRAFT`] says. Statistics: [`pings_of`](Self::pings_of),
+    /// [`last_rtt_of`](Self::last_rtt_of); the [`Event::Pong`] it produces is tagged with
+    /// `ac_id` in [`events_with_aircraft`](Self::events_with_aircraft).
+    ///
+    /// ```
+    /// # use pprz_ground::{monitor::Monitor, set::RuntimeSet};
+    /// # use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
+    /// # let set = RuntimeSet::parse("m.xml", r#"<protocol><msg_class name="telemetry" id="1">
+    /// #     <message name="PONG" id="3"/></msg_class></protocol>"#).unwrap();
+    /// let mut monitor = Monitor::new(set, PprzV2::new().into());
+    /// monitor.ping_sent_to(1.0, 7);
+    /// monitor.ping_sent_to(1.0, 8);
+    /// // A PONG from aircraft 8 to the ground (source 8, destination 0).
+    /// let mut pong = [0u8; 16];
+    /// let n = PprzV2::new().encode(&TxMeta::new(MsgHeader::new(8, 0, 1, 3)), &[], &mut pong).unwrap();
+    /// monitor.feed(1.25, &pong[..n], |_, _| {});
+    /// assert_eq!(monitor.last_rtt_of(8), Some(0.25));
+    /// assert_eq!(monitor.last_rtt_of(7), None);
+    /// assert_eq!(monitor.pings_of(7).unwrap().outstanding(), 1);
+    /// assert_eq!(monitor.aircraft(), [7, 8]);
+    /// ```
+    pub fn ping_sent_to(&mut self, now: f64, ac_id: u8) {
+        let lost = self.addressed(ac_id).pings.sent(now);
+        if lost > 0 {
+            self.notice(now, Some(ac_id), Notice::PingsLost { count: lost });
+        }
+    }
+
+    /// The type of the `value` field of SETTING in the set (`float` without one).
+    fn setting_type(&self) -> BaseType {
+        scalar_type(self.set.find_by_name("datalink", "SETTING"), "value").unwrap_or(BaseType::F32)
+    }
+
+    /// Records that a SETTING of `index` to `value` was sent at `now` to no particular
+    /// aircraft (the single-aircraft form): only a DL_VALUE carrying that value
+    /// (compared as the type of the `value` fields of SETTING and DL_VALUE) acknowledges
+    /// it; another value is reported as not applied. A DL_VALUE from any aircraft
+    /// answers it, when that aircraft has no request of its own pending on `index`.
     pub fn setting_value_sent(&mut self, now: f64, index: u8, value: f64) {
-        let base = scalar_type(self.set.find_by_name("datalink", "SETTING"), "value")
-            .unwrap_or(BaseType::F32);
+        let base = self.setting_type();
         self.settings.setting_sent(now, index, value, base);
+    }
+
+    /// Records that a SETTING of `index` to `value` was sent at `now` to aircraft
+    /// `ac_id`, as [`setting_value_sent`](Self::setting_value_sent) does, but only a
+    /// DL_VALUE whose source is `ac_id` answers it. The aircraft is tracked from now on.
+    /// Statistics: [`settings_of`](Self::settings_of).
+    pub fn setting_value_sent_to(&mut self, now: f64, ac_id: u8, index: u8, value: f64) {
+        let base = self.setting_type();
+        self.addressed(ac_id)
+            .settings
+            .setting_sent(now, index, value, base);
     }
 
     /// Records that a request for setting `index` whose value is not known here was
@@ -496,34 +829,132 @@ impl Monitor {
         self.settings.get_setting_sent(now, index);
     }
 
-    /// Records that a GET_SETTING of `index` was sent at `now`.
+    /// Records that a GET_SETTING of `index` was sent at `now` to no particular
+    /// aircraft (the single-aircraft form).
     pub fn get_setting_sent(&mut self, now: f64, index: u8) {
         self.settings.get_setting_sent(now, index);
     }
 
+    /// Records that a GET_SETTING of `index` was sent at `now` to aircraft `ac_id`: the
+    /// next DL_VALUE of that index from `ac_id` answers it. The aircraft is tracked from
+    /// now on.
+    pub fn get_setting_sent_to(&mut self, now: f64, ac_id: u8, index: u8) {
+        self.addressed(ac_id).settings.get_setting_sent(now, index);
+    }
+
     /// The latest events (PONG round trips, DL_VALUEs), oldest first; at most
-    /// [`MAX_EVENTS`].
+    /// [`MAX_EVENTS`]. [`events_with_aircraft`](Self::events_with_aircraft) tells which
+    /// aircraft each one is about.
     pub fn events(&self) -> impl Iterator<Item = &(f64, Event)> {
-        self.events.iter()
+        self.events.iter().map(|l| &l.entry)
+    }
+
+    /// The latest events as [`events`](Self::events) gives them, with the aircraft each
+    /// is about: `(time, aircraft, event)`. The aircraft is the source of the PONG or
+    /// DL_VALUE, or the aircraft of the secure link.
+    pub fn events_with_aircraft(&self) -> impl Iterator<Item = (f64, Option<u8>, &Event)> {
+        self.events
+            .iter()
+            .map(|l| (l.entry.0, l.aircraft, &l.entry.1))
     }
 
     /// The latest notices (PINGs lost, requests given up, input dropped), oldest first;
     /// at most [`MAX_EVENTS`].
     pub fn notices(&self) -> impl Iterator<Item = &(f64, Notice)> {
-        self.notices.iter()
+        self.notices.iter().map(|l| &l.entry)
     }
 
-    /// The last round-trip time measured.
+    /// The latest notices as [`notices`](Self::notices) gives them, with the aircraft
+    /// each is about (`None`: the link, or requests to no particular aircraft).
+    pub fn notices_with_aircraft(&self) -> impl Iterator<Item = (f64, Option<u8>, &Notice)> {
+        self.notices
+            .iter()
+            .map(|l| (l.entry.0, l.aircraft, &l.entry.1))
+    }
+
+    /// Whether the monitor tracks more than one aircraft (or frames from aircraft beyond
+    /// [`MAX_AIRCRAFT`] arrived): the live view then has a section per aircraft, and
+    /// event lines name their aircraft.
+    pub fn several_aircraft(&self) -> bool {
+        self.aircraft.len() > 1 || self.untracked_frames > 0
+    }
+
+    /// An event as a line of the live view: [`describe_event`], after `aircraft N: `
+    /// when [`several_aircraft`](Self::several_aircraft) and the event is about one.
+    pub fn event_line(&self, aircraft: Option<u8>, event: &Event) -> String {
+        self.about(aircraft) + &describe_event(event)
+    }
+
+    /// A notice as a line of the live view, named after its aircraft as
+    /// [`event_line`](Self::event_line) does.
+    pub fn notice_line(&self, aircraft: Option<u8>, notice: &Notice) -> String {
+        self.about(aircraft) + &describe_notice(notice)
+    }
+
+    /// `aircraft N: ` with several aircraft, or nothing.
+    fn about(&self, aircraft: Option<u8>) -> String {
+        match aircraft {
+            Some(id) if self.several_aircraft() => format!("aircraft {id}: "),
+            _ => String::new(),
+        }
+    }
+
+    /// The last round-trip time measured, of any PING and any aircraft.
     pub fn last_rtt(&self) -> Option<f64> {
-        self.pings.last_rtt()
+        self.last_rtt
     }
 
-    /// The PINGs outstanding and their statistics.
+    /// The last round-trip time measured with a PONG from aircraft `ac_id` (of a PING
+    /// sent to it with [`ping_sent_to`](Self::ping_sent_to), or to no particular
+    /// aircraft with [`ping_sent`](Self::ping_sent)); `None` before any, or when the
+    /// aircraft is not tracked.
+    pub fn last_rtt_of(&self, ac_id: u8) -> Option<f64> {
+        self.aircraft.get(&ac_id)?.last_rtt
+    }
+
+    /// The PINGs sent to aircraft `ac_id` ([`ping_sent_to`](Self::ping_sent_to)) and
+    /// their statistics; `None` when the aircraft is not tracked.
+    pub fn pings_of(&self, ac_id: u8) -> Option<&PingTracker> {
+        Some(&self.aircraft.get(&ac_id)?.pings)
+    }
+
+    /// The SETTING and GET_SETTING requests sent to aircraft `ac_id` and their
+    /// statistics; `None` when the aircraft is not tracked.
+    pub fn settings_of(&self, ac_id: u8) -> Option<&SettingTracker> {
+        Some(&self.aircraft.get(&ac_id)?.settings)
+    }
+
+    /// The ids of the aircraft tracked, in ascending order: every source id of the
+    /// frames received (the first [`MAX_AIRCRAFT`] ones) and every aircraft addressed
+    /// with [`ping_sent_to`](Self::ping_sent_to) and the other `_to` methods.
+    pub fn aircraft(&self) -> Vec<u8> {
+        self.aircraft.keys().copied().collect()
+    }
+
+    /// What the monitor knows about aircraft `ac_id`; `None` when it is not tracked.
+    pub fn aircraft_state(&self, ac_id: u8) -> Option<&Aircraft> {
+        self.aircraft.get(&ac_id)
+    }
+
+    /// Frames from aircraft beyond [`MAX_AIRCRAFT`], which are decoded and counted with
+    /// all aircraft but not tracked one by one.
+    pub fn untracked_frames(&self) -> u64 {
+        self.untracked_frames
+    }
+
+    /// How many different source ids sent the [`untracked_frames`](Self::untracked_frames).
+    pub fn untracked_aircraft(&self) -> u32 {
+        self.untracked_ids.iter().map(|w| w.count_ones()).sum()
+    }
+
+    /// The PINGs to no particular aircraft ([`ping_sent`](Self::ping_sent)) and their
+    /// statistics; [`pings_of`](Self::pings_of) for those sent to an aircraft.
     pub fn pings(&self) -> &PingTracker {
         &self.pings
     }
 
-    /// The SETTING and GET_SETTING requests pending and their statistics.
+    /// The SETTING and GET_SETTING requests to no particular aircraft and their
+    /// statistics; [`settings_of`](Self::settings_of) for those sent to an aircraft.
     pub fn settings(&self) -> &SettingTracker {
         &self.settings
     }
@@ -563,13 +994,18 @@ impl Monitor {
         self.bytes
     }
 
-    /// Messages received per priority level, most important first.
+    /// Messages received per priority level (all aircraft), most important first.
     pub fn per_priority(&self) -> BTreeMap<std::cmp::Reverse<u8>, u64> {
-        let mut out = BTreeMap::new();
-        for m in self.messages.values() {
-            *out.entry(std::cmp::Reverse(m.priority)).or_insert(0) += m.count;
-        }
-        out
+        per_priority(&self.messages)
+    }
+
+    /// Messages received from aircraft `ac_id` per priority level, most important
+    /// first; empty when the aircraft is not tracked.
+    pub fn per_priority_of(&self, ac_id: u8) -> BTreeMap<std::cmp::Reverse<u8>, u64> {
+        self.aircraft
+            .get(&ac_id)
+            .map(Aircraft::per_priority)
+            .unwrap_or_default()
     }
 
     /// Bytes per second over the last [`RATE_WINDOW`] seconds.
@@ -578,20 +1014,20 @@ impl Monitor {
     }
 
     /// An estimate of the heap memory the monitor holds, in bytes (the decoder's
-    /// fixed buffer included): bounded by the size of the message set, whatever the
-    /// input.
+    /// fixed buffer included): bounded by the size of the message set and the number of
+    /// aircraft tracked (at most [`MAX_AIRCRAFT`] from received frames, plus those the
+    /// ground addressed), whatever the input.
     pub fn retained_bytes(&self) -> usize {
-        let per_message = std::mem::size_of::<((u8, u8), MessageStats)>() + 4 * 8;
-        let messages: usize = self
-            .messages
-            .values()
-            .map(|m| per_message + m.name.capacity() + m.class.capacity() + m.last.capacity())
-            .sum();
-        messages
+        messages_bytes(&self.messages)
+            + self
+                .aircraft
+                .values()
+                .map(Aircraft::retained_bytes)
+                .sum::<usize>()
             + std::mem::size_of::<Decoder<AnyTransport>>()
             + self.last_report.as_ref().map_or(0, String::capacity)
-            + self.events.capacity() * std::mem::size_of::<(f64, Event)>()
-            + self.notices.capacity() * std::mem::size_of::<(f64, Notice)>()
+            + self.events.capacity() * std::mem::size_of::<Logged<Event>>()
+            + self.notices.capacity() * std::mem::size_of::<Logged<Notice>>()
             + self.pings.capacity() * 8
             + self.settings.pending() * 64
             + self
@@ -618,59 +1054,35 @@ impl Monitor {
         )
     }
 
-    /// PING and SETTING statistics, when there were any.
+    /// PING and SETTING statistics of the requests to no particular aircraft and, with
+    /// a single aircraft, of those addressed to it, when there were any.
     fn uplink_status(&self) -> Vec<String> {
-        let mut out = Vec::new();
-        let p = &self.pings;
-        if p.sent_count() > 0 || p.unexpected() > 0 {
-            let mut s = format!(
-                "pings: sent {}  answered {}  lost {}  outstanding {}  unexpected pongs {}",
-                p.sent_count(),
-                p.answered(),
-                p.lost(),
-                p.outstanding(),
-                p.unexpected()
-            );
-            if let Some(rtt) = p.last_rtt() {
-                let _ = write!(s, "  last round trip {:.1} ms", rtt * 1e3);
-            }
-            out.push(s);
-        }
-        let st = &self.settings;
-        if st.acknowledged() + st.not_applied() + st.unanswered() > 0 || st.pending() > 0 {
-            out.push(format!(
-                "settings: acknowledged {}  not applied {}  unanswered {}  pending {}",
-                st.acknowledged(),
-                st.not_applied(),
-                st.unanswered(),
-                st.pending()
-            ));
-            for p in st.pending_requests() {
-                out.push(match p {
-                    Expired {
-                        index,
-                        requested: Some(requested),
-                        reported: Some(reported),
-                    } => format!(
-                        "  pending: SETTING index={index} to {}: not applied so far, the aircraft reports {}",
-                        number(requested),
-                        number(reported)
-                    ),
-                    Expired {
-                        index,
-                        requested: Some(requested),
-                        reported: None,
-                    } => format!(
-                        "  pending: SETTING index={index} to {}: no answer yet",
-                        number(requested)
-                    ),
-                    Expired { index, .. } => {
-                        format!("  pending: request for setting index={index}: no answer yet")
-                    }
-                });
-            }
+        let mut out = uplink_lines(&self.pings, &self.settings);
+        if !self.several_aircraft()
+            && let Some(a) = self.aircraft.values().next()
+        {
+            out.extend(uplink_lines(&a.pings, &a.settings));
         }
         out
+    }
+
+    /// The aircraft tracked, and the frames of those not tracked, with several
+    /// aircraft.
+    fn fleet_line(&self) -> Option<String> {
+        if !self.several_aircraft() {
+            return None;
+        }
+        let ids: Vec<String> = self.aircraft.keys().map(u8::to_string).collect();
+        let mut s = format!("aircraft: {}", ids.join(", "));
+        if self.untracked_frames > 0 {
+            let _ = write!(
+                s,
+                "  not tracked (more than {MAX_AIRCRAFT} aircraft): {} frames from {} aircraft",
+                self.untracked_frames,
+                self.untracked_aircraft()
+            );
+        }
+        Some(s)
     }
 
     /// The secure link's status lines, if the monitor has one.
@@ -681,6 +1093,9 @@ impl Monitor {
     }
 
     /// The live view: the status, a table of messages, the latest events and notices.
+    /// With [`several_aircraft`](Self::several_aircraft), a line listing them, then a
+    /// section per aircraft (`aircraft N: frames ...`, its PINGs and SETTINGs, its link
+    /// report, its table), and the events and notices name their aircraft.
     pub fn render(&self, now: f64) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "{}", self.status(now));
@@ -690,47 +1105,65 @@ impl Monitor {
         for line in self.uplink_status() {
             let _ = writeln!(s, "{line}");
         }
-        if let Some(report) = &self.last_report {
-            let _ = writeln!(s, "aircraft link report: {report}");
+        match self.fleet_line() {
+            None => {
+                if let Some(report) = &self.last_report {
+                    let _ = writeln!(s, "aircraft link report: {report}");
+                }
+                table(&mut s, &self.messages, now);
+            }
+            Some(fleet) => {
+                let _ = writeln!(s, "{fleet}");
+                for a in self.aircraft.values() {
+                    let _ = writeln!(s, "{}", aircraft_head(a));
+                    for line in uplink_lines(&a.pings, &a.settings) {
+                        let _ = writeln!(s, "{line}");
+                    }
+                    if let Some(report) = &a.last_report {
+                        let _ = writeln!(s, "aircraft link report: {report}");
+                    }
+                    table(&mut s, &a.messages, now);
+                }
+            }
         }
-        let _ = writeln!(
-            s,
-            "{:<10} {:<20} {:>4} {:>7} {:>7}  last values",
-            "class", "message", "prio", "count", "rate/s"
-        );
-        for m in self.messages.values() {
-            let mut last = m.last.clone();
-            format::truncate(&mut last, 110);
-            let _ = writeln!(
-                s,
-                "{:<10} {:<20} {:>4} {:>7} {:>7.1}  {last}",
-                m.class,
-                m.name,
-                m.priority,
-                m.count,
-                m.rate(now)
-            );
+        for (t, ac, e) in self.events_with_aircraft() {
+            let _ = writeln!(s, "[{t:7.1}s] {}", self.event_line(ac, e));
         }
-        for (t, e) in &self.events {
-            let _ = writeln!(s, "[{t:7.1}s] {}", describe_event(e));
-        }
-        for (t, n) in &self.notices {
-            let _ = writeln!(s, "[{t:7.1}s] {}", describe_notice(n));
+        for (t, ac, n) in self.notices_with_aircraft() {
+            let _ = writeln!(s, "[{t:7.1}s] {}", self.notice_line(ac, n));
         }
         s
     }
 
-    /// Messages received per priority level, as a short table.
+    /// Messages received per priority level (all aircraft), as a short table.
     pub fn priority_summary(&self) -> String {
-        let mut s = String::from("received per priority level:");
-        for (p, n) in self.per_priority() {
-            let _ = write!(s, "  {}: {n}", p.0);
+        priority_line(&self.per_priority())
+    }
+
+    /// Messages received from aircraft `ac_id` per priority level, as a short table
+    /// (`received per priority level:  2: 10  1: 230`; no level when the aircraft is not
+    /// tracked).
+    pub fn priority_summary_of(&self, ac_id: u8) -> String {
+        priority_line(&self.per_priority_of(ac_id))
+    }
+
+    /// The summary of aircraft `ac_id`: `aircraft N: frames F  unknown U  malformed M`,
+    /// then, indented, its messages per priority level and its PING and SETTING
+    /// statistics; `None` when the aircraft is not tracked.
+    pub fn aircraft_summary(&self, ac_id: u8) -> Option<String> {
+        let a = self.aircraft.get(&ac_id)?;
+        let mut s = aircraft_head(a);
+        let levels = priority_line(&a.per_priority());
+        for line in std::iter::once(levels).chain(uplink_lines(&a.pings, &a.settings)) {
+            let _ = write!(s, "\n  {line}");
         }
-        s
+        Some(s)
     }
 
     /// The summary at the end of a run: the status line (with the input dropped under
-    /// overload), PING and SETTING statistics, and messages per priority level.
+    /// overload), PING and SETTING statistics, and messages per priority level; with
+    /// [`several_aircraft`](Self::several_aircraft), then the aircraft and the
+    /// [`aircraft_summary`](Self::aircraft_summary) of each.
     pub fn summary(&self, now: f64) -> String {
         let mut s = self.status(now);
         for line in self.secure_lines().into_iter().chain(self.uplink_status()) {
@@ -739,8 +1172,112 @@ impl Monitor {
         }
         s.push('\n');
         s.push_str(&self.priority_summary());
+        if let Some(fleet) = self.fleet_line() {
+            s.push('\n');
+            s.push_str(&fleet);
+            for id in self.aircraft.keys() {
+                if let Some(a) = self.aircraft_summary(*id) {
+                    s.push('\n');
+                    s.push_str(&a);
+                }
+            }
+        }
         s
     }
+}
+
+/// `received per priority level:  2: 10  1: 230`.
+fn priority_line(levels: &BTreeMap<std::cmp::Reverse<u8>, u64>) -> String {
+    let mut s = String::from("received per priority level:");
+    for (p, n) in levels {
+        let _ = write!(s, "  {}: {n}", p.0);
+    }
+    s
+}
+
+/// The first line of an aircraft's section or summary.
+fn aircraft_head(a: &Aircraft) -> String {
+    format!(
+        "aircraft {}: frames {}  unknown {}  malformed {}",
+        a.id, a.frames, a.unknown, a.malformed
+    )
+}
+
+/// The table of `messages` of the live view, with its header.
+fn table(s: &mut String, messages: &BTreeMap<(u8, u8), MessageStats>, now: f64) {
+    let _ = writeln!(
+        s,
+        "{:<10} {:<20} {:>4} {:>7} {:>7}  last values",
+        "class", "message", "prio", "count", "rate/s"
+    );
+    for m in messages.values() {
+        let mut last = m.last.clone();
+        format::truncate(&mut last, 110);
+        let _ = writeln!(
+            s,
+            "{:<10} {:<20} {:>4} {:>7} {:>7.1}  {last}",
+            m.class,
+            m.name,
+            m.priority,
+            m.count,
+            m.rate(now)
+        );
+    }
+}
+
+/// PING and SETTING statistics of a pair of trackers, when there were any.
+fn uplink_lines(pings: &PingTracker, settings: &SettingTracker) -> Vec<String> {
+    let mut out = Vec::new();
+    let p = pings;
+    if p.sent_count() > 0 || p.unexpected() > 0 {
+        let mut s = format!(
+            "pings: sent {}  answered {}  lost {}  outstanding {}  unexpected pongs {}",
+            p.sent_count(),
+            p.answered(),
+            p.lost(),
+            p.outstanding(),
+            p.unexpected()
+        );
+        if let Some(rtt) = p.last_rtt() {
+            let _ = write!(s, "  last round trip {:.1} ms", rtt * 1e3);
+        }
+        out.push(s);
+    }
+    let st = settings;
+    if st.acknowledged() + st.not_applied() + st.unanswered() > 0 || st.pending() > 0 {
+        out.push(format!(
+            "settings: acknowledged {}  not applied {}  unanswered {}  pending {}",
+            st.acknowledged(),
+            st.not_applied(),
+            st.unanswered(),
+            st.pending()
+        ));
+        for p in st.pending_requests() {
+            out.push(match p {
+                Expired {
+                    index,
+                    requested: Some(requested),
+                    reported: Some(reported),
+                } => format!(
+                    "  pending: SETTING index={index} to {}: not applied so far, the aircraft reports {}",
+                    number(requested),
+                    number(reported)
+                ),
+                Expired {
+                    index,
+                    requested: Some(requested),
+                    reported: None,
+                } => format!(
+                    "  pending: SETTING index={index} to {}: no answer yet",
+                    number(requested)
+                ),
+                Expired { index, .. } => {
+                    format!("  pending: request for setting index={index}: no answer yet")
+                }
+            });
+        }
+    }
+    out
 }
 
 /// A time in seconds as milliseconds (saturating; NaN and negative times are 0).
@@ -748,11 +1285,35 @@ fn millis(now: f64) -> u64 {
     (now * 1000.0) as u64
 }
 
-/// What the monitor keeps of a decoded frame (the decoder's frame borrows the decoder).
-struct Received {
+/// The addressing of a decoded message.
+struct Header {
     source: u8,
+    /// `None` with PPRZ v1, which has no destination.
+    destination: Option<u8>,
     class: u8,
     id: u8,
+}
+
+impl Header {
+    fn of(frame: &pprz_transports::Frame<'_>) -> Self {
+        Self {
+            source: frame.source(),
+            destination: frame.destination(),
+            class: frame.class(),
+            id: frame.msg_id(),
+        }
+    }
+
+    /// Whether the message is for the ground: destination ground, broadcast, or none
+    /// (PPRZ v1).
+    fn to_ground(&self) -> bool {
+        matches!(self.destination, None | Some(GROUND_ID | BROADCAST_ID))
+    }
+}
+
+/// What the monitor keeps of a decoded frame (the decoder's frame borrows the decoder).
+struct Received {
+    header: Header,
     payload: Vec<u8>,
     data: Vec<u8>,
     raw: Vec<u8>,
@@ -761,9 +1322,7 @@ struct Received {
 impl Received {
     fn of(frame: &pprz_transports::Frame<'_>) -> Self {
         Self {
-            source: frame.source(),
-            class: frame.class(),
-            id: frame.msg_id(),
+            header: Header::of(frame),
             payload: frame.payload().to_vec(),
             data: frame.data().to_vec(),
             raw: frame.raw().to_vec(),
@@ -870,16 +1429,29 @@ mod tests {
     }
 
     fn frame(id: u8, payload: &[u8]) -> Vec<u8> {
+        frame_from(7, 0, id, payload)
+    }
+
+    /// A telemetry frame from aircraft `source` to `destination`.
+    fn frame_from(source: u8, destination: u8, id: u8, payload: &[u8]) -> Vec<u8> {
         let mut buf = [0u8; 300];
-        let meta = TxMeta::new(MsgHeader::new(7, 0, 1, id));
+        let meta = TxMeta::new(MsgHeader::new(source, destination, 1, id));
         let n = PprzV2::new().encode(&meta, payload, &mut buf).unwrap();
         buf[..n].to_vec()
     }
 
     fn dl_value(index: u8, value: f32) -> Vec<u8> {
+        dl_value_from(7, index, value)
+    }
+
+    fn dl_value_from(source: u8, index: u8, value: f32) -> Vec<u8> {
         let mut p = vec![index];
         p.extend(value.to_le_bytes());
-        frame(31, &p)
+        frame_from(source, 0, 31, &p)
+    }
+
+    fn pong_from(source: u8) -> Vec<u8> {
+        frame_from(source, 0, 3, &[])
     }
 
     fn feed(m: &mut Monitor, now: f64, bytes: &[u8]) -> Vec<String> {
@@ -1078,5 +1650,205 @@ mod tests {
         assert!(m.events().count() <= MAX_EVENTS);
         let r = m.byte_rate(2.0);
         assert!((r - 200.0 * chunk.len() as f64 / 2.0).abs() < 1.0, "{r}");
+    }
+
+    #[test]
+    fn one_aircraft_keeps_one_table() {
+        let mut m = monitor();
+        feed(&mut m, 0.0, &frame(215, &[2, b'o', b'k']));
+        assert_eq!(m.aircraft(), [7]);
+        assert!(!m.several_aircraft());
+        let view = m.render(1.0);
+        assert!(
+            !view.contains("aircraft 7:") && !view.contains("aircraft:"),
+            "{view}"
+        );
+        assert_eq!(view.matches("class      message").count(), 1, "{view}");
+        assert!(!m.summary(1.0).contains("aircraft"));
+    }
+
+    #[test]
+    fn frames_from_two_aircraft_make_two_sections() {
+        let mut m = monitor();
+        let mut lines = feed(&mut m, 0.0, &frame_from(7, 0, 215, &[2, b'o', b'k']));
+        lines.extend(feed(&mut m, 0.1, &frame_from(8, 0, 9, &[1, 0, 0, 0])));
+        lines.extend(feed(&mut m, 0.2, &frame_from(8, 0, 9, &[2, 0, 0, 0])));
+        lines.extend(feed(&mut m, 0.3, &frame_from(8, 0, 200, &[])));
+        // Each line starts with its source.
+        assert_eq!(
+            lines,
+            [
+                r#"7 telemetry INFO_MSG msg="ok""#,
+                "8 telemetry GPS_LLA lat=1 [1e7deg] 0.0000001 deg",
+                "8 telemetry GPS_LLA lat=2 [1e7deg] 0.0000002 deg",
+                "8 class1 id=200 unknown message (0 bytes)",
+            ]
+        );
+        assert_eq!(m.aircraft(), [7, 8]);
+        assert!(m.several_aircraft());
+        // All aircraft together, and each on its own.
+        assert_eq!(m.messages().len(), 2);
+        let a8 = m.aircraft_state(8).unwrap();
+        assert_eq!(
+            (a8.id(), a8.frames(), a8.unknown(), a8.malformed()),
+            (8, 3, 1, 0)
+        );
+        assert_eq!(a8.messages()[&(1, 9)].count, 2);
+        assert!(!a8.messages().contains_key(&(1, 215)));
+        assert_eq!(m.aircraft_state(7).unwrap().messages().len(), 1);
+        assert!(m.aircraft_state(9).is_none());
+        let prio = pprz_messages::priority::DEFAULT;
+        assert_eq!(m.per_priority_of(8)[&std::cmp::Reverse(prio)], 2);
+        assert_eq!(m.per_priority_of(7)[&std::cmp::Reverse(prio)], 1);
+        assert_eq!(m.per_priority()[&std::cmp::Reverse(prio)], 3);
+        assert!(m.per_priority_of(9).is_empty());
+        assert_eq!(
+            m.priority_summary_of(8),
+            format!("received per priority level:  {prio}: 2")
+        );
+
+        let view = m.render(1.0);
+        no_control(&view);
+        let at = |needle: &str| {
+            view.find(needle)
+                .unwrap_or_else(|| panic!("{needle}: {view}"))
+        };
+        assert!(view.contains("aircraft: 7, 8\n"), "{view}");
+        let (s7, s8) = (
+            at("aircraft 7: frames 1  unknown 0  malformed 0\n"),
+            at("aircraft 8: frames 3  unknown 1  malformed 0\n"),
+        );
+        let (info, gps) = (at("INFO_MSG"), at("GPS_LLA"));
+        assert!(s7 < info && info < s8 && s8 < gps, "{view}");
+        assert_eq!(view.matches("class      message").count(), 2, "{view}");
+
+        let summary = m.summary(1.0);
+        assert!(
+            summary.contains(&format!(
+                "aircraft: 7, 8\naircraft 7: frames 1  unknown 0  malformed 0\n  received per priority level:  {prio}: 1\naircraft 8:"
+            )),
+            "{summary}"
+        );
+        assert_eq!(m.aircraft_summary(9), None);
+    }
+
+    #[test]
+    fn a_pong_answers_only_a_ping_to_its_source() {
+        let mut m = monitor();
+        m.ping_sent_to(0.0, 7);
+        // Aircraft 8 was not pinged: its PONG answers nothing (counted with the PINGs to
+        // no particular aircraft, noted with aircraft 8).
+        feed(&mut m, 0.1, &pong_from(8));
+        assert_eq!(m.pings_of(7).unwrap().outstanding(), 1);
+        assert_eq!(m.last_rtt(), None);
+        let (_, ac, n) = m.notices_with_aircraft().last().unwrap();
+        assert_eq!((ac, n), (Some(8), &Notice::UnexpectedPong));
+        m.ping_sent_to(1.0, 8);
+        feed(&mut m, 1.25, &pong_from(8));
+        assert_eq!(m.last_rtt_of(8), Some(0.25));
+        assert_eq!(m.last_rtt(), Some(0.25));
+        assert_eq!(m.last_rtt_of(7), None);
+        assert_eq!(m.pings_of(7).unwrap().outstanding(), 1);
+        assert_eq!(m.pings_of(8).unwrap().answered(), 1);
+        let (_, ac, e) = m.events_with_aircraft().last().unwrap();
+        assert_eq!((ac, e), (Some(8), &Event::Pong { rtt: 0.25 }));
+        // 7's answer to aircraft 8 (seen on a shared link) is not an answer to the ground.
+        feed(&mut m, 1.5, &frame_from(7, 8, 3, &[]));
+        assert_eq!(m.pings_of(7).unwrap().outstanding(), 1);
+        feed(&mut m, 1.5, &frame_from(7, 0xFF, 3, &[]));
+        assert_eq!(m.last_rtt_of(7), Some(1.5));
+        // A PING to nobody in particular is answered by any aircraft.
+        m.ping_sent(2.0);
+        feed(&mut m, 2.5, &pong_from(9));
+        assert_eq!((m.pings().answered(), m.last_rtt_of(9)), (1, Some(0.5)));
+        // Timeouts per aircraft, noted with the aircraft.
+        m.ping_sent_to(3.0, 7);
+        m.tick(10.0);
+        assert_eq!(m.pings_of(7).unwrap().lost(), 1);
+        let view = m.render(10.0);
+        assert!(view.contains("aircraft 7: 1 PING(s) lost"), "{view}");
+        assert!(
+            view.contains("aircraft 8: PONG: round trip 250.0 ms"),
+            "{view}"
+        );
+        assert!(
+            view.contains("aircraft 8: frames 2  unknown 0  malformed 0\npings: sent 1  answered 1  lost 0  outstanding 0  unexpected pongs 0  last round trip 250.0 ms\n"),
+            "{view}"
+        );
+        let s = m.aircraft_summary(7).unwrap();
+        assert!(s.contains("\n  pings: sent 2  answered 1  lost 1"), "{s}");
+    }
+
+    #[test]
+    fn a_dl_value_answers_only_a_setting_to_its_source() {
+        let mut m = monitor();
+        m.setting_value_sent_to(0.0, 8, 4, 2.5);
+        m.get_setting_sent_to(0.0, 7, 5);
+        feed(&mut m, 0.1, &dl_value_from(7, 4, 2.5));
+        assert_eq!(m.settings_of(8).unwrap().pending(), 1);
+        feed(&mut m, 0.2, &dl_value_from(8, 4, 2.5));
+        assert_eq!(m.settings_of(8).unwrap().acknowledged(), 1);
+        let (_, ac, e) = m.events_with_aircraft().last().unwrap();
+        assert_eq!(ac, Some(8));
+        assert!(
+            matches!(
+                e,
+                Event::DlValue {
+                    index: 4,
+                    answer: Answer::Acknowledged { .. },
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        feed(&mut m, 0.3, &dl_value_from(8, 5, 1.0));
+        assert_eq!(m.settings_of(7).unwrap().pending(), 1);
+        m.tick(10.0);
+        assert_eq!(m.settings_of(7).unwrap().unanswered(), 1);
+        let (_, ac, n) = m.notices_with_aircraft().last().unwrap();
+        assert_eq!(ac, Some(7));
+        assert!(
+            matches!(n, Notice::RequestExpired(Expired { index: 5, .. })),
+            "{n:?}"
+        );
+        assert_eq!(m.settings().pending(), 0);
+    }
+
+    /// Hostile input: frames from every source id track at most [`MAX_AIRCRAFT`]
+    /// aircraft; the others are counted.
+    #[test]
+    fn the_aircraft_tracked_are_bounded() {
+        let mut m = monitor();
+        let flood: Vec<u8> = (0..=255u8)
+            .flat_map(|src| frame_from(src, 0, 215, &[245; 246]))
+            .collect();
+        for i in 0..4 {
+            feed(&mut m, f64::from(i), &flood);
+        }
+        assert_eq!(m.aircraft().len(), MAX_AIRCRAFT);
+        assert_eq!(m.aircraft(), (0..MAX_AIRCRAFT as u8).collect::<Vec<_>>());
+        assert_eq!(m.untracked_aircraft(), 256 - MAX_AIRCRAFT as u32);
+        assert_eq!(m.untracked_frames(), 4 * (256 - MAX_AIRCRAFT as u64));
+        assert_eq!(m.messages()[&(1, 215)].count, 4 * 256);
+        assert_eq!(m.decoder_stats().frames, 4 * 256);
+        // An aircraft the ground addresses is tracked all the same, and its PONG
+        // measured.
+        m.ping_sent_to(5.0, 200);
+        feed(&mut m, 5.5, &pong_from(200));
+        assert_eq!(m.last_rtt_of(200), Some(0.5));
+        assert_eq!(m.aircraft().len(), MAX_AIRCRAFT + 1);
+        let view = m.render(6.0);
+        no_control(&view);
+        assert!(
+            view.contains("not tracked (more than 32 aircraft): 896 frames from 224 aircraft"),
+            "{view}"
+        );
+        // 33 tables of one message with the longest text, and no more.
+        assert!(
+            m.retained_bytes() < 34 * 4096 + 64 * 1024,
+            "{}",
+            m.retained_bytes()
+        );
+        assert!(m.summary(6.0).contains("not tracked"));
     }
 }

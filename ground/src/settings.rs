@@ -199,6 +199,11 @@ impl SettingTracker {
         out
     }
 
+    /// The timeout, in seconds.
+    pub fn timeout(&self) -> f64 {
+        self.timeout
+    }
+
     /// Requests pending.
     pub fn pending(&self) -> usize {
         self.pending.len()

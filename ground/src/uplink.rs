@@ -87,7 +87,22 @@ pub fn encode_scalars(
     Ok(out)
 }
 
-/// A frame of datalink message `name` from the ground to aircraft `ac_id`.
+/// A frame of datalink message `name` from the ground to aircraft `ac_id`: the frame's
+/// destination (PPRZ v2 and the transports built on it) is `ac_id`, and so is the
+/// message's `ac_id` field (SETTING, GET_SETTING... of Paparazzi, which an aircraft
+/// checks against its own id; PPRZ v1 has no destination), unless `values` gives it.
+/// Other fields not given are 0.
+///
+/// ```
+/// use pprz_ground::{set::RuntimeSet, uplink};
+/// use pprz_transports::PprzV2;
+/// let set = RuntimeSet::parse("m.xml", r#"<protocol><msg_class name="datalink" id="2">
+///     <message name="GET_SETTING" id="16"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/></message>
+///     </msg_class></protocol>"#).unwrap();
+/// let f = uplink::frame(&set, PprzV2::new().into(), 8, "GET_SETTING", &[("index", 3.0)]).unwrap();
+/// // 0x99, length, source 0 (ground), destination 8, class 2, id 16, index 3, ac_id 8.
+/// assert_eq!(&f[..8], &[0x99, 10, 0, 8, 2, 16, 3, 8]);
+/// ```
 ///
 /// # Errors
 /// Unknown message, unsupported field or value, or the transport refused the frame.
@@ -101,7 +116,11 @@ pub fn frame(
     let desc = set
         .find_by_name("datalink", name)
         .ok_or_else(|| UplinkError::UnknownMessage(name.to_owned()))?;
-    let payload = encode_scalars(desc, values)?;
+    let mut values = values.to_vec();
+    if !values.iter().any(|(n, _)| *n == "ac_id") {
+        values.push(("ac_id", f64::from(ac_id)));
+    }
+    let payload = encode_scalars(desc, &values)?;
     let meta = TxMeta::new(MsgHeader::new(GROUND_ID, ac_id, desc.class_id, desc.id));
     let mut out = vec![0u8; transport.max_frame_len()];
     let n = transport
@@ -140,6 +159,10 @@ mod tests {
         .unwrap();
         assert_eq!(&f[..9], &[0x99, 14, 0, 7, 2, 4, 2, 7, 0]);
         assert_eq!(&f[7..12], &[7, 0, 0, 0xC0, 0x3F]);
+        // The destination and the `ac_id` field follow the aircraft addressed.
+        let f = frame(&set, t, 8, "SETTING", &[("index", 2.0), ("value", 1.5)]).unwrap();
+        assert_eq!(&f[..12], &[0x99, 14, 0, 8, 2, 4, 2, 8, 0, 0, 0xC0, 0x3F]);
+        assert_eq!(frame(&set, t, 8, "PING", &[]).unwrap()[3], 8);
         assert_eq!(
             frame(&set, t, 7, "SETTING", &[("index", 300.0)]),
             Err(UplinkError::OutOfRange {

@@ -1,5 +1,5 @@
-//! `pprz-monitor`: watch a Paparazzi-compatible aircraft live, from UDP, TCP, a serial
-//! port, a file or standard input, with any `messages.xml`.
+//! `pprz-monitor`: watch one or several Paparazzi-compatible aircraft live, from UDP,
+//! TCP, a serial port, a file or standard input, with any `messages.xml`.
 //!
 //! Exit status: 0 after a complete run (end of input, `--duration`, Ctrl-C), 1 when
 //! the input, the output or the recording failed, 2 for invalid options (an unusable
@@ -18,9 +18,7 @@ use clap::Parser;
 use pprz_ground::cli::Args;
 use pprz_ground::escape;
 use pprz_ground::input::{self, DEFAULT_CAPACITY, End, InputQueue, Overflow, Pop};
-use pprz_ground::monitor::{
-    IDLE_FLUSH, MAX_EVENTS, Monitor, Notice, describe_event, describe_notice,
-};
+use pprz_ground::monitor::{IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
 use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
@@ -173,19 +171,20 @@ impl Output {
 }
 
 /// In `--lines` mode (where standard output carries only messages), writes the events
-/// and notices that arrived since the last call to standard error; `seen` counts those
-/// already written. Input dropped is reported by the rate-limited overload warning.
+/// and notices that arrived since the last call to standard error (named after their
+/// aircraft when there are several); `seen` counts those already written. Input dropped
+/// is reported by the rate-limited overload warning.
 fn report_new(monitor: &Monitor, seen: &mut (u64, u64)) {
     let new_events = (monitor.event_count() - seen.0).min(MAX_EVENTS as u64) as usize;
-    let events: Vec<_> = monitor.events().collect();
-    for (t, e) in &events[events.len().saturating_sub(new_events)..] {
-        eprintln!("[{t:7.1}s] {}", describe_event(e));
+    let events: Vec<_> = monitor.events_with_aircraft().collect();
+    for (t, ac, e) in &events[events.len().saturating_sub(new_events)..] {
+        eprintln!("[{t:7.1}s] {}", monitor.event_line(*ac, e));
     }
     let new_notices = (monitor.notice_count() - seen.1).min(MAX_EVENTS as u64) as usize;
-    let notices: Vec<_> = monitor.notices().collect();
-    for (t, n) in &notices[notices.len().saturating_sub(new_notices)..] {
+    let notices: Vec<_> = monitor.notices_with_aircraft().collect();
+    for (t, ac, n) in &notices[notices.len().saturating_sub(new_notices)..] {
         if !matches!(n, Notice::InputDropped(_)) {
-            eprintln!("[{t:7.1}s] {}", describe_notice(n));
+            eprintln!("[{t:7.1}s] {}", monitor.notice_line(*ac, n));
         }
     }
     *seen = (monitor.event_count(), monitor.notice_count());
@@ -274,15 +273,20 @@ fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(2);
     }
-    let secure = match &args.secure {
-        Some(path) => match GroundSecure::from_key_file(path, args.ac_id) {
+    let secure = match (&args.secure, args.aircraft().as_slice()) {
+        (None, _) => None,
+        // `check` made sure there is one aircraft.
+        (Some(path), &[ac_id, ..]) => match GroundSecure::from_key_file(path, ac_id) {
             Ok(s) => Some(s),
             Err(e) => {
                 eprintln!("error: --secure: {}", escape::lines(&e.to_string()));
                 return ExitCode::from(2);
             }
         },
-        None => None,
+        (Some(_), []) => {
+            eprintln!("error: --secure needs an --ac-id");
+            return ExitCode::from(2);
+        }
     };
     match run(&args, secure) {
         Ok(()) => ExitCode::SUCCESS,
@@ -341,6 +345,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         record_path: args.record.clone(),
         record_error: None,
     };
+    let aircraft = args.aircraft();
     // The SETTINGs go at start, or once the secure session is up.
     let mut settings_pending = true;
     let mut secure_report = SecureReport::default();
@@ -363,22 +368,17 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         }
         if settings_pending && monitor.uplink_ready() {
             settings_pending = false;
-            for (index, value) in &args.settings {
-                let values = [
-                    ("index", f64::from(*index)),
-                    ("ac_id", f64::from(args.ac_id)),
-                    ("value", f64::from(*value)),
-                ];
-                let sink = &mut uplink_sink;
-                if send(
-                    &mut monitor,
-                    sink,
-                    transport,
-                    args.ac_id,
-                    "SETTING",
-                    &values,
-                ) {
-                    monitor.setting_value_sent(now(), *index, f64::from(*value));
+            for &ac_id in &aircraft {
+                for &(index, value) in &args.settings {
+                    let values = [
+                        ("index", f64::from(index)),
+                        ("ac_id", f64::from(ac_id)),
+                        ("value", f64::from(value)),
+                    ];
+                    let sink = &mut uplink_sink;
+                    if send(&mut monitor, sink, transport, ac_id, "SETTING", &values) {
+                        monitor.setting_value_sent_to(now(), ac_id, index, f64::from(value));
+                    }
                 }
             }
         }
@@ -386,17 +386,13 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
             && t >= at
         {
             // On a secure link, no PING before the session is up.
-            if monitor.uplink_ready()
-                && send(
-                    &mut monitor,
-                    &mut uplink_sink,
-                    transport,
-                    args.ac_id,
-                    "PING",
-                    &[],
-                )
-            {
-                monitor.ping_sent(now());
+            if monitor.uplink_ready() {
+                for &ac_id in &aircraft {
+                    let sink = &mut uplink_sink;
+                    if send(&mut monitor, sink, transport, ac_id, "PING", &[]) {
+                        monitor.ping_sent_to(now(), ac_id);
+                    }
+                }
             }
             // After a stall, the next PING is one period from now, not a burst.
             let next = at + period;
