@@ -140,7 +140,15 @@ pub async fn run_aircraft<R: Read>(
     radio_rx: R,
     config: Config,
 ) -> Result<Infallible, SetupError> {
-    run_with_layer(radio, radio_rx, None, config, &Plain, core::future::pending()).await
+    run_with_layer(
+        radio,
+        radio_rx,
+        None,
+        config,
+        &Plain,
+        core::future::pending(),
+    )
+    .await
 }
 
 /// [`run_aircraft`] for an aircraft that relays for others

@@ -237,6 +237,14 @@ fn contradictory_radio_options_are_refused() {
             &["--secure", "--transport pprz2"],
         ),
         (
+            &["--fleet", "2", "--transport", "xbee"],
+            &["--fleet 2", "--transport pprz2"],
+        ),
+        (
+            &["--fleet", "2", "--secure", TEST_KEYS],
+            &["--fleet 2", "--secure"],
+        ),
+        (
             &[
                 "--pacing",
                 "on",
@@ -546,4 +554,62 @@ fn services_answered(out: &str) {
         out.contains("7 telemetry DL_VALUE index=2 value=2.5"),
         "{out}"
     );
+}
+
+/// `--fleet 2`: aircraft 8 reaches the ground only through aircraft 7, which relays; the
+/// ground PINGs both and sets a setting on both; under a 10x overload from both, the
+/// relay sheds 8's payload and nothing more important, and the summary reports it per
+/// aircraft, per level and per route.
+#[test]
+fn a_fleet_of_two_relays_through_the_first() {
+    let (out, json) = run_sitl_json("fleet", "8", "4", &["--fleet", "2", "--overload"]);
+    // Lines from both aircraft (the first word of a line is its source).
+    for ac in ["7", "8"] {
+        assert!(
+            out.lines()
+                .any(|l| l.starts_with(&format!("{ac} telemetry ATTITUDE"))),
+            "no ATTITUDE from {ac}:\n{out}"
+        );
+    }
+    let fleet = json.pointer("/fleet").expect("a fleet section");
+    assert_eq!(uint(fleet, "/aircraft/0/ac_id"), 7);
+    assert_eq!(uint(fleet, "/aircraft/1/ac_id"), 8);
+    assert_eq!(uint(fleet, "/aircraft/1/relayed_by"), 7);
+    for a in 0..2 {
+        // Both answered PINGs, through the relay for 8 (the last one may be in flight).
+        let sent = uint(fleet, &format!("/aircraft/{a}/ping/sent"));
+        let answered = uint(fleet, &format!("/aircraft/{a}/ping/answered"));
+        assert!(sent >= 5 && answered + 1 >= sent, "aircraft {a}: {fleet:#}");
+        // Acknowledgements and status: nothing shed anywhere.
+        for level in 0..2 {
+            for what in ["shed", "shed_by_relay"] {
+                let n = uint(fleet, &format!("/aircraft/{a}/levels/{level}/{what}"));
+                assert_eq!(n, 0, "aircraft {a} level {level} {what}: {fleet:#}");
+            }
+        }
+        let status = uint(fleet, &format!("/aircraft/{a}/levels/1/received"));
+        assert!(status > 50, "aircraft {a}: {fleet:#}");
+    }
+    // 8's acknowledgements were forwarded (PONGs and the DL_VALUE of the SETTING).
+    assert!(uint(fleet, "/aircraft/1/levels/0/forwarded") >= 5);
+    // The relay shed 8's payload, and forwarded the ground's requests to 8.
+    assert!(
+        uint(fleet, "/aircraft/1/levels/2/shed_by_relay") > 0,
+        "{fleet:#}"
+    );
+    assert_eq!(
+        fleet.pointer("/routes/0/to").and_then(Value::as_str),
+        Some("ground")
+    );
+    assert!(uint(fleet, "/routes/0/shed/2") > 0);
+    assert_eq!(uint(fleet, "/routes/0/shed/0"), 0);
+    assert!(
+        uint(fleet, "/routes/1/sent") >= 6,
+        "PINGs and a SETTING for 8: {fleet:#}"
+    );
+    assert!(
+        out.contains("ground station, aircraft 8: PINGs sent"),
+        "{out}"
+    );
+    assert!(out.contains("relay 7 -> ground: forwarded"), "{out}");
 }

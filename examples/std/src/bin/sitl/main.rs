@@ -795,8 +795,9 @@ fn main() -> ExitCode {
         },
         None => None,
     };
-    let fleet_8: Option<(&'static Radio, &'static Dl8)> =
-        second_parts.as_ref().map(|(link, downlink_8, _)| (*link, *downlink_8));
+    let fleet_8: Option<(&'static Radio, &'static Dl8)> = second_parts
+        .as_ref()
+        .map(|(link, downlink_8, _)| (*link, *downlink_8));
     let config_8 = Config {
         observer: Some(record::submitted_by_second),
         ..config
@@ -869,8 +870,13 @@ fn main() -> ExitCode {
             Some(run_ground(&args, socket, monitor, &stop, start))
         }
         _ => {
+            let who = if args.fleet > 1 {
+                format!("aircraft {AC_ID} and {SECOND_AC_ID} (through {AC_ID})")
+            } else {
+                format!("aircraft {AC_ID}")
+            };
             println!(
-                "aircraft {AC_ID} running: telemetry to UDP {}, uplink on UDP {} (Ctrl-C to stop)",
+                "{who} running: telemetry to UDP {}, uplink on UDP {} (Ctrl-C to stop)",
                 args.ground, args.uplink
             );
             while !stop.load(Ordering::SeqCst) && start.elapsed().as_secs_f64() < wall_limit {
@@ -887,13 +893,16 @@ fn main() -> ExitCode {
     let summary = collect_summary(&args, &plan, downlink, radio_device, radio, fleet_8);
     print!("{}", summary.text());
     if let Some(m) = &monitor {
-        let pings = m.pings();
-        println!(
-            "  ground station: PINGs sent {}, answered {}, lost {}",
-            pings.sent_count(),
-            pings.answered(),
-            pings.lost()
-        );
+        for ac in m.aircraft() {
+            if let Some(pings) = m.pings_of(ac) {
+                println!(
+                    "  ground station, aircraft {ac}: PINGs sent {}, answered {}, lost {}",
+                    pings.sent_count(),
+                    pings.answered(),
+                    pings.lost()
+                );
+            }
+        }
         for line in m.secure_lines() {
             println!("  ground station {line}");
         }
@@ -938,6 +947,11 @@ fn run_ground(
     let sim_now = |speed: f64| start.elapsed().as_secs_f64() * speed;
     let wall_limit = args.duration / args.speed;
     let transport = PprzV2::new().into();
+    let fleet: &[u8] = if args.fleet > 1 {
+        &[AC_ID, SECOND_AC_ID]
+    } else {
+        &[AC_ID]
+    };
     let secure = monitor.secure_status().is_some();
     let _ = socket.set_read_timeout(Some(StdDuration::from_millis(20)));
     let mut buf = [0u8; 2048];
@@ -953,27 +967,32 @@ fn run_ground(
         }
         // Every PING due by now (a flood sends many per pass; a slow pass skips none);
         // on a secure link, from the session on, sealed.
+        // Every aircraft of the fleet is PINGed and gets the SETTING.
         while t >= next_ping {
-            if monitor.uplink_ready()
-                && let Ok(frame) = uplink::frame(monitor.set(), transport, AC_ID, "PING", &[])
-                && let Ok(frame) = monitor.seal_uplink(&frame)
-                && socket.send_to(&frame, args.uplink).is_ok()
-            {
-                monitor.ping_sent(t);
-                if secure {
-                    record::uplink(AC_ID, Ping::CLASS_ID, Ping::ID, Instant::now());
+            for &ac in fleet {
+                if monitor.uplink_ready()
+                    && let Ok(frame) = uplink::frame(monitor.set(), transport, ac, "PING", &[])
+                    && let Ok(frame) = monitor.seal_uplink(&frame)
+                    && socket.send_to(&frame, args.uplink).is_ok()
+                {
+                    monitor.ping_sent_to(t, ac);
+                    if secure {
+                        record::uplink(ac, Ping::CLASS_ID, Ping::ID, Instant::now());
+                    }
                 }
             }
             next_ping += ping_period;
         }
         if !setting_sent && t >= 3.0 && monitor.uplink_ready() {
-            // Setting 2 is the example's `gain`.
-            let values = [("index", 2.0), ("ac_id", f64::from(AC_ID)), ("value", 2.5)];
-            if let Ok(frame) = uplink::frame(monitor.set(), transport, AC_ID, "SETTING", &values)
-                && let Ok(frame) = monitor.seal_uplink(&frame)
-                && socket.send_to(&frame, args.uplink).is_ok()
-            {
-                monitor.setting_value_sent(t, 2, 2.5);
+            for &ac in fleet {
+                // Setting 2 is the example's `gain`.
+                let values = [("index", 2.0), ("ac_id", f64::from(ac)), ("value", 2.5)];
+                if let Ok(frame) = uplink::frame(monitor.set(), transport, ac, "SETTING", &values)
+                    && let Ok(frame) = monitor.seal_uplink(&frame)
+                    && socket.send_to(&frame, args.uplink).is_ok()
+                {
+                    monitor.setting_value_sent_to(t, ac, 2, 2.5);
+                }
             }
             setting_sent = true;
         }
@@ -1159,13 +1178,16 @@ fn fleet_figures(downlink_7: &Dl, downlink_8: &Dl8) -> FleetFigures {
     let record = record::lock();
     let received = |ac: u8, i: usize| record.aircraft.get(&ac).map_or(0, |a| a.received[i]);
     let ping = |ac: u8| {
-        record.aircraft.get(&ac).map_or_else(PingFigures::default, |a| PingFigures {
-            sent: a.pings.sent_count(),
-            answered: a.pings.answered(),
-            lost: a.pings.lost(),
-            rtt_p50_ms: a.rtt.percentile_ms(50.0),
-            rtt_p99_ms: a.rtt.percentile_ms(99.0),
-        })
+        record
+            .aircraft
+            .get(&ac)
+            .map_or_else(PingFigures::default, |a| PingFigures {
+                sent: a.pings.sent_count(),
+                answered: a.pings.answered(),
+                lost: a.pings.lost(),
+                rtt_p50_ms: a.rtt.percentile_ms(50.0),
+                rtt_p99_ms: a.rtt.percentile_ms(99.0),
+            })
     };
     let names = priority::LEVEL_NAMES;
     let own_7 = |i: usize| {

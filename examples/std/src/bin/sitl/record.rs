@@ -184,7 +184,12 @@ pub fn uplink(destination: u8, class_id: u8, msg_id: u8, now: Instant) {
         if destination == AC_ID {
             record.pings.sent(t);
         }
-        record.aircraft.entry(destination).or_default().pings.sent(t);
+        record
+            .aircraft
+            .entry(destination)
+            .or_default()
+            .pings
+            .sent(t);
     }
 }
 

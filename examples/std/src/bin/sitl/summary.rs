@@ -435,7 +435,14 @@ impl FleetFigures {
         let _ = writeln!(
             s,
             "  {:<10} {:<8} {:>10} {:>10} {:>10} {:>10} {:>14} {:>10}",
-            "aircraft", "level", "submitted", "sent", "shed", "forwarded", "shed by relay", "received"
+            "aircraft",
+            "level",
+            "submitted",
+            "sent",
+            "shed",
+            "forwarded",
+            "shed by relay",
+            "received"
         );
         for a in &self.aircraft {
             let who = match a.relayed_by {
@@ -446,7 +453,14 @@ impl FleetFigures {
                 let _ = writeln!(
                     s,
                     "  {:<10} {:<8} {:>10} {:>10} {:>10} {:>10} {:>14} {:>10}",
-                    who, l.level, l.submitted, l.sent, l.shed, l.forwarded, l.shed_by_relay, l.received
+                    who,
+                    l.level,
+                    l.submitted,
+                    l.sent,
+                    l.shed,
+                    l.forwarded,
+                    l.shed_by_relay,
+                    l.received
                 );
             }
             let p = &a.ping;
