@@ -51,9 +51,9 @@
 //!
 //! # Destination filtering
 //! PPRZ v2 frames carry a destination: frames for our aircraft id or for broadcast
-//! (`0xFF`) are accepted, the rest are counted in [`UplinkStats::not_for_us`] and, by a
-//! datalink [`with_relay`](Datalink::with_relay), forwarded towards their destination
-//! ([`relay`](crate::relay)). PPRZ v1 frames carry none and are accepted.
+//! (`0xFF`) are accepted, the rest are counted in [`UplinkStats::not_for_us`]. PPRZ v1
+//! frames carry none and are accepted. To forward frames for other aircraft instead,
+//! readers deliver to a [`Relay`](crate::relay::Relay) around the datalink.
 //!
 //! # Idle flush
 //! A false start byte announcing a long frame holds the frames behind it until the
@@ -73,7 +73,6 @@ use pprz_transports::{BROADCAST_ID, Decoder, DecoderStats, Frame, Framing, MAX_F
 
 use crate::downlink::Device;
 use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber};
-use crate::relay::{Relay, RelayStats, Routed};
 
 /// Counters of the uplink (all readers of one [`Datalink`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -81,7 +80,7 @@ use crate::relay::{Relay, RelayStats, Routed};
 pub struct UplinkStats {
     /// Messages accepted (for us or broadcast).
     pub received: u32,
-    /// PPRZ v2 frames addressed to another aircraft (forwarded or not: see `relay`).
+    /// PPRZ v2 frames addressed to another aircraft.
     pub not_for_us: u32,
     /// Accepted messages no subscriber wanted.
     pub unhandled: u32,
@@ -89,9 +88,6 @@ pub struct UplinkStats {
     pub read_errors: u32,
     /// When the last message was accepted.
     pub last_received: Option<Instant>,
-    /// What the relay did with frames for other aircraft and broadcast frames (all zero
-    /// without [`Datalink::with_relay`]).
-    pub relay: RelayStats,
 }
 
 /// Where a [`Reader`] delivers the frames it decodes on devices that live for `'d`:
@@ -115,7 +111,6 @@ pub struct Datalink<'a, M: RawMutex, const N: usize> {
     ac_id: u8,
     registry: Registry<'a, M, N>,
     stats: Mutex<M, RefCell<UplinkStats>>,
-    relay: Option<Relay<'a>>,
 }
 
 impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
@@ -130,17 +125,8 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
                 unhandled: 0,
                 read_errors: 0,
                 last_received: None,
-                relay: RelayStats::ZERO,
             })),
-            relay: None,
         }
-    }
-
-    /// The same datalink relaying frames for other aircraft (and broadcast frames) over
-    /// the downlink's [routes](crate::relay::Routes); see [`relay`](crate::relay).
-    pub const fn with_relay(mut self, relay: Relay<'a>) -> Self {
-        self.relay = Some(relay);
-        self
     }
 
     /// Our aircraft id.
@@ -174,43 +160,13 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
         self.stats.lock(|s| f(&mut s.borrow_mut()));
     }
 
-    /// Applies the destination filter (and the relay, if any) and counts: whether
-    /// `frame`, received on `device`, is for us.
-    fn accept(&self, frame: &Frame<'_>, device: Device<'_>) -> bool {
+    /// Applies the destination filter and counts: whether `frame` is for us.
+    fn accept(&self, frame: &Frame<'_>) -> bool {
         if let Some(dest) = frame.destination()
             && dest != self.ac_id
+            && dest != BROADCAST_ID
         {
-            let broadcast = dest == BROADCAST_ID;
-            if !broadcast {
-                self.count(|s| s.not_for_us = s.not_for_us.wrapping_add(1));
-            }
-            if let Some(relay) = &self.relay {
-                let routed = if frame.source() == self.ac_id {
-                    None
-                } else {
-                    Some(relay.route(frame, dest, device))
-                };
-                self.count(|s| match routed {
-                    Some(routed) => s.relay.count(routed, broadcast),
-                    None => s.relay.own_source = s.relay.own_source.wrapping_add(1),
-                });
-                let delivered = broadcast
-                    && matches!(
-                        routed,
-                        Some(Routed::Forwarded | Routed::BroadcastOnly | Routed::Malformed)
-                    );
-                if !delivered {
-                    return false;
-                }
-            } else if !broadcast {
-                return false;
-            }
-        } else if self.relay.is_some()
-            && frame.destination().is_some()
-            && frame.source() == self.ac_id
-        {
-            // Addressed to us by "us": ours come back, or forged.
-            self.count(|s| s.relay.own_source = s.relay.own_source.wrapping_add(1));
+            self.count(|s| s.not_for_us = s.not_for_us.wrapping_add(1));
             return false;
         }
         let now = Instant::now();
@@ -224,7 +180,7 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
     /// Handles one received frame: destination filter, counters, then `first` (built-in
     /// services, if any) and the registry's subscribers.
     pub(crate) fn deliver_with(&self, rx: &Received<'_, 'a>, first: Option<&dyn Handler<'a>>) {
-        if !self.accept(&rx.frame, rx.device) {
+        if !self.accept(&rx.frame) {
             return;
         }
         let by_first = first.is_some_and(|f| f.handle(rx));

@@ -23,9 +23,10 @@
 //! an SD-card log).
 //!
 //! # Relaying
-//! A [`Datalink`](crate::reader::Datalink) made [`with_relay`](crate::reader::Datalink::with_relay)
-//! forwards the PPRZ v2 frames it receives that are not for us onto the devices of their
-//! destination's route, **without decoding their fields**: the frame's header (source,
+//! A [`Relay`] is an [`Inbox`] in front of the aircraft's
+//! [`Datalink`](crate::reader::Datalink): the readers of every device deliver to it, it
+//! hands the datalink what is for us and forwards the PPRZ v2 frames that are not onto
+//! the devices of their destination's route, **without decoding their fields**: the frame's header (source,
 //! destination, class, component, id) and fields are copied into the shared frame arena
 //! and re-framed for each outgoing device's transport (for PPRZ v2 in and out, the bytes
 //! sent are the bytes received). Forwarded frames go through the same priority queues as
@@ -33,7 +34,8 @@
 //! precedence when the relay is saturated: a forwarded frame has the priority its message
 //! has in the relay's message table ([`Relay::with_messages`]), or the relay's configured
 //! priority for a message it does not know. Broadcast frames are delivered to us and
-//! forwarded on the broadcast route. What each device carried for others is in its
+//! forwarded on the broadcast route. (A firmware that does not relay does not use the
+//! type, and carries none of its code.) What each device carried for others is in its
 //! [`DeviceStats::relayed`](crate::DeviceStats::relayed) (submitted, sent, dropped by
 //! reason, shed per priority level); what the relay refused, in [`RelayStats`].
 //!
@@ -83,23 +85,32 @@
 //!     DeviceConfig::new(AnyTransport::PprzV2(PprzV2::new())),
 //! ])
 //! .with_routes(Routes::new(&ROUTES, Targets::only(0)));
-//! static DATALINK: Datalink<'static, M, 8> =
-//!     Datalink::new(7).with_relay(Relay::new(10).with_messages(&MESSAGES));
+//! static DATALINK: Datalink<'static, M, 8> = Datalink::new(7);
+//! // Frames for others go with their own priority, unknown messages with 10.
+//! static RELAY: Relay<'static, M, Datalink<'static, M, 8>> =
+//!     Relay::new(&DATALINK, 10).with_messages(&MESSAGES);
 //!
 //! let [radio, to_8] = DOWNLINK.ports().unwrap();
 //! let mut from_ground = Reader::<_, _>::new(&[][..], PprzV2::new(), radio.device());
 //! // A PING from the ground (0) to aircraft 8 comes in on the radio...
-//! from_ground.feed(&[0x99, 0x08, 0x00, 0x08, 0x02, 0x08, 0x1A, 0x4C], &DATALINK);
+//! from_ground.feed(&[0x99, 0x08, 0x00, 0x08, 0x02, 0x08, 0x1A, 0x4C], &RELAY);
 //! // ... and waits for the radio to aircraft 8, unchanged.
 //! assert_eq!(to_8.device().stats().relayed.submitted, 1);
-//! assert_eq!(DATALINK.stats().relay.forwarded, 1);
+//! assert_eq!(RELAY.stats().forwarded, 1);
+//! // Readers of both devices deliver to `RELAY`: `reader.run(&RELAY).await`.
 //! ```
 
+use core::cell::Cell;
+
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
 use pprz_messages::MessageSet;
 use pprz_messages::dynamic;
 use pprz_transports::{BROADCAST_ID, Frame, GROUND_ID};
 
 use crate::downlink::{Device, Targets};
+use crate::reader::Inbox;
+use crate::registry::Received;
 
 /// The route table of an aircraft: which devices lead to which destination. `const`, so
 /// it can be given to a `static` [`Downlink`](crate::Downlink); see the
@@ -156,21 +167,29 @@ impl<'r> Routes<'r> {
     }
 }
 
-/// How a [`Datalink`](crate::reader::Datalink) relays frames for other aircraft; see the
-/// [module documentation](self).
-#[derive(Debug, Clone, Copy)]
-pub struct Relay<'r> {
+/// The relay of an aircraft: an [`Inbox`] in front of its datalink (or any inbox) that
+/// forwards frames for other aircraft and broadcast frames over the downlink's
+/// [`Routes`], and hands the datalink what is for us; see the
+/// [module documentation](self). Readers of every device deliver to it.
+///
+/// `M` guards its counters (the mutex of the datalink).
+pub struct Relay<'r, M: RawMutex, I: ?Sized> {
+    inner: &'r I,
     priority: u8,
     messages: Option<&'r MessageSet<'r>>,
+    stats: Mutex<M, Cell<RelayStats>>,
 }
 
-impl<'r> Relay<'r> {
-    /// A relay forwarding every frame with `priority` (the priority of messages the
-    /// relay does not know; see [`with_messages`](Self::with_messages)).
-    pub const fn new(priority: u8) -> Self {
+impl<'r, M: RawMutex, I: ?Sized> Relay<'r, M, I> {
+    /// A relay delivering our frames to `inner` and forwarding the others with
+    /// `priority` (the priority of messages the relay does not know; see
+    /// [`with_messages`](Self::with_messages)). `const`, so it can be a `static`.
+    pub const fn new(inner: &'r I, priority: u8) -> Self {
         Self {
+            inner,
             priority,
             messages: None,
+            stats: Mutex::new(Cell::new(RelayStats::ZERO)),
         }
     }
 
@@ -184,6 +203,47 @@ impl<'r> Relay<'r> {
     /// The priority of frames whose message the relay does not know.
     pub fn priority(&self) -> u8 {
         self.priority
+    }
+
+    /// A snapshot of the counters.
+    pub fn stats(&self) -> RelayStats {
+        self.stats.lock(Cell::get)
+    }
+
+    fn count(&self, f: impl FnOnce(&mut RelayStats)) {
+        self.stats.lock(|s| {
+            let mut v = s.get();
+            f(&mut v);
+            s.set(v);
+        });
+    }
+}
+
+impl<'d, M: RawMutex, I: Inbox<'d> + ?Sized> Inbox<'d> for Relay<'_, M, I> {
+    fn deliver(&self, rx: &Received<'_, 'd>) {
+        let frame = &rx.frame;
+        // PPRZ v1 frames name no destination: always ours.
+        let Some(destination) = frame.destination() else {
+            return self.inner.deliver(rx);
+        };
+        let ac_id = rx.device.sender().ac_id();
+        if frame.source() == ac_id {
+            self.count(|s| s.own_source = s.own_source.wrapping_add(1));
+            return;
+        }
+        if destination == ac_id {
+            return self.inner.deliver(rx);
+        }
+        let broadcast = destination == BROADCAST_ID;
+        let routed = self.route(frame, destination, rx.device);
+        self.count(|s| s.count(routed, broadcast));
+        if broadcast && routed != Routed::ReversePath {
+            self.inner.deliver(rx);
+        }
+    }
+
+    fn read_error(&self) {
+        self.inner.read_error();
     }
 }
 
@@ -231,7 +291,7 @@ impl RelayStats {
 
 /// What the relay did with one frame (one counter of [`RelayStats`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Routed {
+enum Routed {
     /// Handed to the devices of its route.
     Forwarded,
     /// A broadcast frame with no other device to go to: delivered only.
@@ -246,7 +306,7 @@ pub(crate) enum Routed {
 
 impl RelayStats {
     /// Counts one outcome; `broadcast` also counts a broadcast frame delivered to us.
-    pub(crate) fn count(&mut self, routed: Routed, broadcast: bool) {
+    fn count(&mut self, routed: Routed, broadcast: bool) {
         let c = match routed {
             Routed::Forwarded => &mut self.forwarded,
             Routed::BroadcastOnly => &mut self.broadcast,
@@ -261,13 +321,13 @@ impl RelayStats {
     }
 }
 
-impl Relay<'_> {
+impl<M: RawMutex, I: ?Sized> Relay<'_, M, I> {
     /// Routes `frame`, from another aircraft (or the ground), addressed to another
     /// aircraft or to broadcast (`destination`), which arrived on `device`: forwards it
     /// on the devices of its destination's route but `device`, unless a rule of the
     /// [module documentation](self) refuses it. A broadcast frame is to be delivered to us
     /// too unless it failed the reverse-path rule (then it is a second copy).
-    pub(crate) fn route(&self, frame: &Frame<'_>, destination: u8, device: Device<'_>) -> Routed {
+    fn route(&self, frame: &Frame<'_>, destination: u8, device: Device<'_>) -> Routed {
         let sender = device.sender();
         let routes = sender.routes();
         let incoming = device.index();

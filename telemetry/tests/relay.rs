@@ -56,6 +56,7 @@ struct Aircraft {
     id: u8,
     downlink: &'static Dl,
     datalink: &'static Dlk,
+    relay: &'static Relay<'static, M, Dlk>,
     services: &'static Svc,
     /// Subscribers' view: (source, class, id) of every message delivered to us.
     delivered: &'static Mutex<Vec<(u8, u8, u8)>>,
@@ -85,8 +86,8 @@ fn aircraft(
         Downlink::new(arena, id, [v2(), v2()])
             .with_routes(Routes::new(table, default).broadcast(broadcast)),
     );
-    let datalink: &'static Dlk =
-        leak(Datalink::new(id).with_relay(Relay::new(RELAY_PRIORITY).with_messages(&MESSAGES)));
+    let datalink: &'static Dlk = leak(Datalink::new(id));
+    let relay = leak(Relay::new(datalink, RELAY_PRIORITY).with_messages(&MESSAGES));
     let services: &'static Svc = leak(Services::new(id));
     let value: &'static AtomicU32 = leak(AtomicU32::new(0));
     let get = leak(move || f32::from_bits(value.load(Ordering::Relaxed)));
@@ -105,6 +106,7 @@ fn aircraft(
         id,
         downlink,
         datalink,
+        relay,
         services,
         delivered,
     }
@@ -233,9 +235,9 @@ impl embedded_io_async::Read for Rx {
 /// Runs one device of `ac`: its writer onto `out`, its reader from `input`.
 async fn device(ac: &Aircraft, mut port: Port<'static>, out: &'static Wire, input: &'static Wire) {
     let mut reader = Reader::<_, _>::new(Rx(input), PprzV2::new(), port.device());
-    let datalink = ac.datalink;
+    let relay = ac.relay;
     let _: (Infallible, Infallible) =
-        match select(run_writer(&mut port, Tx(out)), reader.run(datalink)).await {
+        match select(run_writer(&mut port, Tx(out)), reader.run(relay)).await {
             Either::First(never) | Either::Second(never) => never,
         };
 }
@@ -394,7 +396,7 @@ fn ground_reaches_8_through_7() {
     );
 
     // Accounting at each hop.
-    let r7 = a7.datalink.stats().relay;
+    let r7 = a7.relay.stats();
     assert_eq!(
         r7.forwarded, 5,
         "PING, SETTING down; PONG, DL_VALUE, ATTITUDE up: {r7:?}"
@@ -406,7 +408,7 @@ fn ground_reaches_8_through_7() {
     assert_eq!((radio.relayed.submitted, radio.relayed.sent), (3, 3));
     assert_eq!((link.relayed.submitted, link.relayed.sent), (2, 2));
     assert_eq!(link.sent, 2, "7 sends nothing of its own to 8");
-    assert_eq!(a8.datalink.stats().relay.forwarded, 0);
+    assert_eq!(a8.relay.stats().forwarded, 0);
 }
 
 #[test]
@@ -515,7 +517,7 @@ fn a_saturated_relay_keeps_acknowledgements_first() {
     let sent_by_8 = fleet.from_8.frames().len() as u32;
     assert_eq!(s8.sent, sent_by_8);
     // 7 forwarded every frame 8 sent (all for the ground) and every request for 8.
-    let r7 = a7.datalink.stats().relay;
+    let r7 = a7.relay.stats();
     assert_eq!(r7.forwarded, sent_by_8 + requests_8 as u32, "{r7:?}");
     assert_eq!(r7.refused(), 0);
     let radio = a7.downlink.stats(0).unwrap();
@@ -581,7 +583,7 @@ impl<'f> Pumped<'f> {
     fn receive(&self, ac: usize, device: usize, frame: &[u8]) {
         let mut reader =
             Reader::<_, _>::new(&[][..], PprzV2::new(), self.ports[ac][device].device());
-        reader.feed(frame, self.fleet[ac].datalink);
+        reader.feed(frame, self.fleet[ac].relay);
     }
 
     /// Takes what aircraft `ac` queued on its device `device`.
@@ -662,7 +664,7 @@ fn broadcast_is_delivered_once_and_a_loop_does_not_circulate() {
     // default route leads back where it came from: it stops there.
     fleet.receive(0, 0, &block(9));
     assert_eq!(fleet.pump(&[link_78], 10), [1]);
-    assert_eq!(a8.datalink.stats().relay.no_route, 1);
+    assert_eq!(a8.relay.stats().no_route, 1);
     // 8 sending to 9 itself: 7's route for 9 is the link it came from.
     a8.downlink
         .send_to(
@@ -675,7 +677,7 @@ fn broadcast_is_delivered_once_and_a_loop_does_not_circulate() {
         )
         .unwrap();
     assert_eq!(fleet.pump(&[link_78], 10), [1]);
-    assert_eq!(a7.datalink.stats().relay.no_route, 1);
+    assert_eq!(a7.relay.stats().no_route, 1);
     // A broadcast from 8 reaches 7 and the ground, and not 8 again.
     a8.downlink
         .send_to(
@@ -691,14 +693,10 @@ fn broadcast_is_delivered_once_and_a_loop_does_not_circulate() {
     assert_eq!(count(&a7, 8, BLOCK), 1);
     assert_eq!(fleet.take(0, 0).len(), 1, "on to the ground");
     assert_eq!(count(&a8, 8, BLOCK), 0);
-    assert_eq!(
-        a8.datalink.stats().relay.own_source,
-        0,
-        "it never came back"
-    );
+    assert_eq!(a8.relay.stats().own_source, 0, "it never came back");
     for ac in [&a7, &a8] {
-        assert_eq!(ac.datalink.stats().relay.reverse_path, 0);
-        assert_eq!(ac.datalink.stats().relay.malformed, 0);
+        assert_eq!(ac.relay.stats().reverse_path, 0);
+        assert_eq!(ac.relay.stats().malformed, 0);
     }
 }
 
@@ -740,7 +738,7 @@ fn a_ring_of_misconfigured_defaults_stops_every_frame() {
     // Every frame made at most one hop past its sender before a rule stopped it.
     assert!(crossed.iter().sum::<usize>() <= 3 * 2 * 3, "{crossed:?}");
     for (i, ac) in [&a7, &a8, &a9].iter().enumerate() {
-        let r = ac.datalink.stats().relay;
+        let r = ac.relay.stats();
         println!("aircraft {}: {r:?}", ac.id);
         // Each other aircraft's broadcast is delivered exactly once (the copy that
         // came the other way round was refused by the reverse-path rule).
@@ -751,7 +749,7 @@ fn a_ring_of_misconfigured_defaults_stops_every_frame() {
     }
     let refused: u32 = [&a7, &a8, &a9]
         .iter()
-        .map(|ac| ac.datalink.stats().relay.refused())
+        .map(|ac| ac.relay.stats().refused())
         .sum();
     assert!(refused > 0);
 }
@@ -787,7 +785,7 @@ fn hostile_frames_are_counted_and_never_forwarded() {
     // An unknown message for 8 is forwarded at the relay priority.
     fleet.receive(0, 0, &raw_v2(GROUND_ID, 8, 2, 250, &[1, 2, 3]));
 
-    let r = a7.datalink.stats().relay;
+    let r = a7.relay.stats();
     assert_eq!(r.own_source, 2, "{r:?}");
     assert_eq!(r.no_route, 1, "{r:?}");
     assert_eq!(r.reverse_path, 1, "{r:?}");
@@ -837,7 +835,7 @@ fn random_frames_never_panic_and_are_all_accounted_for() {
         }
     }
     let s = a7.datalink.stats();
-    let r = s.relay;
+    let r = a7.relay.stats();
     println!("{s:?}");
     // Every frame for another aircraft or broadcast (or claiming to be ours) was
     // forwarded or refused, by reason, exactly once (a broadcast always has another

@@ -44,6 +44,7 @@ use pprz_default::messages::telemetry::{
     ImuGyroRaw, ImuMagRaw, Ins, Payload, RotorcraftFp, RotorcraftStatus, UartErrors,
 };
 use pprz_default::periodic::{PROCESSES, SCHEDULE, main};
+use pprz_messages::MessageSet;
 use pprz_messages::{Message, VarArray};
 use pprz_telemetry::reader::{Datalink, Reader};
 use pprz_telemetry::registry::RegistryFull;
@@ -143,7 +144,7 @@ pub async fn run_aircraft<R: Read>(
     run_with_layer(
         radio,
         radio_rx,
-        None,
+        RadioOnly,
         config,
         &Plain,
         core::future::pending(),
@@ -152,8 +153,9 @@ pub async fn run_aircraft<R: Read>(
 }
 
 /// [`run_aircraft`] for an aircraft that relays for others
-/// ([`relay`](pprz_telemetry::relay)) as `relay` says: a second device, `link`, leads to
-/// other aircraft and is read from `link_rx`; frames for other aircraft (and broadcast frames) arriving
+/// ([`relay`](pprz_telemetry::relay)): a second device, `link`, leads to other aircraft
+/// and is read from `link_rx`; forwarded frames go with the priority `messages` gives
+/// their message, else `priority` (see [`Relay`]); frames for other aircraft (and broadcast frames) arriving
 /// on either device are forwarded by the routes of the downlink
 /// ([`Downlink::with_routes`](pprz_telemetry::Downlink::with_routes)). Its own telemetry
 /// goes to the ground's route. Requests are answered on the device they came in on.
@@ -165,13 +167,19 @@ pub async fn run_relay_aircraft<R: Read>(
     radio_rx: R,
     link: Device<'_>,
     link_rx: R,
-    relay: Relay<'_>,
+    priority: u8,
+    messages: Option<&MessageSet<'_>>,
     config: Config,
 ) -> Result<Infallible, SetupError> {
     run_with_layer(
         radio,
         radio_rx,
-        Some((link, link_rx, relay)),
+        RelayLink {
+            link,
+            rx: link_rx,
+            priority,
+            messages,
+        },
         config,
         &Plain,
         core::future::pending(),
@@ -225,16 +233,78 @@ pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
             | embassy_futures::select::Either::Second(never) => never,
         }
     };
-    run_with_layer(radio, radio_rx, None, config, secure, extra).await
+    run_with_layer(radio, radio_rx, RadioOnly, config, secure, extra).await
+}
+
+/// The readers of the application, given the radio's: the radio's alone, or with a
+/// relay link's. A type per case, so a firmware that does not relay carries no relay
+/// code.
+trait Readers<'d> {
+    /// Reads forever, the radio's frames delivered through `layer`.
+    async fn run<'x, R: Read, L: LinkLayer + ?Sized, const N: usize>(
+        self,
+        radio: Reader<'d, R, PprzV2>,
+        layer: &L,
+        datalink: &Datalink<'x, M, N>,
+    ) -> Infallible
+    where
+        'd: 'x;
+}
+
+/// The radio alone.
+struct RadioOnly;
+
+impl<'d> Readers<'d> for RadioOnly {
+    async fn run<'x, R: Read, L: LinkLayer + ?Sized, const N: usize>(
+        self,
+        mut radio: Reader<'d, R, PprzV2>,
+        layer: &L,
+        datalink: &Datalink<'x, M, N>,
+    ) -> Infallible
+    where
+        'd: 'x,
+    {
+        radio.run(&Layered::new(layer, datalink)).await
+    }
+}
+
+/// The radio and a link to other aircraft, both delivering to a [`Relay`].
+struct RelayLink<'l, 'm, R2> {
+    link: Device<'l>,
+    rx: R2,
+    priority: u8,
+    messages: Option<&'m MessageSet<'m>>,
+}
+
+impl<'d, R2: Read> Readers<'d> for RelayLink<'d, '_, R2> {
+    async fn run<'x, R: Read, L: LinkLayer + ?Sized, const N: usize>(
+        self,
+        mut radio: Reader<'d, R, PprzV2>,
+        layer: &L,
+        datalink: &Datalink<'x, M, N>,
+    ) -> Infallible
+    where
+        'd: 'x,
+    {
+        let relay: Relay<'_, M, _> = match self.messages {
+            Some(messages) => Relay::new(datalink, self.priority).with_messages(messages),
+            None => Relay::new(datalink, self.priority),
+        };
+        // The link to other aircraft carries no layer (the secure link is per radio,
+        // between one aircraft and the ground).
+        let mut link = Reader::<R2, PprzV2>::new(self.rx, PprzV2::new(), self.link);
+        match select(radio.run(&Layered::new(layer, &relay)), link.run(&relay)).await {
+            Either::First(never) | Either::Second(never) => never,
+        }
+    }
 }
 
 /// The application, its reader delivering through `layer`, with `extra` (the secure
-/// link's tasks) running beside it; with `link`, a second device read by a second
-/// reader, and the datalink relaying.
-async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
-    radio: Device<'_>,
+/// link's tasks) running beside it, and the readers of `readers`.
+async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
+    radio: Device<'d>,
     radio_rx: R,
-    link: Option<(Device<'_>, R, Relay<'_>)>,
+    readers: impl Readers<'d>,
     config: Config,
     layer: &L,
     extra: impl Future<Output = Infallible>,
@@ -264,10 +334,7 @@ async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
     // Our id is the downlink's (the example's `AC_ID` unless a fleet says otherwise).
     let ac_id = radio.sender().ac_id();
     let services: Services<'_, Set, M, 4> = Services::new(ac_id);
-    let datalink: Datalink<'_, M, { Services::<Set, M, 4>::SUBSCRIPTIONS }> = match link {
-        Some((_, _, relay)) => Datalink::new(ac_id).with_relay(relay),
-        None => Datalink::new(ac_id),
-    };
+    let datalink: Datalink<'_, M, { Services::<Set, M, 4>::SUBSCRIPTIONS }> = Datalink::new(ac_id);
     let settings = services.settings();
     settings.add_mode("telemetry_mode", modes.setting(main::PROCESS)?)?;
     settings.add("payload_flood", &get_flood, &set_flood)?;
@@ -355,25 +422,14 @@ async fn run_with_layer<R: Read, L: LinkLayer + ?Sized>(
             }
         }
     };
-    let mut reader = Reader::<R, PprzV2>::new(radio_rx, PprzV2::new(), radio);
-    let inbox = Layered::new(layer, &datalink);
-    let readers = async {
-        match link {
-            Some((link, link_rx, _)) => {
-                // The link to other aircraft carries no layer (the secure link is per
-                // radio, between one aircraft and the ground).
-                let mut relay_reader = Reader::<R, PprzV2>::new(link_rx, PprzV2::new(), link);
-                match select(reader.run(&inbox), relay_reader.run(&datalink)).await {
-                    Either::First(never) | Either::Second(never) => never,
-                }
-            }
-            None => reader.run(&inbox).await,
-        }
-    };
+    let reader = Reader::<R, PprzV2>::new(radio_rx, PprzV2::new(), radio);
+    let readers = readers.run(reader, layer, &datalink);
     let app = select4(scheduler.run(), readers, dynamics, flood);
     match select(app, extra).await {
-        Either::First(Either4::First(never) | Either4::Second(never)) => never,
-        Either::First(Either4::Third(never) | Either4::Fourth(never)) => never,
+        Either::First(Either4::First(never) | Either4::Third(never) | Either4::Fourth(never)) => {
+            never
+        }
+        Either::First(Either4::Second(never)) => match never {},
         Either::Second(never) => match never {},
     }
 }

@@ -61,8 +61,8 @@ use pprz_telemetry::pprz_transports::{
     AnyTransport, Decoder, Encoder, Framing, MAX_FRAME_LEN, PprzV2, XBee24,
 };
 use pprz_telemetry::{
-    DeliveryWindow, Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Pacing, Port, Relay,
-    Routes, Sender, Targets, run_writer, run_writer_with,
+    DeliveryWindow, Device, DeviceConfig, DeviceStats, Downlink, FrameArena, Pacing, Port, Routes,
+    Sender, Targets, run_writer, run_writer_with,
 };
 use static_cell::StaticCell;
 
@@ -364,9 +364,16 @@ async fn relay_aircraft(
     link_rx: SimRx<'static, M, RADIO_RING>,
     config: Config,
 ) {
-    let relay = Relay::new(RELAY_PRIORITY).with_messages(&MESSAGES);
-    let Err(e) =
-        pprz_example_app::run_relay_aircraft(radio, rx, link, link_rx, relay, config).await;
+    let Err(e) = pprz_example_app::run_relay_aircraft(
+        radio,
+        rx,
+        link,
+        link_rx,
+        RELAY_PRIORITY,
+        Some(&MESSAGES),
+        config,
+    )
+    .await;
     panic!("the aircraft application cannot start: {e}");
 }
 
