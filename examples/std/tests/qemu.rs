@@ -5,6 +5,9 @@
 //! telemetry of `telemetry.xml` arrives at its configured rates, measured on the guest's
 //! own clock (GPS_INT's `tow` field).
 //!
+//! QEMU's serial port is a Unix socket of this test's own (a path unique to the process
+//! and the test), so tests running side by side never race for a TCP port.
+//!
 //! Needs `qemu-system-arm` (or `PPRZ_QEMU`) and the firmware ELF, built first with
 //! `cargo build --release` in `examples/mps2-an386` (or named by `PPRZ_QEMU_FIRMWARE`).
 //! Without either the test is skipped with a note on stderr, unless
@@ -12,7 +15,7 @@
 //! the test fails.
 
 use std::io::{ErrorKind, Read, Write as _};
-use std::net::{Ipv4Addr, TcpListener, TcpStream};
+use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -45,7 +48,7 @@ struct Qemu {
 }
 
 impl Qemu {
-    fn start(qemu: &str, firmware: &Path, port: u16) -> std::io::Result<Self> {
+    fn start(qemu: &str, firmware: &Path, socket: &Path) -> std::io::Result<Self> {
         let child = Command::new(qemu)
             .args([
                 "-M",
@@ -55,7 +58,7 @@ impl Qemu {
                 "none",
                 "-serial",
             ])
-            .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+            .arg(format!("unix:{},server=on,wait=on", socket.display()))
             .arg("-kernel")
             .arg(firmware)
             .stdin(Stdio::null())
@@ -67,24 +70,42 @@ impl Qemu {
 
     /// Connects to the serial port QEMU listens on (it starts the guest once we are
     /// connected). `Err` with QEMU's stderr if it exited first.
-    fn connect(&mut self, port: u16) -> Result<TcpStream, String> {
+    fn connect(&mut self, socket: &Path) -> Result<UnixStream, String> {
         let start = Instant::now();
         loop {
-            if let Ok(Some(status)) = self.child.try_wait() {
-                let mut stderr = String::new();
-                if let Some(mut pipe) = self.child.stderr.take() {
-                    let _ = pipe.read_to_string(&mut stderr);
-                }
-                return Err(format!("QEMU exited ({status}): {}", stderr.trim()));
+            if let Some(exit) = self.exited() {
+                return Err(exit);
             }
-            match TcpStream::connect((Ipv4Addr::LOCALHOST, port)) {
+            match UnixStream::connect(socket) {
                 Ok(stream) => return Ok(stream),
                 Err(e) if start.elapsed() > Duration::from_secs(10) => {
-                    return Err(format!("cannot connect to QEMU's serial port {port}: {e}"));
+                    return Err(format!(
+                        "cannot connect to QEMU's serial port {}: {e}",
+                        socket.display()
+                    ));
                 }
                 Err(_) => std::thread::sleep(Duration::from_millis(20)),
             }
         }
+    }
+
+    /// QEMU's exit status and stderr if it has exited.
+    fn exited(&mut self) -> Option<String> {
+        let status = self.child.try_wait().ok()??;
+        let mut stderr = String::new();
+        if let Some(mut pipe) = self.child.stderr.take() {
+            let _ = pipe.read_to_string(&mut stderr);
+        }
+        Some(format!("QEMU exited ({status}): {}", stderr.trim()))
+    }
+
+    /// Why the serial connection failed with `e`: QEMU's exit if it exited.
+    fn failure(&mut self, what: &str, e: &std::io::Error) -> String {
+        std::thread::sleep(Duration::from_millis(100));
+        let exit = self
+            .exited()
+            .unwrap_or_else(|| "QEMU still running".to_owned());
+        format!("{what}: {e} ({exit})")
     }
 }
 
@@ -125,7 +146,7 @@ fn firmware_path(name: &str) -> PathBuf {
 
 /// Boots firmware `name` under QEMU and connects to its UART0, or `None` (the test is
 /// skipped, or fails where QEMU is required) when QEMU or the firmware is missing.
-fn boot(name: &str) -> Option<(Qemu, TcpStream)> {
+fn boot(name: &str) -> Option<(Qemu, UnixStream)> {
     let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
     let firmware = firmware_path(name);
     if !firmware.is_file() {
@@ -145,22 +166,15 @@ fn boot(name: &str) -> Option<(Qemu, TcpStream)> {
         skip(&format!("{qemu} is not installed"));
         return None;
     }
-    // Start QEMU and connect; a port taken between our probe and QEMU's bind makes QEMU
-    // exit, then another port is tried.
-    let mut attempts = Vec::new();
-    let (guard, stream) = loop {
-        let port = free_port();
-        let mut guard = Qemu::start(&qemu, &firmware, port).expect("QEMU starts");
-        match guard.connect(port) {
-            Ok(stream) => break (guard, stream),
-            Err(e) if attempts.len() < 2 => attempts.push(e),
-            Err(e) => panic!("{e} (earlier attempts: {attempts:?})"),
-        }
-    };
+    let socket = std::env::temp_dir().join(format!("pprz-qemu-{}-{name}.sock", std::process::id()));
+    let _ = std::fs::remove_file(&socket);
+    let mut guard = Qemu::start(&qemu, &firmware, &socket).expect("QEMU starts");
+    let stream = guard.connect(&socket).unwrap_or_else(|e| panic!("{e}"));
+    // The connection is made: the path is no longer needed.
+    let _ = std::fs::remove_file(&socket);
     stream
         .set_read_timeout(Some(Duration::from_millis(20)))
         .expect("socket timeout");
-    let _ = stream.set_nodelay(true);
     Some((guard, stream))
 }
 
@@ -192,12 +206,6 @@ fn default_set() -> RuntimeSet {
     .expect("messages.xml loads")
 }
 
-/// A loopback TCP port that was free a moment ago.
-fn free_port() -> u16 {
-    let listener = TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).expect("bind a loopback port");
-    listener.local_addr().expect("bound address").port()
-}
-
 /// One received message: its id and, for GPS_INT, the guest time it was sent at.
 struct Received {
     class: u8,
@@ -207,7 +215,7 @@ struct Received {
 
 #[test]
 fn firmware_answers_and_sends_telemetry_at_configured_rates() {
-    let Some((_qemu, mut stream)) = boot("aircraft") else {
+    let Some((mut qemu, mut stream)) = boot("aircraft") else {
         return;
     };
     let set = default_set();
@@ -235,22 +243,26 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         // PING once the aircraft talks, again every second until a PONG; then the
         // SETTING, again every second until acknowledged.
         if !received.is_empty() && pong_rtt.is_none() && now >= next_ping {
-            stream.write_all(&ping).expect("send PING");
+            stream
+                .write_all(&ping)
+                .unwrap_or_else(|e| panic!("{}", qemu.failure("send PING", &e)));
             monitor.ping_sent(now);
             next_ping = now + 1.0;
         }
         if pong_rtt.is_some() && ack.is_none() && now >= next_setting {
-            stream.write_all(&setting).expect("send SETTING");
+            stream
+                .write_all(&setting)
+                .unwrap_or_else(|e| panic!("{}", qemu.failure("send SETTING", &e)));
             monitor.setting_value_sent(now, GAIN_INDEX, f64::from(GAIN));
             setting_first_sent.get_or_insert(now);
             next_setting = now + 1.0;
         }
 
         let n = match stream.read(&mut buf) {
-            Ok(0) => panic!("QEMU closed the serial connection"),
+            Ok(0) => panic!("QEMU closed the serial connection ({:?})", qemu.exited()),
             Ok(n) => n,
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
-            Err(e) => panic!("reading QEMU's serial port: {e}"),
+            Err(e) => panic!("{}", qemu.failure("reading QEMU's serial port", &e)),
         };
         let bytes = &buf[..n];
         let now = start.elapsed().as_secs_f64();
@@ -401,7 +413,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
 /// exchange), and none is rejected by the ground.
 #[test]
 fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
-    let Some((_qemu, mut stream)) = boot("aircraft-secure") else {
+    let Some((mut qemu, mut stream)) = boot("aircraft-secure") else {
         return;
     };
     let keys = KeyFile::parse(pprz_secure::keys::INSECURE_TEST_KEY_FILE).expect("test keys");
@@ -423,12 +435,16 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
     while start.elapsed() < DEADLINE && !(pong_rtt.is_some() && acked) {
         let now = start.elapsed().as_secs_f64();
         for frame in monitor.poll_secure(now) {
-            stream.write_all(&frame).expect("send a key exchange");
+            stream
+                .write_all(&frame)
+                .unwrap_or_else(|e| panic!("{}", qemu.failure("send a key exchange", &e)));
         }
         if monitor.uplink_ready() && now >= next_request {
             let request = if pong_rtt.is_none() { &ping } else { &setting };
             let sealed = monitor.seal_uplink(request).expect("a session seals");
-            stream.write_all(&sealed).expect("send a request");
+            stream
+                .write_all(&sealed)
+                .unwrap_or_else(|e| panic!("{}", qemu.failure("send a request", &e)));
             if pong_rtt.is_none() {
                 monitor.ping_sent(now);
             } else {
@@ -437,10 +453,10 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
             next_request = now + 1.0;
         }
         let n = match stream.read(&mut buf) {
-            Ok(0) => panic!("QEMU closed the serial connection"),
+            Ok(0) => panic!("QEMU closed the serial connection ({:?})", qemu.exited()),
             Ok(n) => n,
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
-            Err(e) => panic!("reading QEMU's serial port: {e}"),
+            Err(e) => panic!("{}", qemu.failure("reading QEMU's serial port", &e)),
         };
         let bytes = &buf[..n];
         let mut input = bytes;
