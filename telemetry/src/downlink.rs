@@ -388,7 +388,7 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     queues: [FrameQueue<'a, M, Q>; D],
     ac_id: u8,
     /// Global sequence number: the age of a frame across all queues, for eviction.
-    seq: Mutex<M, Cell<u32>>,
+    seq: SeqCounter<M>,
     /// Whether [`ports`](Self::ports) handed the ports out already.
     ports_taken: Mutex<M, Cell<bool>>,
     /// Sends whose targets named no device.
@@ -403,6 +403,48 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
 
 fn no_clock() -> u32 {
     0
+}
+
+/// The downlink's global sequence number (wrapping): an atomic counter where the target
+/// has atomic read-modify-write (no lock taken per message), else a counter under the
+/// downlink's mutex (e.g. `thumbv6m`).
+struct SeqCounter<M: RawMutex> {
+    #[cfg(target_has_atomic = "32")]
+    next: core::sync::atomic::AtomicU32,
+    #[cfg(target_has_atomic = "32")]
+    _mutex: core::marker::PhantomData<M>,
+    #[cfg(not(target_has_atomic = "32"))]
+    next: Mutex<M, Cell<u32>>,
+}
+
+impl<M: RawMutex> SeqCounter<M> {
+    const fn new() -> Self {
+        Self {
+            #[cfg(target_has_atomic = "32")]
+            next: core::sync::atomic::AtomicU32::new(0),
+            #[cfg(target_has_atomic = "32")]
+            _mutex: core::marker::PhantomData,
+            #[cfg(not(target_has_atomic = "32"))]
+            next: Mutex::new(Cell::new(0)),
+        }
+    }
+
+    /// The next number.
+    #[inline]
+    fn next(&self) -> u32 {
+        #[cfg(target_has_atomic = "32")]
+        {
+            // Only uniqueness and order matter, not ordering with other memory.
+            self.next
+                .fetch_add(1, core::sync::atomic::Ordering::Relaxed)
+        }
+        #[cfg(not(target_has_atomic = "32"))]
+        self.next.lock(|n| {
+            let v = n.get();
+            n.set(v.wrapping_add(1));
+            v
+        })
+    }
 }
 
 /// [`Downlink::ports`] was called before: each device has one port, handed out once.
@@ -438,7 +480,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             devices,
             queues: [const { FrameQueue::new() }; D],
             ac_id,
-            seq: Mutex::new(Cell::new(0)),
+            seq: SeqCounter::new(),
             ports_taken: Mutex::new(Cell::new(false)),
             undeliverable: Mutex::new(Cell::new(0)),
             reply_tat: [const { Mutex::new(Cell::new(0)) }; D],
@@ -621,11 +663,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     }
 
     fn next_seq(&self) -> u32 {
-        self.seq.lock(|s| {
-            let v = s.get();
-            s.set(v.wrapping_add(1));
-            v
-        })
+        self.seq.next()
     }
 
     /// Builds the frame of `msg` for one transport in arena memory.
@@ -770,7 +808,8 @@ trait Core: Sync {
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
     /// Runs `f` on device `device`'s outstanding frames (nothing for a bad index).
     fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
-    fn complete(&self, device: usize, len: usize, outcome: Result<(), DropReason>);
+    /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it.
+    fn complete(&self, device: usize, frame: FrameBuf<'_>, outcome: Result<(), DropReason>);
 }
 
 impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M, D, Q> {
@@ -821,9 +860,9 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         }
     }
 
-    fn complete(&self, device: usize, len: usize, outcome: Result<(), DropReason>) {
+    fn complete(&self, device: usize, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
         if let Some(q) = self.queues.get(device) {
-            q.complete(len, outcome);
+            q.complete(frame, outcome);
         }
     }
 }
@@ -1113,9 +1152,8 @@ impl<'d> Port<'d> {
     pub fn try_next(&mut self) -> Option<Outgoing<'_>> {
         let frame = self.device.core.try_receive(self.device.index(), None)?;
         Some(Outgoing {
-            frame,
+            frame: Some(frame),
             device: self.device,
-            done: false,
         })
     }
 
@@ -1147,9 +1185,8 @@ impl<'d> Port<'d> {
         )
         .await;
         Outgoing {
-            frame,
+            frame: Some(frame),
             device,
-            done: false,
         }
     }
 }
@@ -1159,16 +1196,16 @@ impl<'d> Port<'d> {
 /// cancelled mid-write), it counts as a failed write, so every frame is counted once.
 /// Its arena memory is released when it is dropped.
 pub struct Outgoing<'p> {
-    frame: FrameBuf<'p>,
+    /// The frame; `None` once its outcome is counted (and its memory released).
+    frame: Option<FrameBuf<'p>>,
     device: Device<'p>,
-    done: bool,
 }
 
 impl fmt::Debug for Outgoing<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("Outgoing")
             .field("device", &self.device.index)
-            .field("len", &self.frame.len())
+            .field("len", &self.len())
             .finish()
     }
 }
@@ -1176,7 +1213,7 @@ impl fmt::Debug for Outgoing<'_> {
 impl Outgoing<'_> {
     /// The frame's bytes, to change before writing (the writer sets XBee frame ids).
     pub(crate) fn bytes_mut(&mut self) -> &mut [u8] {
-        &mut self.frame
+        self.frame.as_deref_mut().unwrap_or_default()
     }
 
     /// Lets `layer` rewrite the frame for the wire in place, in the whole of its arena
@@ -1184,15 +1221,16 @@ impl Outgoing<'_> {
     /// [`DeviceConfig::reserve`]). `Err` if the layer refused it: the frame must not be
     /// written (its bytes are unspecified) and is to be [`refused`](Self::refuse).
     pub(crate) fn seal_with<L: LinkLayer + ?Sized>(&mut self, layer: &L) -> Result<(), ()> {
-        let len = self.frame.len();
-        let capacity = self.frame.set_len_to_capacity();
-        match layer.seal(&mut self.frame, len) {
+        let frame = self.frame.as_mut().ok_or(())?;
+        let len = frame.len();
+        let capacity = frame.set_len_to_capacity();
+        match layer.seal(frame, len) {
             Ok(sealed) if sealed <= capacity => {
-                self.frame.truncate(sealed);
+                frame.truncate(sealed);
                 Ok(())
             }
             _ => {
-                self.frame.truncate(len);
+                frame.truncate(len);
                 Err(())
             }
         }
@@ -1215,10 +1253,11 @@ impl Outgoing<'_> {
     }
 
     fn finish_with(mut self, outcome: Result<(), DropReason>) {
-        self.done = true;
-        self.device
-            .core
-            .complete(self.device.index(), self.frame.len(), outcome);
+        if let Some(frame) = self.frame.take() {
+            self.device
+                .core
+                .complete(self.device.index(), frame, outcome);
+        }
     }
 }
 
@@ -1226,20 +1265,17 @@ impl core::ops::Deref for Outgoing<'_> {
     type Target = [u8];
 
     fn deref(&self) -> &[u8] {
-        &self.frame
+        self.frame.as_deref().unwrap_or_default()
     }
 }
 
 impl Drop for Outgoing<'_> {
     fn drop(&mut self) {
-        if !self.done {
-            self.device.core.complete(
-                self.device.index(),
-                self.frame.len(),
-                Err(DropReason::WriteError),
-            );
+        if let Some(frame) = self.frame.take() {
+            self.device
+                .core
+                .complete(self.device.index(), frame, Err(DropReason::WriteError));
         }
-        // The frame's memory returns to the arena after this, when its fields drop.
     }
 }
 

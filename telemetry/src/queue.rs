@@ -349,10 +349,14 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         })
     }
 
-    /// Reports the outcome of writing the in-flight frame of `len` bytes: sent, or lost
-    /// for `reason` (a write error, or refused by the device's link layer).
-    pub fn complete(&self, len: usize, outcome: Result<(), DropReason>) {
+    /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
+    /// write error, or refused by the device's link layer), and releases the frame's
+    /// memory. The release takes the arena's lock inside this queue's (one critical
+    /// section per frame instead of two; nothing takes them in the other order).
+    pub fn complete(&self, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
         self.with(|s| {
+            let len = frame.len();
+            drop(frame);
             let priority = s.in_flight_priority;
             match outcome {
                 Ok(()) => {
@@ -459,7 +463,7 @@ mod tests {
                 ages.push(end - u64::from_le_bytes(at));
                 gaps[i] = gaps[i].max(end - last[i]);
                 last[i] = end;
-                queue.complete(frame.len(), Ok(()));
+                queue.complete(frame, Ok(()));
                 link_free_us = end;
             }
         }

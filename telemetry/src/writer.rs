@@ -86,14 +86,17 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
             frame.refuse();
             continue;
         }
-        let now = Instant::now().as_ticks();
-        if let Some(model) = &mut modem {
-            model.add(frame.len(), now);
-        }
-        if let Some(window) = &window
-            && let Some(id) = device.delivery_start(window, now)
-        {
-            config.transport.set_frame_id(frame.bytes_mut(), id);
+        if modem.is_some() || window.is_some() {
+            // The clock is read only for the devices that use it.
+            let now = Instant::now().as_ticks();
+            if let Some(model) = &mut modem {
+                model.add(frame.len(), now);
+            }
+            if let Some(window) = &window
+                && let Some(id) = device.delivery_start(window, now)
+            {
+                config.transport.set_frame_id(frame.bytes_mut(), id);
+            }
         }
         let mut written = io.write_all(&frame).await.is_ok();
         if written && config.flush {
