@@ -613,7 +613,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         let mut error = None;
         // Frames are all built before any is queued, so a frame can be copied from an
         // earlier target with the same transport.
-        let mut frames: heapless::Vec<(usize, FrameBuf<'a>), D> = heapless::Vec::new();
+        let mut frames: [Option<FrameBuf<'a>>; D] = [const { None }; D];
         for device in (0..D).filter(|&d| targets.contains(d)) {
             if reply && !self.admit_reply(device) {
                 self.queues[device].count_dropped(DropReason::RateLimited, priority);
@@ -626,17 +626,17 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             let config = &self.devices[device];
             let built = self.build(msg, &meta, payload_len, config, priority, &frames);
             match built {
-                Ok(frame) => {
-                    // `frames` has room for one frame per device.
-                    let _ = frames.push((device, frame));
-                }
+                Ok(frame) => frames[device] = Some(frame),
                 Err(reason) => {
                     self.queues[device].count_dropped(reason, priority);
                     error = Some(SendError { device, reason });
                 }
             }
         }
-        for (device, frame) in frames {
+        for (device, frame) in frames.iter_mut().enumerate() {
+            let Some(frame) = frame.take() else {
+                continue;
+            };
             let depth = match self.devices[device].depth {
                 0 => Q,
                 depth => depth,
@@ -674,7 +674,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         payload_len: usize,
         config: &DeviceConfig,
         priority: u8,
-        built: &[(usize, FrameBuf<'a>)],
+        built: &[Option<FrameBuf<'a>>],
     ) -> Result<FrameBuf<'a>, DropReason> {
         let transport = config.transport;
         let reserve = usize::from(config.reserve);
@@ -688,9 +688,10 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 .map_err(|_| DropReason::TooLarge)?;
         }
         let mut frame = self.alloc(frame_len + reserve, priority)?;
-        if let Some((_, same)) = built
+        if let Some(same) = built
             .iter()
-            .find(|(d, _)| self.devices[*d].transport == transport)
+            .zip(&self.devices)
+            .find_map(|(f, d)| f.as_ref().filter(|_| d.transport == transport))
         {
             // Same transport, same length: the earlier frame was checked against
             // `payload_len` below. Never a panic, whatever the lengths.
@@ -810,6 +811,13 @@ trait Core: Sync {
     fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
     /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it.
     fn complete(&self, device: usize, frame: FrameBuf<'_>, outcome: Result<(), DropReason>);
+    /// [`complete`](Core::complete), then takes the device's next frame, under one lock.
+    fn complete_and_receive(
+        &self,
+        device: usize,
+        frame: FrameBuf<'_>,
+        outcome: Result<(), DropReason>,
+    ) -> Option<FrameBuf<'_>>;
 }
 
 impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M, D, Q> {
@@ -864,6 +872,17 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         if let Some(q) = self.queues.get(device) {
             q.complete(frame, outcome);
         }
+    }
+
+    fn complete_and_receive(
+        &self,
+        device: usize,
+        frame: FrameBuf<'_>,
+        outcome: Result<(), DropReason>,
+    ) -> Option<FrameBuf<'_>> {
+        self.queues
+            .get(device)?
+            .complete_and_receive(frame, outcome)
     }
 }
 
@@ -1087,6 +1106,26 @@ impl<'d> Device<'d> {
     pub fn sender(&self) -> Sender<'d> {
         Sender { core: self.core }
     }
+
+    /// Waits for this device's most important frame (see [`Port::next`]).
+    pub(crate) async fn next(&self) -> Outgoing<'d> {
+        poll_fn(|cx| match self.receive(Some(cx)) {
+            Some(frame) => Poll::Ready(frame),
+            None => Poll::Pending,
+        })
+        .await
+    }
+
+    /// Takes this device's most important frame; with a context, registers it for the
+    /// next frame when there is none. For the device's one consumer: its [`Port`], or
+    /// the writer task that holds the port.
+    pub(crate) fn receive(&self, cx: Option<&mut Context<'_>>) -> Option<Outgoing<'d>> {
+        let frame = self.core.try_receive(self.index(), cx)?;
+        Some(Outgoing {
+            frame: Some(frame),
+            device: *self,
+        })
+    }
 }
 
 impl From<Device<'_>> for Targets {
@@ -1150,11 +1189,7 @@ impl<'d> Port<'d> {
     /// The most important frame waiting, if any. Report how its write went with
     /// [`Outgoing::finish`]; dropping it unreported counts a failed write.
     pub fn try_next(&mut self) -> Option<Outgoing<'_>> {
-        let frame = self.device.core.try_receive(self.device.index(), None)?;
-        Some(Outgoing {
-            frame: Some(frame),
-            device: self.device,
-        })
+        self.device.receive(None)
     }
 
     /// The length of the most important frame waiting, if any, without taking it (a
@@ -1176,18 +1211,7 @@ impl<'d> Port<'d> {
 
     /// Waits for the most important frame; as [`try_next`](Self::try_next).
     pub async fn next(&mut self) -> Outgoing<'_> {
-        let device = self.device;
-        let frame = poll_fn(
-            |cx| match device.core.try_receive(device.index(), Some(cx)) {
-                Some(frame) => Poll::Ready(frame),
-                None => Poll::Pending,
-            },
-        )
-        .await;
-        Outgoing {
-            frame: Some(frame),
-            device,
-        }
+        self.device.next().await
     }
 }
 
@@ -1250,6 +1274,25 @@ impl Outgoing<'_> {
     /// not send it) and releases its memory.
     pub fn refuse(self) {
         self.finish_with(Err(DropReason::Refused));
+    }
+
+    /// [`finish`](Self::finish), then takes the device's next frame if one waits, under
+    /// one lock: for a writer that writes the next frame at once.
+    pub(crate) fn finish_and_next(mut self, written: bool) -> Option<Self> {
+        let frame = self.frame.take()?;
+        let outcome = if written {
+            Ok(())
+        } else {
+            Err(DropReason::WriteError)
+        };
+        let device = self.device;
+        let next = device
+            .core
+            .complete_and_receive(device.index(), frame, outcome)?;
+        Some(Outgoing {
+            frame: Some(next),
+            device,
+        })
     }
 
     fn finish_with(mut self, outcome: Result<(), DropReason>) {

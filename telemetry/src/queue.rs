@@ -126,6 +126,47 @@ impl<'a, const Q: usize> State<'a, Q> {
         l.lost = l.lost.wrapping_add(1);
     }
 
+    /// Takes the most important frame (see [`FrameQueue::try_receive`]).
+    #[inline]
+    fn receive(&mut self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
+        match self.entries.pop() {
+            Some(entry) => {
+                self.in_flight = true;
+                self.in_flight_priority = entry.priority;
+                self.update_queued();
+                Some(entry.frame)
+            }
+            None => {
+                if let Some(cx) = cx {
+                    self.waker.register(cx.waker());
+                }
+                None
+            }
+        }
+    }
+
+    /// Counts the outcome of the in-flight frame and releases it (see
+    /// [`FrameQueue::complete`]); the caller updates the queue counts.
+    #[inline]
+    fn complete(&mut self, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
+        let len = frame.len();
+        drop(frame);
+        let priority = self.in_flight_priority;
+        match outcome {
+            Ok(()) => {
+                self.stats.sent = self.stats.sent.wrapping_add(1);
+                self.stats.bytes_sent = self.stats.bytes_sent.wrapping_add(len as u32);
+                let l = self.level(priority);
+                l.sent = l.sent.wrapping_add(1);
+            }
+            Err(reason) => {
+                self.stats.dropped.count(reason);
+                self.lost(priority);
+            }
+        }
+        self.in_flight = false;
+    }
+
     fn update_queued(&mut self) {
         let n = self.entries.len() + usize::from(self.in_flight);
         self.stats.queued = u16::try_from(n).unwrap_or(u16::MAX);
@@ -333,19 +374,24 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// the waker when there is none. For the device's one consumer, which reports the
     /// outcome with [`complete`](Self::complete).
     pub fn try_receive(&self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
-        self.with(|s| match s.entries.pop() {
-            Some(entry) => {
-                s.in_flight = true;
-                s.in_flight_priority = entry.priority;
+        self.with(|s| s.receive(cx))
+    }
+
+    /// [`complete`](Self::complete) then [`try_receive`](Self::try_receive) (without a
+    /// context), under one lock: for a writer that takes the next frame as soon as a
+    /// write completes.
+    pub fn complete_and_receive(
+        &self,
+        frame: FrameBuf<'_>,
+        outcome: Result<(), DropReason>,
+    ) -> Option<FrameBuf<'a>> {
+        self.with(|s| {
+            s.complete(frame, outcome);
+            let next = s.receive(None);
+            if next.is_none() {
                 s.update_queued();
-                Some(entry.frame)
             }
-            None => {
-                if let Some(cx) = cx {
-                    s.waker.register(cx.waker());
-                }
-                None
-            }
+            next
         })
     }
 
@@ -355,22 +401,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// section per frame instead of two; nothing takes them in the other order).
     pub fn complete(&self, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
         self.with(|s| {
-            let len = frame.len();
-            drop(frame);
-            let priority = s.in_flight_priority;
-            match outcome {
-                Ok(()) => {
-                    s.stats.sent = s.stats.sent.wrapping_add(1);
-                    s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
-                    let l = s.level(priority);
-                    l.sent = l.sent.wrapping_add(1);
-                }
-                Err(reason) => {
-                    s.stats.dropped.count(reason);
-                    s.lost(priority);
-                }
-            }
-            s.in_flight = false;
+            s.complete(frame, outcome);
             s.update_queued();
         });
     }

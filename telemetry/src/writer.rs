@@ -67,6 +67,10 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
     let config = device.config();
     let mut modem = config.pacing.map(ModemModel::new);
     let window = config.delivery.filter(|_| config.transport.has_tx_status());
+    // Without pacing or a status window nothing waits between two frames: the next frame
+    // is taken under the lock that counts the last one (`Outgoing::finish_and_next`).
+    let back_to_back = modem.is_none() && window.is_none();
+    let mut taken = None;
     loop {
         if let Some(window) = &window {
             wait_for_room(device, window).await;
@@ -81,7 +85,10 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
                 continue;
             }
         }
-        let mut frame = port.next().await;
+        let mut frame = match taken.take() {
+            Some(frame) => frame,
+            None => device.next().await,
+        };
         if frame.seal_with(layer).is_err() {
             frame.refuse();
             continue;
@@ -103,8 +110,13 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
             written = io.flush().await.is_ok();
         }
         // Counted here; if this future is dropped mid-write, `frame` counts itself as a
-        // failed write when it drops.
-        frame.finish(written);
+        // failed write when it drops. (A frame in `taken` is never held across an
+        // `.await`: it is written next.)
+        if back_to_back {
+            taken = frame.finish_and_next(written);
+        } else {
+            frame.finish(written);
+        }
     }
 }
 
