@@ -19,8 +19,9 @@
 //! the repository has the commands and the latest figures; footprint (workload 6) is
 //! measured by `bench/footprint.sh` on the `bench/footprint` firmware.
 //!
-//! not apply (fixed-offset message encoders), run by the same workload (mode
-//! `encode-proposed`).
+//! Workloads 1-3 live in `pprz-bench-common` (`bench/common`, `no_std`), re-exported by
+//! [`stream`] and [`downlink`]: the Cortex-M4 firmware of `bench/m4` runs the very same
+//! loops on the same inputs under QEMU.
 
 #![warn(missing_docs)]
 
