@@ -2,10 +2,10 @@
 //! priorities, with eviction of less important frames when full.
 //!
 //! ```text
-//!   least important                                     most important
-//!   index 0 ........................................... index len-1
-//!   [ p=0 newest .. p=0 oldest | p=1 newest .. p=1 oldest | ... ]
-//!     ^ evicted first: oldest of the lowest priority         ^ sent next
+//!   most important                                       least important
+//!   front ................................................ back
+//!   [ p=2 oldest .. p=2 newest | p=1 oldest .. p=1 newest | p=0 oldest .. p=0 newest ]
+//!     ^ sent next                  evicted first: oldest of the lowest priority ^
 //! ```
 //!
 //! This module is internal: the downlink is its only producer, and a device's
@@ -18,12 +18,14 @@
 //! buggy. This queue is built on embassy-sync's blocking [`Mutex`] (a critical section
 //! on boards, so interrupt-free contexts on any executor may send) and a
 //! [`WakerRegistration`] for its one consumer, the device's writer task. Entries are
-//! kept sorted, so sending takes the last one, FIFO order needs no sequence number, and
-//! the eviction candidate is found by binary search.
+//! kept sorted in a ring buffer (`heapless::Deque`), so sending takes the front one, FIFO
+//! order needs no sequence number, and the eviction candidate is found by binary search.
 //!
 //! # Time Complexity
-//! `push` and `evict` are O(Q) (a binary search and a shift of at most `Q` small
-//! entries), `receive` is O(1); `Q` is the queue capacity, typically 8..64.
+//! `receive` is O(1). `push` is O(1) when the new frame is not more important than the
+//! least important waiting one (all frames of one priority, say), else it moves the new
+//! entry forward past the less important ones; evicting moves the entries behind the
+//! evicted one back: both O(Q), where `Q` is the queue capacity, typically 8..64.
 
 use core::cell::RefCell;
 use core::task::Context;
@@ -93,9 +95,10 @@ fn older(a: u32, b: u32) -> bool {
 }
 
 struct State<'a, const Q: usize> {
-    /// Invariant: sorted by priority ascending, and within a priority by age descending
-    /// (newest first), so the last entry is the most important and oldest.
-    entries: heapless::Vec<Entry<'a>, Q>,
+    /// Invariant: sorted by priority descending, and within a priority by age ascending
+    /// (oldest first), so the front entry is the most important and oldest, and the
+    /// eviction candidate is the first entry of the back's priority.
+    entries: heapless::Deque<Entry<'a>, Q>,
     /// Whether the writer holds a frame taken from this queue, and its priority.
     in_flight: bool,
     in_flight_priority: u8,
@@ -106,9 +109,57 @@ struct State<'a, const Q: usize> {
 impl<'a, const Q: usize> State<'a, Q> {
     /// Index of the eviction candidate: the oldest entry of the lowest priority.
     fn candidate(&self) -> Option<usize> {
-        let lowest = self.entries.first()?.priority;
-        let end = self.entries.partition_point(|e| e.priority <= lowest);
-        end.checked_sub(1)
+        let lowest = self.entries.back()?.priority;
+        // The first index whose priority is `lowest` (binary search: entries before it are
+        // more important).
+        let (mut lo, mut hi) = (0, self.entries.len() - 1);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            match self.entries.get(mid) {
+                Some(e) if e.priority > lowest => lo = mid + 1,
+                _ => hi = mid,
+            }
+        }
+        Some(lo)
+    }
+
+    /// Removes and returns entry `at` (`at < len`), keeping the order of the others.
+    fn remove(&mut self, at: usize) -> Option<Entry<'a>> {
+        let len = self.entries.len();
+        if at >= len {
+            return None;
+        }
+        // Move it to the nearer end, then take it from there.
+        if at < len - at {
+            for i in (0..at).rev() {
+                self.entries.swap(i, i + 1);
+            }
+            self.entries.pop_front()
+        } else {
+            for i in at..len - 1 {
+                self.entries.swap(i, i + 1);
+            }
+            self.entries.pop_back()
+        }
+    }
+
+    /// Inserts `entry` after every entry at least as important (behind the entries of its
+    /// own priority: the newest of them). `Err` if the queue is full.
+    fn insert(&mut self, entry: Entry<'a>) -> Result<(), Entry<'a>> {
+        let priority = entry.priority;
+        self.entries.push_back(entry)?;
+        // Move it forward past the less important entries (none, usually).
+        let mut at = self.entries.len() - 1;
+        while at > 0
+            && self
+                .entries
+                .get(at - 1)
+                .is_some_and(|e| e.priority < priority)
+        {
+            self.entries.swap(at - 1, at);
+            at -= 1;
+        }
+        Ok(())
     }
 
     fn level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
@@ -129,7 +180,7 @@ impl<'a, const Q: usize> State<'a, Q> {
     /// Takes the most important frame (see [`FrameQueue::try_receive`]).
     #[inline]
     fn receive(&mut self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
-        match self.entries.pop() {
+        match self.entries.pop_front() {
             Some(entry) => {
                 self.in_flight = true;
                 self.in_flight_priority = entry.priority;
@@ -195,7 +246,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let () = Self::VALID;
         Self {
             state: Mutex::new(RefCell::new(State {
-                entries: heapless::Vec::new(),
+                entries: heapless::Deque::new(),
                 in_flight: false,
                 in_flight_priority: 0,
                 waker: WakerRegistration::new(),
@@ -285,9 +336,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             }
             let mut result = Pushed::Queued;
             if s.entries.len() >= depth {
-                match s.candidate() {
-                    Some(i) if s.entries[i].priority < priority => {
-                        let victim = s.entries.remove(i);
+                let victim = s
+                    .candidate()
+                    .filter(|&i| s.entries.get(i).is_some_and(|e| e.priority < priority))
+                    .and_then(|i| s.remove(i));
+                match victim {
+                    Some(victim) => {
                         s.lost(victim.priority);
                         released = Some(victim.frame);
                         s.stats.evicted.queue_full = s.stats.evicted.queue_full.wrapping_add(1);
@@ -301,15 +355,14 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                     }
                 }
             }
-            // Newest first within a priority: before every entry of the same priority.
-            let at = s.entries.partition_point(|e| e.priority < priority);
+            // Oldest first within a priority: after every entry of the same priority.
             let entry = Entry {
                 priority,
                 seq,
                 latest,
                 frame,
             };
-            if let Err(entry) = s.entries.insert(at, entry) {
+            if let Err(entry) = s.insert(entry) {
                 // Unreachable while depth <= Q; counted rather than lost if it ever is.
                 s.stats.dropped.count(DropReason::QueueFull);
                 s.lost(priority);
@@ -347,7 +400,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             if e.priority != expected.priority || e.seq != expected.seq {
                 return None;
             }
-            let entry = s.entries.remove(i);
+            let entry = s.remove(i)?;
             s.lost(entry.priority);
             s.stats.evicted.arena_full = s.stats.evicted.arena_full.wrapping_add(1);
             s.update_queued();
@@ -359,7 +412,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// The length of the most important frame, without taking it; with a context,
     /// registers the waker when there is none.
     pub fn peek_len(&self, cx: Option<&mut Context<'_>>) -> Option<usize> {
-        self.with(|s| match s.entries.last() {
+        self.with(|s| match s.entries.front() {
             Some(entry) => Some(entry.frame.len()),
             None => {
                 if let Some(cx) = cx {
@@ -474,7 +527,7 @@ mod tests {
                 if policy == Policy::Requeue {
                     let old = queue.with(|s| {
                         let at = s.entries.iter().position(|e| e.latest == key)?;
-                        Some(s.entries.remove(at))
+                        s.remove(at)
                     });
                     drop(old);
                 }
