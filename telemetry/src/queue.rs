@@ -218,11 +218,12 @@ impl<'a, const Q: usize> State<'a, Q> {
         self.in_flight = false;
     }
 
+    #[inline]
     fn update_queued(&mut self) {
-        let n = self.entries.len() + usize::from(self.in_flight);
-        self.stats.queued = u16::try_from(n).unwrap_or(u16::MAX);
-        let waiting = u16::try_from(self.entries.len()).unwrap_or(u16::MAX);
+        // Lossless: `len <= Q <= u16::MAX` (checked at compile time).
+        let waiting = self.entries.len() as u16;
         self.stats.waiting = waiting;
+        self.stats.queued = waiting.saturating_add(u16::from(self.in_flight));
         self.stats.queue_high_water = self.stats.queue_high_water.max(waiting);
     }
 }
