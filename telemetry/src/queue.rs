@@ -147,17 +147,21 @@ impl<'a, const Q: usize> State<'a, Q> {
     /// own priority: the newest of them). `Err` if the queue is full.
     fn insert(&mut self, entry: Entry<'a>) -> Result<(), Entry<'a>> {
         let priority = entry.priority;
+        // Usually no entry is less important: the new one stays at the back.
+        let in_place = self.entries.back().is_none_or(|e| e.priority >= priority);
         self.entries.push_back(entry)?;
-        // Move it forward past the less important entries (none, usually).
-        let mut at = self.entries.len() - 1;
-        while at > 0
-            && self
-                .entries
-                .get(at - 1)
-                .is_some_and(|e| e.priority < priority)
-        {
-            self.entries.swap(at - 1, at);
-            at -= 1;
+        if !in_place {
+            // Move it forward past the less important entries.
+            let mut at = self.entries.len() - 1;
+            while at > 0
+                && self
+                    .entries
+                    .get(at - 1)
+                    .is_some_and(|e| e.priority < priority)
+            {
+                self.entries.swap(at - 1, at);
+                at -= 1;
+            }
         }
         Ok(())
     }
