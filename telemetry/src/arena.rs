@@ -424,7 +424,8 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
             // `len <= MAX_ALLOC_LIMIT`.
             Some(start) => Ok(FrameBuf {
                 arena: self,
-                start: start as u16,
+                // In bounds: `start < UNITS`, so the block's first byte is in the storage.
+                ptr: self.base().wrapping_add(start * GRANULARITY),
                 units: units as u16,
                 len: len as u16,
             }),
@@ -452,13 +453,13 @@ trait Grants {
     /// Start of the storage.
     fn base(&self) -> *mut u8;
 
-    /// Return the block `start..start + units` to the free lists.
+    /// Return the block of `units` units whose first byte is `ptr` to the free lists.
     ///
     /// # Safety
     ///
-    /// * `start..start + units` is a block allocated by this arena and not yet released.
+    /// * `ptr` and `units` describe a block allocated by this arena and not yet released.
     /// * No reference into its bytes is used afterwards.
-    unsafe fn release(&self, start: usize, units: usize);
+    unsafe fn release(&self, ptr: *mut u8, units: usize);
 }
 
 impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
@@ -466,7 +467,9 @@ impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
         self.storage.get().cast::<u8>()
     }
 
-    unsafe fn release(&self, start: usize, units: usize) {
+    unsafe fn release(&self, ptr: *mut u8, units: usize) {
+        // The block's first unit (the caller guarantees `ptr` is one of ours).
+        let start = (ptr.addr() - self.base().addr()) / GRANULARITY;
         self.with_heap(|st, mem| {
             st.free(mem, start, units);
             st.frees = st.frees.wrapping_add(1);
@@ -486,9 +489,10 @@ impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
 pub struct FrameBuf<'a> {
     /// The arena, which outlives the frame.
     arena: &'a dyn Grants,
-    /// First unit of the block; owned by this `FrameBuf` alone (invariant 1).
-    start: u16,
-    /// Size of the block in units; `start + units <= UNITS`.
+    /// First byte of the block, a pointer into the arena's storage; the block is owned
+    /// by this `FrameBuf` alone (invariant 1).
+    ptr: *mut u8,
+    /// Size of the block in units; the block ends at or before unit `UNITS`.
     units: u16,
     /// Logical length in bytes; `len <= units * GRANULARITY`.
     len: u16,
@@ -543,13 +547,9 @@ impl FrameBuf<'_> {
         self.len()
     }
 
-    /// Pointer to the first byte of the block.
-    fn ptr(&self) -> *mut u8 {
-        // `wrapping_add` cannot leave the storage: `start * GRANULARITY < UNITS *
-        // GRANULARITY <= N`, so this is an in-bounds pointer of the storage allocation.
-        self.arena
-            .base()
-            .wrapping_add(usize::from(self.start) * GRANULARITY)
+    /// Offset of the block in the arena's storage, in bytes.
+    fn offset(&self) -> usize {
+        self.ptr.addr() - self.arena.base().addr()
     }
 }
 
@@ -557,13 +557,13 @@ impl Deref for FrameBuf<'_> {
     type Target = [u8];
 
     fn deref(&self) -> &[u8] {
-        // Safety: the block `start..start + units` lies inside the storage, which lives for
-        // `'a`, and `len <= units * GRANULARITY`. It is owned by this `FrameBuf` alone
+        // Safety: the block (`units` units from `ptr`) lies inside the storage, which lives
+        // for `'a`, and `len <= units * GRANULARITY`. It is owned by this `FrameBuf` alone
         // (invariant 1): the allocator does not touch it (invariant 4) and no other
         // `FrameBuf` covers it, so the only references to these bytes come from this
         // `FrameBuf`, and `&self` keeps `deref_mut` out. The bytes are initialised
         // (invariant 6).
-        unsafe { core::slice::from_raw_parts(self.ptr(), self.len()) }
+        unsafe { core::slice::from_raw_parts(self.ptr, self.len()) }
     }
 }
 
@@ -571,7 +571,7 @@ impl DerefMut for FrameBuf<'_> {
     fn deref_mut(&mut self) -> &mut [u8] {
         // Safety: as in `deref`; `&mut self` makes this the only live reference to the
         // block's bytes.
-        unsafe { core::slice::from_raw_parts_mut(self.ptr(), self.len()) }
+        unsafe { core::slice::from_raw_parts_mut(self.ptr, self.len()) }
     }
 }
 
@@ -580,8 +580,7 @@ impl Drop for FrameBuf<'_> {
         // Safety: the block was allocated by `self.arena` and is released exactly once,
         // here; references into it borrowed `self`, so none outlives this call.
         unsafe {
-            self.arena
-                .release(usize::from(self.start), usize::from(self.units));
+            self.arena.release(self.ptr, usize::from(self.units));
         }
     }
 }
@@ -589,7 +588,7 @@ impl Drop for FrameBuf<'_> {
 impl fmt::Debug for FrameBuf<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("FrameBuf")
-            .field("offset", &(usize::from(self.start) * GRANULARITY))
+            .field("offset", &self.offset())
             .field("len", &self.len())
             .field("capacity", &self.capacity())
             .finish()
@@ -602,7 +601,7 @@ impl defmt::Format for FrameBuf<'_> {
         defmt::write!(
             f,
             "FrameBuf {{ offset: {}, len: {}, capacity: {} }}",
-            usize::from(self.start) * GRANULARITY,
+            self.offset(),
             self.len(),
             self.capacity()
         );
@@ -1129,7 +1128,7 @@ mod tests {
             let blocks = |frames: &[FrameBuf<'_>]| -> Vec<(usize, usize)> {
                 frames
                     .iter()
-                    .map(|f| (usize::from(f.start), usize::from(f.units)))
+                    .map(|f| (f.offset() / GRANULARITY, usize::from(f.units)))
                     .collect()
             };
             let mut largest = arena.check(&[]);
