@@ -1276,23 +1276,23 @@ impl Outgoing<'_> {
         self.finish_with(Err(DropReason::Refused));
     }
 
-    /// [`finish`](Self::finish), then takes the device's next frame if one waits, under
-    /// one lock: for a writer that writes the next frame at once.
-    pub(crate) fn finish_and_next(mut self, written: bool) -> Option<Self> {
-        let frame = self.frame.take()?;
+    /// [`finish`](Self::finish), then takes the device's next frame into `self` if one
+    /// waits, under one lock: for a writer that writes the next frame at once. Returns
+    /// whether `self` holds a next frame (else it is finished and holds none).
+    pub(crate) fn finish_and_next(&mut self, written: bool) -> bool {
+        let Some(frame) = self.frame.take() else {
+            return false;
+        };
         let outcome = if written {
             Ok(())
         } else {
             Err(DropReason::WriteError)
         };
-        let device = self.device;
-        let next = device
+        self.frame = self
+            .device
             .core
-            .complete_and_receive(device.index(), frame, outcome)?;
-        Some(Outgoing {
-            frame: Some(next),
-            device,
-        })
+            .complete_and_receive(self.device.index(), frame, outcome);
+        self.frame.is_some()
     }
 
     fn finish_with(mut self, outcome: Result<(), DropReason>) {

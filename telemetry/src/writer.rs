@@ -58,19 +58,60 @@ pub async fn run_writer<W: Write>(port: &mut Port<'_>, io: W) -> ! {
 /// [`DropReason::Refused`](crate::DropReason::Refused) drop.
 pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
     port: &mut Port<'_>,
-    mut io: W,
+    io: W,
     layer: &L,
 ) -> ! {
     let device = port.device();
-    // Frames grow by up to this much when sealed: the modem model counts it.
-    let reserve = usize::from(device.config().reserve);
     let config = device.config();
-    let mut modem = config.pacing.map(ModemModel::new);
+    let modem = config.pacing.map(ModemModel::new);
     let window = config.delivery.filter(|_| config.transport.has_tx_status());
-    // Without pacing or a status window nothing waits between two frames: the next frame
-    // is taken under the lock that counts the last one (`Outgoing::finish_and_next`).
-    let back_to_back = modem.is_none() && window.is_none();
-    let mut taken = None;
+    if modem.is_none() && window.is_none() {
+        back_to_back(device, io, layer, config.flush).await
+    }
+    held_back(port, io, layer, modem, window).await
+}
+
+/// The writer of a device that nothing holds back between two frames (no pacing, no
+/// transmit-status window): the next frame is taken under the lock that counts the last
+/// one ([`Outgoing::finish_and_next`](crate::Outgoing)), into the same `Outgoing`.
+async fn back_to_back<W: Write, L: LinkLayer + ?Sized>(
+    device: Device<'_>,
+    mut io: W,
+    layer: &L,
+    flush: bool,
+) -> ! {
+    let mut frame = device.next().await;
+    loop {
+        if frame.seal_with(layer).is_err() {
+            frame.refuse();
+            frame = device.next().await;
+            continue;
+        }
+        let mut written = io.write_all(&frame).await.is_ok();
+        if written && flush {
+            written = io.flush().await.is_ok();
+        }
+        // Counted here; if this future is dropped mid-write, `frame` counts itself as a
+        // failed write when it drops.
+        if !frame.finish_and_next(written) {
+            frame = device.next().await;
+        }
+    }
+}
+
+/// The writer of a paced device, or of one with a transmit-status window: it waits for
+/// room in the modem before taking each frame.
+async fn held_back<W: Write, L: LinkLayer + ?Sized>(
+    port: &mut Port<'_>,
+    mut io: W,
+    layer: &L,
+    mut modem: Option<ModemModel>,
+    window: Option<DeliveryWindow>,
+) -> ! {
+    let device = port.device();
+    let config = device.config();
+    // Frames grow by up to this much when sealed: the modem model counts it.
+    let reserve = usize::from(config.reserve);
     loop {
         if let Some(window) = &window {
             wait_for_room(device, window).await;
@@ -85,38 +126,27 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
                 continue;
             }
         }
-        let mut frame = match taken.take() {
-            Some(frame) => frame,
-            None => device.next().await,
-        };
+        let mut frame = port.next().await;
         if frame.seal_with(layer).is_err() {
             frame.refuse();
             continue;
         }
-        if modem.is_some() || window.is_some() {
-            // The clock is read only for the devices that use it.
-            let now = Instant::now().as_ticks();
-            if let Some(model) = &mut modem {
-                model.add(frame.len(), now);
-            }
-            if let Some(window) = &window
-                && let Some(id) = device.delivery_start(window, now)
-            {
-                config.transport.set_frame_id(frame.bytes_mut(), id);
-            }
+        let now = Instant::now().as_ticks();
+        if let Some(model) = &mut modem {
+            model.add(frame.len(), now);
+        }
+        if let Some(window) = &window
+            && let Some(id) = device.delivery_start(window, now)
+        {
+            config.transport.set_frame_id(frame.bytes_mut(), id);
         }
         let mut written = io.write_all(&frame).await.is_ok();
         if written && config.flush {
             written = io.flush().await.is_ok();
         }
         // Counted here; if this future is dropped mid-write, `frame` counts itself as a
-        // failed write when it drops. (A frame in `taken` is never held across an
-        // `.await`: it is written next.)
-        if back_to_back {
-            taken = frame.finish_and_next(written);
-        } else {
-            frame.finish(written);
-        }
+        // failed write when it drops.
+        frame.finish(written);
     }
 }
 
