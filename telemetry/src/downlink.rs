@@ -1234,7 +1234,7 @@ impl fmt::Debug for Outgoing<'_> {
     }
 }
 
-impl Outgoing<'_> {
+impl<'p> Outgoing<'p> {
     /// The frame's bytes, to change before writing (the writer sets XBee frame ids).
     pub(crate) fn bytes_mut(&mut self) -> &mut [u8] {
         self.frame.as_deref_mut().unwrap_or_default()
@@ -1276,23 +1276,46 @@ impl Outgoing<'_> {
         self.finish_with(Err(DropReason::Refused));
     }
 
-    /// [`finish`](Self::finish), then takes the device's next frame into `self` if one
-    /// waits, under one lock: for a writer that writes the next frame at once. Returns
-    /// whether `self` holds a next frame (else it is finished and holds none).
-    pub(crate) fn finish_and_next(&mut self, written: bool) -> bool {
+    /// A finished `Outgoing` of `device` (holding no frame), for a writer's loop.
+    pub(crate) fn none(device: Device<'p>) -> Self {
+        Self {
+            frame: None,
+            device,
+        }
+    }
+
+    /// Whether it holds a frame (not finished yet).
+    pub(crate) fn is_taken(&self) -> bool {
+        self.frame.is_some()
+    }
+
+    /// [`finish`](Self::finish) in place; with `take_next`, also takes the device's next
+    /// frame into `self` if one waits, under the same lock (for a writer that writes the
+    /// next frame at once).
+    pub(crate) fn finish_and_take(&mut self, written: bool, take_next: bool) {
         let Some(frame) = self.frame.take() else {
-            return false;
+            return;
         };
         let outcome = if written {
             Ok(())
         } else {
             Err(DropReason::WriteError)
         };
-        self.frame = self
-            .device
-            .core
-            .complete_and_receive(self.device.index(), frame, outcome);
-        self.frame.is_some()
+        let (core, index) = (self.device.core, self.device.index());
+        if take_next {
+            self.frame = core.complete_and_receive(index, frame, outcome);
+        } else {
+            core.complete(index, frame, outcome);
+        }
+    }
+
+    /// [`refuse`](Self::refuse) in place.
+    pub(crate) fn refuse_in_place(&mut self) {
+        if let Some(frame) = self.frame.take() {
+            self.device
+                .core
+                .complete(self.device.index(), frame, Err(DropReason::Refused));
+        }
     }
 
     fn finish_with(mut self, outcome: Result<(), DropReason>) {
