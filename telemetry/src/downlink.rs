@@ -809,14 +809,14 @@ trait Core: Sync {
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
     /// Runs `f` on device `device`'s outstanding frames (nothing for a bad index).
     fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
-    /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it.
-    fn complete(&self, device: usize, frame: FrameBuf<'_>, outcome: Result<(), DropReason>);
-    /// [`complete`](Core::complete), then takes the device's next frame, under one lock.
-    fn complete_and_receive(
+    /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it;
+    /// with `take_next`, then takes the device's next frame under the same lock.
+    fn complete(
         &self,
         device: usize,
         frame: FrameBuf<'_>,
         outcome: Result<(), DropReason>,
+        take_next: bool,
     ) -> Option<FrameBuf<'_>>;
 }
 
@@ -868,21 +868,14 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         }
     }
 
-    fn complete(&self, device: usize, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
-        if let Some(q) = self.queues.get(device) {
-            q.complete(frame, outcome);
-        }
-    }
-
-    fn complete_and_receive(
+    fn complete(
         &self,
         device: usize,
         frame: FrameBuf<'_>,
         outcome: Result<(), DropReason>,
+        take_next: bool,
     ) -> Option<FrameBuf<'_>> {
-        self.queues
-            .get(device)?
-            .complete_and_receive(frame, outcome)
+        self.queues.get(device)?.complete(frame, outcome, take_next)
     }
 }
 
@@ -1301,12 +1294,10 @@ impl<'p> Outgoing<'p> {
         } else {
             Err(DropReason::WriteError)
         };
-        let (core, index) = (self.device.core, self.device.index());
-        if take_next {
-            self.frame = core.complete_and_receive(index, frame, outcome);
-        } else {
-            core.complete(index, frame, outcome);
-        }
+        self.frame = self
+            .device
+            .core
+            .complete(self.device.index(), frame, outcome, take_next);
     }
 
     /// [`refuse`](Self::refuse) in place.
@@ -1314,7 +1305,7 @@ impl<'p> Outgoing<'p> {
         if let Some(frame) = self.frame.take() {
             self.device
                 .core
-                .complete(self.device.index(), frame, Err(DropReason::Refused));
+                .complete(self.device.index(), frame, Err(DropReason::Refused), false);
         }
     }
 
@@ -1322,7 +1313,7 @@ impl<'p> Outgoing<'p> {
         if let Some(frame) = self.frame.take() {
             self.device
                 .core
-                .complete(self.device.index(), frame, outcome);
+                .complete(self.device.index(), frame, outcome, false);
         }
     }
 }
@@ -1338,9 +1329,12 @@ impl core::ops::Deref for Outgoing<'_> {
 impl Drop for Outgoing<'_> {
     fn drop(&mut self) {
         if let Some(frame) = self.frame.take() {
-            self.device
-                .core
-                .complete(self.device.index(), frame, Err(DropReason::WriteError));
+            self.device.core.complete(
+                self.device.index(),
+                frame,
+                Err(DropReason::WriteError),
+                false,
+            );
         }
     }
 }

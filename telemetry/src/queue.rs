@@ -435,33 +435,27 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         self.with(|s| s.receive(cx))
     }
 
-    /// [`complete`](Self::complete) then [`try_receive`](Self::try_receive) (without a
-    /// context), under one lock: for a writer that takes the next frame as soon as a
-    /// write completes.
-    pub fn complete_and_receive(
+    /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
+    /// write error, or refused by the device's link layer), and releases the frame's
+    /// memory. The release takes the arena's lock inside this queue's (one critical
+    /// section per frame instead of two; nothing takes them in the other order). With
+    /// `take_next`, then takes the most important frame as
+    /// [`try_receive`](Self::try_receive) (without a context) does, under the same lock:
+    /// for a writer that writes the next frame as soon as a write completes.
+    pub fn complete(
         &self,
         frame: FrameBuf<'_>,
         outcome: Result<(), DropReason>,
+        take_next: bool,
     ) -> Option<FrameBuf<'a>> {
         self.with(|s| {
             s.complete(frame, outcome);
-            let next = s.receive(None);
+            let next = if take_next { s.receive(None) } else { None };
             if next.is_none() {
                 s.update_queued();
             }
             next
         })
-    }
-
-    /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
-    /// write error, or refused by the device's link layer), and releases the frame's
-    /// memory. The release takes the arena's lock inside this queue's (one critical
-    /// section per frame instead of two; nothing takes them in the other order).
-    pub fn complete(&self, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
-        self.with(|s| {
-            s.complete(frame, outcome);
-            s.update_queued();
-        });
     }
 }
 
@@ -552,7 +546,7 @@ mod tests {
                 ages.push(end - u64::from_le_bytes(at));
                 gaps[i] = gaps[i].max(end - last[i]);
                 last[i] = end;
-                queue.complete(frame, Ok(()));
+                queue.complete(frame, Ok(()), false);
                 link_free_us = end;
             }
         }
