@@ -9,7 +9,7 @@
 //! | [`stream`] | 2. parse that byte stream and decode every message | instructions per byte |
 //! | [`downlink`] | 3. send -> arena -> queue -> writer -> sink, polled on the host | instructions per message |
 //! | [`overload`] | 4. a 57 600-baud link overloaded 10x for 60 s of mock time, against a FIFO | latencies, shedding, utilisation |
-//! | [`arena`] | 5. alloc + release at 10/50/90 % fill, fill at the first failure | instructions per pair, fill |
+//! | [`arena`] | 5. alloc + release at 10/50/90 % fill, fill at the first failure | instructions per operation (an allocation or a release), fill |
 //! | [`secure`] | 8. seal and open 10 000 40-byte-field frames of the secure link | instructions per frame |
 //!
 //! The `workloads` binary (`src/bin/workloads.rs`) runs each workload inside one named,
