@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
-# The secure link's costs on an emulated Cortex-M4 (issue 14): builds the bench/m4
-# firmware (release: opt-level "s", fat LTO, one codegen unit), runs it on QEMU's
-# mps2-an386 with `-icount shift=0` (1 ns of virtual time per guest instruction, so the
-# board's 25 MHz timers tick once per 40 instructions), and prints the figures:
-# instructions per handshake step and per frame, and the same in ms on a 168 MHz
-# Cortex-M4 (STM32F405) assuming one instruction per cycle (an approximation: loads,
-# taken branches and flash wait states cost more), then the firmware's flash.
+# Instruction counts on an emulated Cortex-M4: builds the bench/m4 firmware (release:
+# opt-level "s", fat LTO, one codegen unit), runs it on QEMU's mps2-an386 with
+# `-icount shift=0` (1 ns of virtual time per guest instruction, so the board's 25 MHz
+# timers tick once per 40 instructions), and prints the figures: the encode, parse and
+# downlink workloads of the host benchmarks (issue 16: instructions per message / per
+# byte), the secure link's handshake steps and per-frame work (issue 14), each also in
+# ms on a 168 MHz Cortex-M4 (STM32F405) assuming one instruction per cycle (an
+# approximation: loads, taken branches and flash wait states cost more), then the
+# firmware's flash.
 #
 #   bash bench/m4/run.sh          # from anywhere; a few seconds once built
 #
@@ -50,11 +52,13 @@ fi
 
 awk '
     /^result / {
-        name = $2; instructions = $3; count = $4
-        what = $5; for (i = 6; i <= NF; i++) what = what " " $i
+        name = $2; instructions = $3; count = $4; unit = $5
+        what = $6; for (i = 7; i <= NF; i++) what = what " " $i
         per = instructions / count
-        printf "  %-16s %12.1f instructions %8.3f ms at 168 MHz   %s", name, per, per / 168000, what
-        if (count > 1) printf " (%d frames: %d instructions; %.1f per field byte)", count, instructions, per / 40
+        printf "  %-16s %12.*f instructions per %-9s %9.4f ms at 168 MHz   %s", name,
+            (unit == "byte" ? 2 : 1), per, unit, per / 168000, what
+        if (unit == "frame") printf " (%d frames: %d instructions; %.1f per field byte)", count, instructions, per / 40
+        else if (count > 1) printf " (%d %ss: %d instructions)", count, unit, instructions
         printf "\n"
         next
     }

@@ -9,7 +9,7 @@
 //! | [`stream`] | 2. parse that byte stream and decode every message | instructions per byte |
 //! | [`downlink`] | 3. send -> arena -> queue -> writer -> sink, polled on the host | instructions per message |
 //! | [`overload`] | 4. a 57 600-baud link overloaded 10x for 60 s of mock time, against a FIFO | latencies, shedding, utilisation |
-//! | [`arena`] | 5. alloc + release at 10/50/90 % fill, fill at the first failure | instructions per pair, fill |
+//! | [`arena`] | 5. alloc + release at 10/50/90 % fill, fill at the first failure | instructions per operation (an allocation or a release), fill |
 //! | [`secure`] | 8. seal and open 10 000 40-byte-field frames of the secure link | instructions per frame |
 //!
 //! The `workloads` binary (`src/bin/workloads.rs`) runs each workload inside one named,
@@ -19,8 +19,9 @@
 //! the repository has the commands and the latest figures; footprint (workload 6) is
 //! measured by `bench/footprint.sh` on the `bench/footprint` firmware.
 //!
-//! not apply (fixed-offset message encoders), run by the same workload (mode
-//! `encode-proposed`).
+//! Workloads 1-3 live in `pprz-bench-common` (`bench/common`, `no_std`), re-exported by
+//! [`stream`] and [`downlink`]: the Cortex-M4 firmware of `bench/m4` runs the very same
+//! loops on the same inputs under QEMU.
 
 #![warn(missing_docs)]
 

@@ -104,13 +104,15 @@
 //! allowed `unsafe` code for exactly that, disjoint `&mut [u8]` views into one
 //! [`UnsafeCell`] buffer, and for the allocator's raw reads and writes of free blocks'
 //! headers. The invariants that make it sound are written on [`FrameArena`]; property
-//! tests check them after every step and the tests run under Miri.
+//! tests check them after every step and the tests run under Miri. Release builds trust
+//! the invariants for the allocator's metadata accesses (no bounds check per access, as
+//! in `rlsf`); debug builds, and so the tests and Miri, assert every access in bounds.
 
 // The crate denies `unsafe_code`; this module needs it to hand out disjoint mutable views
 // of one shared buffer (see "Concurrency and `unsafe`" above). Every block is justified.
 #![allow(unsafe_code)]
 
-use core::cell::{RefCell, UnsafeCell};
+use core::cell::UnsafeCell;
 use core::fmt;
 use core::ops::{Deref, DerefMut};
 
@@ -265,7 +267,7 @@ pub struct ArenaStats {
 /// [`alloc`]: Self::alloc
 pub struct FrameArena<M: RawMutex, const N: usize> {
     /// Allocator metadata; see the invariants above.
-    state: Mutex<M, RefCell<State>>,
+    state: Mutex<M, State>,
     /// Frame units, then the boundary bitmap, then padding.
     storage: UnsafeCell<[u8; N]>,
 }
@@ -291,7 +293,7 @@ impl<M: RawMutex + Sync, const N: usize> FrameArena<M, N> {
     pub const fn new() -> Self {
         let () = Self::VALID;
         Self {
-            state: Mutex::new(RefCell::new(State::EMPTY)),
+            state: Mutex::new(State::EMPTY),
             storage: UnsafeCell::new([0; N]),
         }
     }
@@ -341,7 +343,7 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
         self.with_heap(|st, _| ArenaStats {
             capacity: N,
             used: st.used,
-            live: st.live,
+            live: st.live(),
             high_water: st.high_water,
             free_blocks: st.free_blocks,
             allocs: st.allocs,
@@ -361,17 +363,17 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
             base: self.storage.get().cast::<u8>(),
             units: Self::UNITS,
         };
-        self.state.lock(|state| {
-            // Never already borrowed: nothing below calls back into the arena.
-            let mut st = state.borrow_mut();
-            if !st.ready {
-                st.ready = true;
-                st.used = Self::RESERVED;
-                st.high_water = Self::RESERVED;
-                st.insert(mem, 0, Self::UNITS);
-            }
-            f(&mut st, mem)
-        })
+        // Safety: `lock_mut` is sound unless called re-entrantly; this is the only place
+        // that locks `state`, and `f` is one of this module's closures, none of which
+        // calls back into the arena (they only touch `State` and `Mem`).
+        unsafe {
+            self.state.lock_mut(|st| {
+                if !st.ready {
+                    st.set_up(mem, Self::RESERVED);
+                }
+                f(st, mem)
+            })
+        }
     }
     /// Allocate a frame of `len` bytes (`0..=MAX_ALLOC`). Its bytes are initialised but
     /// unspecified (an older frame's data); [`FrameBuf::truncate`] it to the length
@@ -393,40 +395,42 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
     ///
     /// # Panics
     ///
-    /// Only if the allocator's invariants were broken (a bug in this module): bounds
-    /// checks on the metadata turn that into a panic rather than memory corruption.
+    /// Never, unless the allocator's invariants were broken (a bug in this module): debug
+    /// builds then panic on the first metadata access out of the arena's bounds (see
+    /// `Mem`); release builds do not check, to keep an allocation to a few dozen
+    /// instructions.
     pub fn alloc(&self, len: usize) -> Result<FrameBuf<'_>, AllocError> {
-        let (start, units) = self.with_heap(|st, mem| {
-            let result = if len > Self::MAX_ALLOC {
-                Err(AllocError::TooLarge {
-                    len,
-                    max: Self::MAX_ALLOC,
-                })
+        if len > Self::MAX_ALLOC {
+            self.with_heap(|st, _| st.failures = st.failures.wrapping_add(1));
+            return Err(AllocError::TooLarge {
+                len,
+                max: Self::MAX_ALLOC,
+            });
+        }
+        let units = len.div_ceil(GRANULARITY).max(1);
+        let start = self.with_heap(|st, mem| {
+            let start = st.alloc(mem, units);
+            if start.is_some() {
+                st.allocs = st.allocs.wrapping_add(1);
+                st.used += units * GRANULARITY;
+                st.high_water = st.high_water.max(st.used);
             } else {
-                let units = len.div_ceil(GRANULARITY).max(1);
-                st.alloc(mem, units)
-                    .map(|start| (start, units))
-                    .ok_or(AllocError::Full { len })
-            };
-            match result {
-                Ok((_, units)) => {
-                    st.allocs = st.allocs.wrapping_add(1);
-                    st.live += 1;
-                    st.used += units * GRANULARITY;
-                    st.high_water = st.high_water.max(st.used);
-                }
-                Err(_) => st.failures = st.failures.wrapping_add(1),
+                st.failures = st.failures.wrapping_add(1);
             }
-            result
-        })?;
-        // The casts are lossless: `start + units <= UNITS <= MAX_UNITS` and
-        // `len <= MAX_ALLOC_LIMIT`.
-        Ok(FrameBuf {
-            arena: self,
-            start: start as u16,
-            units: units as u16,
-            len: len as u16,
-        })
+            start
+        });
+        match start {
+            // The casts are lossless: `start + units <= UNITS <= MAX_UNITS` and
+            // `len <= MAX_ALLOC_LIMIT`.
+            Some(start) => Ok(FrameBuf {
+                arena: self,
+                // In bounds: `start < UNITS`, so the block's first byte is in the storage.
+                ptr: self.base().wrapping_add(start * GRANULARITY),
+                units: units as u16,
+                len: len as u16,
+            }),
+            None => Err(AllocError::Full { len }),
+        }
     }
 }
 
@@ -449,13 +453,13 @@ trait Grants {
     /// Start of the storage.
     fn base(&self) -> *mut u8;
 
-    /// Return the block `start..start + units` to the free lists.
+    /// Return the block of `units` units whose first byte is `ptr` to the free lists.
     ///
     /// # Safety
     ///
-    /// * `start..start + units` is a block allocated by this arena and not yet released.
+    /// * `ptr` and `units` describe a block allocated by this arena and not yet released.
     /// * No reference into its bytes is used afterwards.
-    unsafe fn release(&self, start: usize, units: usize);
+    unsafe fn release(&self, ptr: *mut u8, units: usize);
 }
 
 impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
@@ -463,11 +467,12 @@ impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
         self.storage.get().cast::<u8>()
     }
 
-    unsafe fn release(&self, start: usize, units: usize) {
+    unsafe fn release(&self, ptr: *mut u8, units: usize) {
+        // The block's first unit (the caller guarantees `ptr` is one of ours).
+        let start = (ptr.addr() - self.base().addr()) / GRANULARITY;
         self.with_heap(|st, mem| {
             st.free(mem, start, units);
             st.frees = st.frees.wrapping_add(1);
-            st.live -= 1;
             st.used -= units * GRANULARITY;
         });
     }
@@ -484,9 +489,10 @@ impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
 pub struct FrameBuf<'a> {
     /// The arena, which outlives the frame.
     arena: &'a dyn Grants,
-    /// First unit of the block; owned by this `FrameBuf` alone (invariant 1).
-    start: u16,
-    /// Size of the block in units; `start + units <= UNITS`.
+    /// First byte of the block, a pointer into the arena's storage; the block is owned
+    /// by this `FrameBuf` alone (invariant 1).
+    ptr: *mut u8,
+    /// Size of the block in units; the block ends at or before unit `UNITS`.
     units: u16,
     /// Logical length in bytes; `len <= units * GRANULARITY`.
     len: u16,
@@ -541,13 +547,9 @@ impl FrameBuf<'_> {
         self.len()
     }
 
-    /// Pointer to the first byte of the block.
-    fn ptr(&self) -> *mut u8 {
-        // `wrapping_add` cannot leave the storage: `start * GRANULARITY < UNITS *
-        // GRANULARITY <= N`, so this is an in-bounds pointer of the storage allocation.
-        self.arena
-            .base()
-            .wrapping_add(usize::from(self.start) * GRANULARITY)
+    /// Offset of the block in the arena's storage, in bytes.
+    fn offset(&self) -> usize {
+        self.ptr.addr() - self.arena.base().addr()
     }
 }
 
@@ -555,13 +557,13 @@ impl Deref for FrameBuf<'_> {
     type Target = [u8];
 
     fn deref(&self) -> &[u8] {
-        // Safety: the block `start..start + units` lies inside the storage, which lives for
-        // `'a`, and `len <= units * GRANULARITY`. It is owned by this `FrameBuf` alone
+        // Safety: the block (`units` units from `ptr`) lies inside the storage, which lives
+        // for `'a`, and `len <= units * GRANULARITY`. It is owned by this `FrameBuf` alone
         // (invariant 1): the allocator does not touch it (invariant 4) and no other
         // `FrameBuf` covers it, so the only references to these bytes come from this
         // `FrameBuf`, and `&self` keeps `deref_mut` out. The bytes are initialised
         // (invariant 6).
-        unsafe { core::slice::from_raw_parts(self.ptr(), self.len()) }
+        unsafe { core::slice::from_raw_parts(self.ptr, self.len()) }
     }
 }
 
@@ -569,7 +571,7 @@ impl DerefMut for FrameBuf<'_> {
     fn deref_mut(&mut self) -> &mut [u8] {
         // Safety: as in `deref`; `&mut self` makes this the only live reference to the
         // block's bytes.
-        unsafe { core::slice::from_raw_parts_mut(self.ptr(), self.len()) }
+        unsafe { core::slice::from_raw_parts_mut(self.ptr, self.len()) }
     }
 }
 
@@ -578,8 +580,7 @@ impl Drop for FrameBuf<'_> {
         // Safety: the block was allocated by `self.arena` and is released exactly once,
         // here; references into it borrowed `self`, so none outlives this call.
         unsafe {
-            self.arena
-                .release(usize::from(self.start), usize::from(self.units));
+            self.arena.release(self.ptr, usize::from(self.units));
         }
     }
 }
@@ -587,7 +588,7 @@ impl Drop for FrameBuf<'_> {
 impl fmt::Debug for FrameBuf<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("FrameBuf")
-            .field("offset", &(usize::from(self.start) * GRANULARITY))
+            .field("offset", &self.offset())
             .field("len", &self.len())
             .field("capacity", &self.capacity())
             .finish()
@@ -600,7 +601,7 @@ impl defmt::Format for FrameBuf<'_> {
         defmt::write!(
             f,
             "FrameBuf {{ offset: {}, len: {}, capacity: {} }}",
-            usize::from(self.start) * GRANULARITY,
+            self.offset(),
             self.len(),
             self.capacity()
         );
@@ -608,6 +609,12 @@ impl defmt::Format for FrameBuf<'_> {
 }
 
 /// Raw access to the storage for the allocator, valid while the lock is held.
+///
+/// Every unit index the allocator passes is below `units`: it is a block start or end
+/// taken from a [`FrameBuf`], a free-list link, a boundary bit or a free block's size
+/// (invariants 1-4). Debug builds (the tests, Miri) assert it on every access; release
+/// builds rely on the invariants, as `rlsf` does, so that an operation costs a few dozen
+/// instructions rather than twice that in checks.
 #[derive(Clone, Copy)]
 struct Mem {
     /// Start of the storage (`N` bytes).
@@ -617,73 +624,80 @@ struct Mem {
 }
 
 impl Mem {
-    /// Byte offset of `field` in unit `unit`.
-    fn offset(self, unit: usize, field: usize) -> usize {
-        assert!(unit < self.units, "arena: unit out of range");
-        unit * GRANULARITY + field
+    /// Pointer to byte `field` of unit `unit`.
+    #[inline(always)]
+    fn at(self, unit: usize, field: usize) -> *mut u8 {
+        debug_assert!(unit < self.units, "arena: unit out of range");
+        // `unit < units` and `field <= 6`, so this stays inside the storage's
+        // `units * GRANULARITY` frame bytes.
+        self.base.wrapping_add(unit * GRANULARITY + field)
     }
 
     /// Read the `u16` field at `field` of unit `unit` of a free block.
+    #[inline(always)]
     fn get(self, unit: usize, field: usize) -> usize {
-        let at = self.offset(unit, field);
-        // Safety: `at + 2 <= units * GRANULARITY <= N`, in bounds of the storage. The unit
-        // is the first or last unit of a free block (callers follow free-list links,
-        // boundary bits and footers, invariants 1-4), which no `FrameBuf` covers, and the
-        // lock is held, so nothing writes it concurrently. `[u8; 2]` has alignment 1.
-        let bytes = unsafe { self.base.add(at).cast::<[u8; 2]>().read() };
+        // Safety: `at + 2 <= units * GRANULARITY <= N`, in bounds of the storage (see
+        // `Mem`). The unit is the first or last unit of a free block (callers follow
+        // free-list links, boundary bits and footers, invariants 1-4), which no
+        // `FrameBuf` covers, and the lock is held, so nothing writes it concurrently.
+        // `[u8; 2]` has alignment 1.
+        let bytes = unsafe { self.at(unit, field).cast::<[u8; 2]>().read() };
         usize::from(u16::from_le_bytes(bytes))
     }
 
     /// Write the `u16` field at `field` of unit `unit` of a free block.
+    #[inline(always)]
     fn set(self, unit: usize, field: usize, value: usize) {
-        let at = self.offset(unit, field);
         // Values are unit counts or links, at most `MAX_UNITS + 1`.
         let bytes = (value as u16).to_le_bytes();
         // Safety: as in `get`; the unit belongs to a free block or to a block being freed
         // or split off, which no `FrameBuf` covers.
-        unsafe { self.base.add(at).cast::<[u8; 2]>().write(bytes) };
+        unsafe { self.at(unit, field).cast::<[u8; 2]>().write(bytes) };
     }
 
-    /// Byte offset and mask of the boundary bit of `unit`.
-    fn bit(self, unit: usize) -> (usize, u8) {
-        assert!(unit < self.units, "arena: unit out of range");
-        (self.units * GRANULARITY + unit / 8, 1 << (unit % 8))
+    /// Pointer to the bitmap byte holding the boundary bit of `unit`, and its mask.
+    #[inline(always)]
+    fn bit(self, unit: usize) -> (*mut u8, u8) {
+        debug_assert!(unit < self.units, "arena: unit out of range");
+        // The bitmap's `ceil(units / 8)` bytes follow the frame units inside the storage.
+        let at = self.units * GRANULARITY + unit / 8;
+        (self.base.wrapping_add(at), 1 << (unit % 8))
     }
 
     /// The boundary bit of `unit` (invariant 3).
+    #[inline(always)]
     fn boundary(self, unit: usize) -> bool {
-        let (at, mask) = self.bit(unit);
-        // Safety: `at < units * GRANULARITY + ceil(units / 8) <= N`; the bitmap is only
-        // accessed by the allocator, with the lock held.
-        unsafe { self.base.add(at).read() & mask != 0 }
+        let (byte, mask) = self.bit(unit);
+        // Safety: `byte` is in bounds (`units * GRANULARITY + ceil(units / 8) <= N`); the
+        // bitmap is only accessed by the allocator, with the lock held.
+        unsafe { byte.read() & mask != 0 }
     }
 
-    /// Set or clear the boundary bit of `unit`.
-    fn set_boundary(self, unit: usize, on: bool) {
-        let (at, mask) = self.bit(unit);
+    /// Set the boundary bit of `unit`.
+    #[inline(always)]
+    fn mark(self, unit: usize) {
+        let (byte, mask) = self.bit(unit);
         // Safety: as in `boundary`.
-        unsafe {
-            let byte = self.base.add(at);
-            byte.write(if on {
-                byte.read() | mask
-            } else {
-                byte.read() & !mask
-            });
-        }
+        unsafe { byte.write(byte.read() | mask) };
+    }
+
+    /// Clear the boundary bit of `unit`.
+    #[inline(always)]
+    fn unmark(self, unit: usize) {
+        let (byte, mask) = self.bit(unit);
+        // Safety: as in `boundary`.
+        unsafe { byte.write(byte.read() & !mask) };
     }
 }
 
-/// Free-list link of a block: unit + 1, 0 = none.
-fn link(unit: Option<usize>) -> usize {
-    unit.map_or(0, |u| u + 1)
-}
-
-/// The block a link points to.
+/// The block a free-list link points to (links are unit + 1, 0 = none).
+#[inline(always)]
 fn unlink(link: usize) -> Option<usize> {
     link.checked_sub(1)
 }
 
 /// Size class `(fl, sl)` of a size in units (`1..=MAX_UNITS`).
+#[inline(always)]
 fn class(size: usize) -> (usize, usize) {
     if size < SL {
         (0, size)
@@ -693,8 +707,24 @@ fn class(size: usize) -> (usize, usize) {
     }
 }
 
+/// The class of [`round_up`]`(size)`, with one bit scan: the smallest class whose every
+/// block is at least `size` units.
+#[inline(always)]
+fn class_up(size: usize) -> (usize, usize) {
+    if size < SL {
+        (0, size)
+    } else {
+        let shift = size.ilog2() - SLI;
+        // `top` is in `SL..=2 * SL`; `2 * SL` is the first class of the next first level.
+        let top = (size + (1 << shift) - 1) >> shift;
+        let flat = ((shift as usize + 1) << SLI) + top - SL;
+        (flat >> SLI, flat & (SL - 1))
+    }
+}
+
 /// `size` rounded up to the smallest size of its class or the next one, so that every
 /// block of that class or above is at least `size`.
+#[cfg(test)]
 fn round_up(size: usize) -> usize {
     if size < SL {
         size
@@ -714,10 +744,9 @@ struct State {
     sl_bitmap: [u16; FL],
     /// First block of each free list, as a link.
     heads: [[u16; SL]; FL],
-    /// See [`ArenaStats`].
+    /// See [`ArenaStats`]; `live` is `allocs - frees`.
     used: usize,
     high_water: usize,
-    live: usize,
     free_blocks: usize,
     allocs: u32,
     frees: u32,
@@ -733,111 +762,178 @@ impl State {
         heads: [[0; SL]; FL],
         used: 0,
         high_water: 0,
-        live: 0,
         free_blocks: 0,
         allocs: 0,
         frees: 0,
         failures: 0,
     };
 
-    /// Make `block..block + size` a free block: header, footer, boundary bits, and the
-    /// head of its free list. It must not be adjacent to another free block.
-    fn insert(&mut self, mem: Mem, block: usize, size: usize) {
-        let (fl, sl) = class(size);
-        let next = usize::from(self.heads[fl][sl]);
-        mem.set(block, field::SIZE, size);
-        mem.set(block, field::NEXT, next);
-        mem.set(block, field::PREV, link(None));
-        mem.set(block + size - 1, field::FOOT, size);
-        if let Some(next) = unlink(next) {
-            mem.set(next, field::PREV, link(Some(block)));
-        }
-        mem.set_boundary(block, true);
-        mem.set_boundary(block + size - 1, true);
-        self.heads[fl][sl] = link(Some(block)) as u16;
-        self.sl_bitmap[fl] |= 1 << sl;
-        self.fl_bitmap |= 1 << fl;
-        self.free_blocks += 1;
+    /// Live frames.
+    fn live(&self) -> usize {
+        // Exact: at most `MAX_UNITS` frames are live, far below 2^32.
+        self.allocs.wrapping_sub(self.frees) as usize
     }
 
-    /// Take the free block `block` of `size` units out of its list.
-    fn remove(&mut self, mem: Mem, block: usize, size: usize) {
+    /// Write the header and footer of the free block `block..block + size` and put it at
+    /// the head of its free list. Its boundary bits are the caller's business, and so is
+    /// `free_blocks`.
+    #[inline(always)]
+    fn push(&mut self, mem: Mem, block: usize, size: usize) {
         let (fl, sl) = class(size);
+        let head = usize::from(self.heads[fl][sl]);
+        mem.set(block, field::SIZE, size);
+        mem.set(block, field::NEXT, head);
+        mem.set(block, field::PREV, 0);
+        mem.set(block + size - 1, field::FOOT, size);
+        if let Some(head) = unlink(head) {
+            mem.set(head, field::PREV, block + 1);
+        }
+        self.heads[fl][sl] = (block + 1) as u16;
+        self.sl_bitmap[fl] |= 1 << sl;
+        self.fl_bitmap |= 1 << fl;
+    }
+
+    /// Take the free block `block` of `size` units out of its list (anywhere in it).
+    #[inline(always)]
+    fn remove(&mut self, mem: Mem, block: usize, size: usize) {
         let next = mem.get(block, field::NEXT);
         let prev = mem.get(block, field::PREV);
-        match unlink(prev) {
-            Some(prev) => mem.set(prev, field::NEXT, next),
-            None => {
-                self.heads[fl][sl] = next as u16;
-                if next == 0 {
-                    self.sl_bitmap[fl] &= !(1 << sl);
-                    if self.sl_bitmap[fl] == 0 {
-                        self.fl_bitmap &= !(1 << fl);
-                    }
-                }
-            }
-        }
         if let Some(next) = unlink(next) {
             mem.set(next, field::PREV, prev);
         }
-        mem.set_boundary(block, false);
-        mem.set_boundary(block + size - 1, false);
-        self.free_blocks -= 1;
+        match unlink(prev) {
+            Some(prev) => mem.set(prev, field::NEXT, next),
+            None => {
+                let (fl, sl) = class(size);
+                self.heads[fl][sl] = next as u16;
+                if next == 0 {
+                    self.emptied(fl, sl);
+                }
+            }
+        }
     }
 
-    /// First block of the smallest non-empty list of class `(fl, sl)` or above.
-    fn find(&self, (fl, sl): (usize, usize)) -> Option<usize> {
-        let here = self.sl_bitmap.get(fl)? & (u16::MAX << sl);
-        let (fl, sl) = if here != 0 {
-            (fl, here.trailing_zeros() as usize)
-        } else {
-            let above = self.fl_bitmap & u16::MAX.checked_shl(fl as u32 + 1)?;
-            if above == 0 {
-                return None;
-            }
-            let fl = above.trailing_zeros() as usize;
-            (fl, self.sl_bitmap[fl].trailing_zeros() as usize)
-        };
-        unlink(usize::from(self.heads[fl][sl]))
+    /// List `(fl, sl)` became empty: clear its bits (invariant 5).
+    #[inline(always)]
+    fn emptied(&mut self, fl: usize, sl: usize) {
+        self.sl_bitmap[fl] &= !(1 << sl);
+        if self.sl_bitmap[fl] == 0 {
+            self.fl_bitmap &= !(1 << fl);
+        }
+    }
+
+    /// The smallest non-empty class `(fl, sl)` or above.
+    #[inline(always)]
+    fn find(&self, (fl, sl): (usize, usize)) -> Option<(usize, usize)> {
+        let here = self.sl_bitmap[fl] & (u16::MAX << sl);
+        if here != 0 {
+            return Some((fl, here.trailing_zeros() as usize));
+        }
+        // `fl < FL <= 15`: the shift does not overflow.
+        let above = self.fl_bitmap & (u16::MAX << (fl + 1));
+        if above == 0 {
+            return None;
+        }
+        let fl = above.trailing_zeros() as usize;
+        Some((fl, self.sl_bitmap[fl].trailing_zeros() as usize))
+    }
+
+    /// Set up a new arena: all `mem.units` units form one free block.
+    #[cold]
+    #[inline(never)]
+    fn set_up(&mut self, mem: Mem, reserved: usize) {
+        self.ready = true;
+        self.used = reserved;
+        self.high_water = reserved;
+        mem.mark(0);
+        mem.mark(mem.units - 1);
+        self.push(mem, 0, mem.units);
+        self.free_blocks = 1;
     }
 
     /// Allocate `units` (`1..=MAX_UNITS`) and return the first unit.
+    #[inline(always)]
     fn alloc(&mut self, mem: Mem, units: usize) -> Option<usize> {
-        // Good fit: any block of the rounded-up class or above fits. Failing that, the
-        // first block of the request's own class may (only for sizes of 32 units and more,
-        // whose classes span several sizes).
-        let block = self.find(class(round_up(units))).or_else(|| {
-            let (fl, sl) = class(units);
-            unlink(usize::from(self.heads[fl][sl])).filter(|&b| mem.get(b, field::SIZE) >= units)
-        })?;
+        // Good fit: the first block of any list of the rounded-up class or above fits.
+        // Failing that, the first block of the request's own class may (only for sizes of
+        // 32 units and more, whose classes span several sizes).
+        let (fl, sl) = match self.find(class_up(units)) {
+            Some(found) => found,
+            None => {
+                let (fl, sl) = class(units);
+                let head = unlink(usize::from(self.heads[fl][sl]))?;
+                if mem.get(head, field::SIZE) < units {
+                    return None;
+                }
+                (fl, sl)
+            }
+        };
+        // Take the head of list `(fl, sl)`, which is not empty (invariant 5).
+        let block = usize::from(self.heads[fl][sl]).wrapping_sub(1);
         let size = mem.get(block, field::SIZE);
-        self.remove(mem, block, size);
+        let next = mem.get(block, field::NEXT);
+        self.pop(mem, fl, sl, next);
+        // Unit `block` is no longer the first unit of a free block (invariant 3).
+        mem.unmark(block);
         if size > units {
-            // The rest was inside a free block, so its neighbours are this block (now
-            // allocated) and a used block: it is not adjacent to a free block.
-            self.insert(mem, block + units, size - units);
+            // The rest stays free: its last unit keeps its bit, its first unit gets one.
+            // Its neighbours are this block (now allocated) and a used block, so it is
+            // not adjacent to a free block (invariant 2).
+            let rest = block + units;
+            mem.mark(rest);
+            self.push(mem, rest, size - units);
+        } else {
+            mem.unmark(block + size - 1);
+            self.free_blocks -= 1;
         }
         Some(block)
     }
 
+    /// Remove the head of list `(fl, sl)`, whose successor is `next` (a link).
+    #[inline(always)]
+    fn pop(&mut self, mem: Mem, fl: usize, sl: usize, next: usize) {
+        self.heads[fl][sl] = next as u16;
+        match unlink(next) {
+            Some(next) => mem.set(next, field::PREV, 0),
+            None => self.emptied(fl, sl),
+        }
+    }
+
     /// Release the allocated block `block..block + units`, merging it with free neighbours.
+    #[inline(always)]
     fn free(&mut self, mem: Mem, block: usize, units: usize) {
         let (mut start, mut size) = (block, units);
-        let after = block + units;
-        if after < mem.units && mem.boundary(after) {
-            // `after` starts the next block; its bit is set iff that block is free.
-            let next_size = mem.get(after, field::SIZE);
-            self.remove(mem, after, next_size);
+        let end = block + units;
+        let mut blocks = self.free_blocks + 1;
+        if end < mem.units && mem.boundary(end) {
+            // `end` starts the next block; its bit is set iff that block is free. Its
+            // last unit becomes the merged block's last; its first unit (if another) is
+            // now inside the merged block.
+            let next_size = mem.get(end, field::SIZE);
+            self.remove(mem, end, next_size);
+            if next_size > 1 {
+                mem.unmark(end);
+            }
             size += next_size;
+            blocks -= 1;
+        } else {
+            mem.mark(end - 1);
         }
         if block > 0 && mem.boundary(block - 1) {
             // `block - 1` ends the previous block; its bit is set iff that block is free.
             let prev_size = mem.get(block - 1, field::FOOT);
             start = block - prev_size;
             self.remove(mem, start, prev_size);
+            if prev_size > 1 {
+                mem.unmark(block - 1);
+            }
             size += prev_size;
+            blocks -= 1;
+        } else {
+            mem.mark(block);
         }
-        self.insert(mem, start, size);
+        self.push(mem, start, size);
+        self.free_blocks = blocks;
     }
 }
 
@@ -899,6 +995,7 @@ mod tests {
             // `r` is the smallest size of its class, and that class is not below the
             // class of `size`: every block of class `class(r)` or above holds `size`.
             assert!(class(r) >= c);
+            assert_eq!(class_up(size), class(r), "class_up({size})");
             assert!(r == 1 || class(r - 1) < class(r), "round_up({size}) = {r}");
             last = c;
         }
@@ -983,7 +1080,7 @@ mod tests {
                     assert_eq!(mem.boundary(u), ends.contains(&u), "boundary bit {u}");
                 }
                 assert_eq!(st.free_blocks, free_blocks);
-                assert_eq!(st.live, live.len());
+                assert_eq!(st.live(), live.len());
                 assert_eq!(
                     st.used,
                     Self::RESERVED + (mem.units - free_units) * GRANULARITY
@@ -1031,7 +1128,7 @@ mod tests {
             let blocks = |frames: &[FrameBuf<'_>]| -> Vec<(usize, usize)> {
                 frames
                     .iter()
-                    .map(|f| (usize::from(f.start), usize::from(f.units)))
+                    .map(|f| (f.offset() / GRANULARITY, usize::from(f.units)))
                     .collect()
             };
             let mut largest = arena.check(&[]);

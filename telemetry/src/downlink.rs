@@ -437,7 +437,7 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     queues: [FrameQueue<'a, M, Q>; D],
     ac_id: u8,
     /// Global sequence number: the age of a frame across all queues, for eviction.
-    seq: Mutex<M, Cell<u32>>,
+    seq: SeqCounter<M>,
     /// Whether [`ports`](Self::ports) handed the ports out already.
     ports_taken: Mutex<M, Cell<bool>>,
     /// Sends whose targets named no device.
@@ -454,6 +454,48 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
 
 fn no_clock() -> u32 {
     0
+}
+
+/// The downlink's global sequence number (wrapping): an atomic counter where the target
+/// has atomic read-modify-write (no lock taken per message), else a counter under the
+/// downlink's mutex (e.g. `thumbv6m`).
+struct SeqCounter<M: RawMutex> {
+    #[cfg(target_has_atomic = "32")]
+    next: core::sync::atomic::AtomicU32,
+    #[cfg(target_has_atomic = "32")]
+    _mutex: core::marker::PhantomData<M>,
+    #[cfg(not(target_has_atomic = "32"))]
+    next: Mutex<M, Cell<u32>>,
+}
+
+impl<M: RawMutex> SeqCounter<M> {
+    const fn new() -> Self {
+        Self {
+            #[cfg(target_has_atomic = "32")]
+            next: core::sync::atomic::AtomicU32::new(0),
+            #[cfg(target_has_atomic = "32")]
+            _mutex: core::marker::PhantomData,
+            #[cfg(not(target_has_atomic = "32"))]
+            next: Mutex::new(Cell::new(0)),
+        }
+    }
+
+    /// The next number.
+    #[inline]
+    fn next(&self) -> u32 {
+        #[cfg(target_has_atomic = "32")]
+        {
+            // Only uniqueness and order matter, not ordering with other memory.
+            self.next
+                .fetch_add(1, core::sync::atomic::Ordering::Relaxed)
+        }
+        #[cfg(not(target_has_atomic = "32"))]
+        self.next.lock(|n| {
+            let v = n.get();
+            n.set(v.wrapping_add(1));
+            v
+        })
+    }
 }
 
 /// [`Downlink::ports`] was called before: each device has one port, handed out once.
@@ -489,7 +531,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             devices,
             queues: [const { FrameQueue::new() }; D],
             ac_id,
-            seq: Mutex::new(Cell::new(0)),
+            seq: SeqCounter::new(),
             ports_taken: Mutex::new(Cell::new(false)),
             undeliverable: Mutex::new(Cell::new(0)),
             reply_tat: [const { Mutex::new(Cell::new(0)) }; D],
@@ -670,7 +712,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         let mut error = None;
         // Frames are all built before any is queued, so a frame can be copied from an
         // earlier target with the same transport.
-        let mut frames: heapless::Vec<(usize, FrameBuf<'a>), D> = heapless::Vec::new();
+        let mut frames: [Option<FrameBuf<'a>>; D] = [const { None }; D];
         for device in (0..D).filter(|&d| targets.contains(d)) {
             if reply && !self.admit_reply(device) {
                 self.queues[device].count_dropped(DropReason::RateLimited, priority, relay);
@@ -683,17 +725,17 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             let config = &self.devices[device];
             let built = self.build(msg, &meta, payload_len, config, priority, &frames);
             match built {
-                Ok(frame) => {
-                    // `frames` has room for one frame per device.
-                    let _ = frames.push((device, frame));
-                }
+                Ok(frame) => frames[device] = Some(frame),
                 Err(reason) => {
                     self.queues[device].count_dropped(reason, priority, relay);
                     error = Some(SendError { device, reason });
                 }
             }
         }
-        for (device, frame) in frames {
+        for (device, frame) in frames.iter_mut().enumerate() {
+            let Some(frame) = frame.take() else {
+                continue;
+            };
             let depth = match self.devices[device].depth {
                 0 => Q,
                 depth => depth,
@@ -722,11 +764,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     }
 
     fn next_seq(&self) -> u32 {
-        self.seq.lock(|s| {
-            let v = s.get();
-            s.set(v.wrapping_add(1));
-            v
-        })
+        self.seq.next()
     }
 
     /// Builds the frame of `msg` for one transport in arena memory.
@@ -737,7 +775,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         payload_len: usize,
         config: &DeviceConfig,
         priority: u8,
-        built: &[(usize, FrameBuf<'a>)],
+        built: &[Option<FrameBuf<'a>>],
     ) -> Result<FrameBuf<'a>, DropReason> {
         let transport = config.transport;
         let reserve = usize::from(config.reserve);
@@ -751,9 +789,10 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
                 .map_err(|_| DropReason::TooLarge)?;
         }
         let mut frame = self.alloc(frame_len + reserve, priority)?;
-        if let Some((_, same)) = built
+        if let Some(same) = built
             .iter()
-            .find(|(d, _)| self.devices[*d].transport == transport)
+            .zip(&self.devices)
+            .find_map(|(f, d)| f.as_ref().filter(|_| d.transport == transport))
         {
             // Same transport, same length: the earlier frame was checked against
             // `payload_len` below. Never a panic, whatever the lengths.
@@ -872,7 +911,15 @@ trait Core: Sync {
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
     /// Runs `f` on device `device`'s outstanding frames (nothing for a bad index).
     fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
-    fn complete(&self, device: usize, len: usize, outcome: Result<(), DropReason>);
+    /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it;
+    /// with `take_next`, then takes the device's next frame under the same lock.
+    fn complete(
+        &self,
+        device: usize,
+        frame: FrameBuf<'_>,
+        outcome: Result<(), DropReason>,
+        take_next: bool,
+    ) -> Option<FrameBuf<'_>>;
 }
 
 impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M, D, Q> {
@@ -927,10 +974,14 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         }
     }
 
-    fn complete(&self, device: usize, len: usize, outcome: Result<(), DropReason>) {
-        if let Some(q) = self.queues.get(device) {
-            q.complete(len, outcome);
-        }
+    fn complete(
+        &self,
+        device: usize,
+        frame: FrameBuf<'_>,
+        outcome: Result<(), DropReason>,
+        take_next: bool,
+    ) -> Option<FrameBuf<'_>> {
+        self.queues.get(device)?.complete(frame, outcome, take_next)
     }
 }
 
@@ -1214,6 +1265,26 @@ impl<'d> Device<'d> {
     pub fn sender(&self) -> Sender<'d> {
         Sender { core: self.core }
     }
+
+    /// Waits for this device's most important frame (see [`Port::next`]).
+    pub(crate) async fn next(&self) -> Outgoing<'d> {
+        poll_fn(|cx| match self.receive(Some(cx)) {
+            Some(frame) => Poll::Ready(frame),
+            None => Poll::Pending,
+        })
+        .await
+    }
+
+    /// Takes this device's most important frame; with a context, registers it for the
+    /// next frame when there is none. For the device's one consumer: its [`Port`], or
+    /// the writer task that holds the port.
+    pub(crate) fn receive(&self, cx: Option<&mut Context<'_>>) -> Option<Outgoing<'d>> {
+        let frame = self.core.try_receive(self.index(), cx)?;
+        Some(Outgoing {
+            frame: Some(frame),
+            device: *self,
+        })
+    }
 }
 
 impl From<Device<'_>> for Targets {
@@ -1277,12 +1348,7 @@ impl<'d> Port<'d> {
     /// The most important frame waiting, if any. Report how its write went with
     /// [`Outgoing::finish`]; dropping it unreported counts a failed write.
     pub fn try_next(&mut self) -> Option<Outgoing<'_>> {
-        let frame = self.device.core.try_receive(self.device.index(), None)?;
-        Some(Outgoing {
-            frame,
-            device: self.device,
-            done: false,
-        })
+        self.device.receive(None)
     }
 
     /// The length of the most important frame waiting, if any, without taking it (a
@@ -1304,19 +1370,7 @@ impl<'d> Port<'d> {
 
     /// Waits for the most important frame; as [`try_next`](Self::try_next).
     pub async fn next(&mut self) -> Outgoing<'_> {
-        let device = self.device;
-        let frame = poll_fn(
-            |cx| match device.core.try_receive(device.index(), Some(cx)) {
-                Some(frame) => Poll::Ready(frame),
-                None => Poll::Pending,
-            },
-        )
-        .await;
-        Outgoing {
-            frame,
-            device,
-            done: false,
-        }
+        self.device.next().await
     }
 }
 
@@ -1325,24 +1379,24 @@ impl<'d> Port<'d> {
 /// cancelled mid-write), it counts as a failed write, so every frame is counted once.
 /// Its arena memory is released when it is dropped.
 pub struct Outgoing<'p> {
-    frame: FrameBuf<'p>,
+    /// The frame; `None` once its outcome is counted (and its memory released).
+    frame: Option<FrameBuf<'p>>,
     device: Device<'p>,
-    done: bool,
 }
 
 impl fmt::Debug for Outgoing<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("Outgoing")
             .field("device", &self.device.index)
-            .field("len", &self.frame.len())
+            .field("len", &self.len())
             .finish()
     }
 }
 
-impl Outgoing<'_> {
+impl<'p> Outgoing<'p> {
     /// The frame's bytes, to change before writing (the writer sets XBee frame ids).
     pub(crate) fn bytes_mut(&mut self) -> &mut [u8] {
-        &mut self.frame
+        self.frame.as_deref_mut().unwrap_or_default()
     }
 
     /// Lets `layer` rewrite the frame for the wire in place, in the whole of its arena
@@ -1350,15 +1404,16 @@ impl Outgoing<'_> {
     /// [`DeviceConfig::reserve`]). `Err` if the layer refused it: the frame must not be
     /// written (its bytes are unspecified) and is to be [`refused`](Self::refuse).
     pub(crate) fn seal_with<L: LinkLayer + ?Sized>(&mut self, layer: &L) -> Result<(), ()> {
-        let len = self.frame.len();
-        let capacity = self.frame.set_len_to_capacity();
-        match layer.seal(&mut self.frame, len) {
+        let frame = self.frame.as_mut().ok_or(())?;
+        let len = frame.len();
+        let capacity = frame.set_len_to_capacity();
+        match layer.seal(frame, len) {
             Ok(sealed) if sealed <= capacity => {
-                self.frame.truncate(sealed);
+                frame.truncate(sealed);
                 Ok(())
             }
             _ => {
-                self.frame.truncate(len);
+                frame.truncate(len);
                 Err(())
             }
         }
@@ -1380,11 +1435,52 @@ impl Outgoing<'_> {
         self.finish_with(Err(DropReason::Refused));
     }
 
-    fn finish_with(mut self, outcome: Result<(), DropReason>) {
-        self.done = true;
-        self.device
+    /// A finished `Outgoing` of `device` (holding no frame), for a writer's loop.
+    pub(crate) fn none(device: Device<'p>) -> Self {
+        Self {
+            frame: None,
+            device,
+        }
+    }
+
+    /// Whether it holds a frame (not finished yet).
+    pub(crate) fn is_taken(&self) -> bool {
+        self.frame.is_some()
+    }
+
+    /// [`finish`](Self::finish) in place; with `take_next`, also takes the device's next
+    /// frame into `self` if one waits, under the same lock (for a writer that writes the
+    /// next frame at once).
+    pub(crate) fn finish_and_take(&mut self, written: bool, take_next: bool) {
+        let Some(frame) = self.frame.take() else {
+            return;
+        };
+        let outcome = if written {
+            Ok(())
+        } else {
+            Err(DropReason::WriteError)
+        };
+        self.frame = self
+            .device
             .core
-            .complete(self.device.index(), self.frame.len(), outcome);
+            .complete(self.device.index(), frame, outcome, take_next);
+    }
+
+    /// [`refuse`](Self::refuse) in place.
+    pub(crate) fn refuse_in_place(&mut self) {
+        if let Some(frame) = self.frame.take() {
+            self.device
+                .core
+                .complete(self.device.index(), frame, Err(DropReason::Refused), false);
+        }
+    }
+
+    fn finish_with(mut self, outcome: Result<(), DropReason>) {
+        if let Some(frame) = self.frame.take() {
+            self.device
+                .core
+                .complete(self.device.index(), frame, outcome, false);
+        }
     }
 }
 
@@ -1392,20 +1488,20 @@ impl core::ops::Deref for Outgoing<'_> {
     type Target = [u8];
 
     fn deref(&self) -> &[u8] {
-        &self.frame
+        self.frame.as_deref().unwrap_or_default()
     }
 }
 
 impl Drop for Outgoing<'_> {
     fn drop(&mut self) {
-        if !self.done {
+        if let Some(frame) = self.frame.take() {
             self.device.core.complete(
                 self.device.index(),
-                self.frame.len(),
+                frame,
                 Err(DropReason::WriteError),
+                false,
             );
         }
-        // The frame's memory returns to the arena after this, when its fields drop.
     }
 }
 

@@ -2,10 +2,10 @@
 //! priorities, with eviction of less important frames when full.
 //!
 //! ```text
-//!   least important                                     most important
-//!   index 0 ........................................... index len-1
-//!   [ p=0 newest .. p=0 oldest | p=1 newest .. p=1 oldest | ... ]
-//!     ^ evicted first: oldest of the lowest priority         ^ sent next
+//!   most important                                       least important
+//!   front ................................................ back
+//!   [ p=2 oldest .. p=2 newest | p=1 oldest .. p=1 newest | p=0 oldest .. p=0 newest ]
+//!     ^ sent next                  evicted first: oldest of the lowest priority ^
 //! ```
 //!
 //! This module is internal: the downlink is its only producer, and a device's
@@ -18,12 +18,14 @@
 //! buggy. This queue is built on embassy-sync's blocking [`Mutex`] (a critical section
 //! on boards, so interrupt-free contexts on any executor may send) and a
 //! [`WakerRegistration`] for its one consumer, the device's writer task. Entries are
-//! kept sorted, so sending takes the last one, FIFO order needs no sequence number, and
-//! the eviction candidate is found by binary search.
+//! kept sorted in a ring buffer (`heapless::Deque`), so sending takes the front one, FIFO
+//! order needs no sequence number, and the eviction candidate is found by binary search.
 //!
 //! # Time Complexity
-//! `push` and `evict` are O(Q) (a binary search and a shift of at most `Q` small
-//! entries), `receive` is O(1); `Q` is the queue capacity, typically 8..64.
+//! `receive` is O(1). `push` is O(1) when the new frame is not more important than the
+//! least important waiting one (all frames of one priority, say), else it moves the new
+//! entry forward past the less important ones; evicting moves the entries behind the
+//! evicted one back: both O(Q), where `Q` is the queue capacity, typically 8..64.
 
 use core::cell::RefCell;
 use core::task::Context;
@@ -97,9 +99,10 @@ fn older(a: u32, b: u32) -> bool {
 }
 
 struct State<'a, const Q: usize> {
-    /// Invariant: sorted by priority ascending, and within a priority by age descending
-    /// (newest first), so the last entry is the most important and oldest.
-    entries: heapless::Vec<Entry<'a>, Q>,
+    /// Invariant: sorted by priority descending, and within a priority by age ascending
+    /// (oldest first), so the front entry is the most important and oldest, and the
+    /// eviction candidate is the first entry of the back's priority.
+    entries: heapless::Deque<Entry<'a>, Q>,
     /// Whether the writer holds a frame taken from this queue, its priority, and
     /// whether it is a forwarded one.
     in_flight: bool,
@@ -112,9 +115,61 @@ struct State<'a, const Q: usize> {
 impl<'a, const Q: usize> State<'a, Q> {
     /// Index of the eviction candidate: the oldest entry of the lowest priority.
     fn candidate(&self) -> Option<usize> {
-        let lowest = self.entries.first()?.priority;
-        let end = self.entries.partition_point(|e| e.priority <= lowest);
-        end.checked_sub(1)
+        let lowest = self.entries.back()?.priority;
+        // The first index whose priority is `lowest` (binary search: entries before it are
+        // more important).
+        let (mut lo, mut hi) = (0, self.entries.len() - 1);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            match self.entries.get(mid) {
+                Some(e) if e.priority > lowest => lo = mid + 1,
+                _ => hi = mid,
+            }
+        }
+        Some(lo)
+    }
+
+    /// Removes and returns entry `at` (`at < len`), keeping the order of the others.
+    fn remove(&mut self, at: usize) -> Option<Entry<'a>> {
+        let len = self.entries.len();
+        if at >= len {
+            return None;
+        }
+        // Move it to the nearer end, then take it from there.
+        if at < len - at {
+            for i in (0..at).rev() {
+                self.entries.swap(i, i + 1);
+            }
+            self.entries.pop_front()
+        } else {
+            for i in at..len - 1 {
+                self.entries.swap(i, i + 1);
+            }
+            self.entries.pop_back()
+        }
+    }
+
+    /// Inserts `entry` after every entry at least as important (behind the entries of its
+    /// own priority: the newest of them). `Err` if the queue is full.
+    fn insert(&mut self, entry: Entry<'a>) -> Result<(), Entry<'a>> {
+        let priority = entry.priority;
+        // Usually no entry is less important: the new one stays at the back.
+        let in_place = self.entries.back().is_none_or(|e| e.priority >= priority);
+        self.entries.push_back(entry)?;
+        if !in_place {
+            // Move it forward past the less important entries.
+            let mut at = self.entries.len() - 1;
+            while at > 0
+                && self
+                    .entries
+                    .get(at - 1)
+                    .is_some_and(|e| e.priority < priority)
+            {
+                self.entries.swap(at - 1, at);
+                at -= 1;
+            }
+        }
+        Ok(())
     }
 
     fn level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
@@ -173,11 +228,57 @@ impl<'a, const Q: usize> State<'a, Q> {
         self.lost(entry.priority, entry.relayed);
     }
 
+    /// Takes the most important frame (see [`FrameQueue::try_receive`]).
+    #[inline]
+    fn receive(&mut self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
+        match self.entries.pop_front() {
+            Some(entry) => {
+                self.in_flight = true;
+                self.in_flight_priority = entry.priority;
+                self.in_flight_relayed = entry.relayed;
+                self.update_queued();
+                Some(entry.frame)
+            }
+            None => {
+                if let Some(cx) = cx {
+                    self.waker.register(cx.waker());
+                }
+                None
+            }
+        }
+    }
+
+    /// Counts the outcome of the in-flight frame and releases it (see
+    /// [`FrameQueue::complete`]); the caller updates the queue counts.
+    #[inline]
+    fn complete(&mut self, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
+        let len = frame.len();
+        drop(frame);
+        let priority = self.in_flight_priority;
+        let relayed = self.in_flight_relayed;
+        match outcome {
+            Ok(()) => {
+                self.stats.sent = self.stats.sent.wrapping_add(1);
+                self.stats.bytes_sent = self.stats.bytes_sent.wrapping_add(len as u32);
+                let l = self.level(priority);
+                l.sent = l.sent.wrapping_add(1);
+                if relayed {
+                    self.stats.relayed.sent = self.stats.relayed.sent.wrapping_add(1);
+                    let l = self.relayed_level(priority);
+                    l.sent = l.sent.wrapping_add(1);
+                }
+            }
+            Err(reason) => self.dropped(reason, priority, relayed),
+        }
+        self.in_flight = false;
+    }
+
+    #[inline]
     fn update_queued(&mut self) {
-        let n = self.entries.len() + usize::from(self.in_flight);
-        self.stats.queued = u16::try_from(n).unwrap_or(u16::MAX);
-        let waiting = u16::try_from(self.entries.len()).unwrap_or(u16::MAX);
+        // Lossless: `len <= Q <= u16::MAX` (checked at compile time).
+        let waiting = self.entries.len() as u16;
         self.stats.waiting = waiting;
+        self.stats.queued = waiting.saturating_add(u16::from(self.in_flight));
         self.stats.queue_high_water = self.stats.queue_high_water.max(waiting);
     }
 }
@@ -201,7 +302,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let () = Self::VALID;
         Self {
             state: Mutex::new(RefCell::new(State {
-                entries: heapless::Vec::new(),
+                entries: heapless::Deque::new(),
                 in_flight: false,
                 in_flight_priority: 0,
                 in_flight_relayed: false,
@@ -294,9 +395,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             }
             let mut result = Pushed::Queued;
             if s.entries.len() >= depth {
-                match s.candidate() {
-                    Some(i) if s.entries[i].priority < priority => {
-                        let victim = s.entries.remove(i);
+                let victim = s
+                    .candidate()
+                    .filter(|&i| s.entries.get(i).is_some_and(|e| e.priority < priority))
+                    .and_then(|i| s.remove(i));
+                match victim {
+                    Some(victim) => {
                         s.evicted(&victim, true);
                         released = Some(victim.frame);
                         result = Pushed::QueuedEvicting;
@@ -308,8 +412,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                     }
                 }
             }
-            // Newest first within a priority: before every entry of the same priority.
-            let at = s.entries.partition_point(|e| e.priority < priority);
+            // Oldest first within a priority: after every entry of the same priority.
             let entry = Entry {
                 priority,
                 seq,
@@ -317,7 +420,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 relayed,
                 frame,
             };
-            if let Err(entry) = s.entries.insert(at, entry) {
+            if let Err(entry) = s.insert(entry) {
                 // Unreachable while depth <= Q; counted rather than lost if it ever is.
                 s.dropped(DropReason::QueueFull, priority, relayed);
                 s.update_queued();
@@ -354,7 +457,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             if e.priority != expected.priority || e.seq != expected.seq {
                 return None;
             }
-            let entry = s.entries.remove(i);
+            let entry = s.remove(i)?;
             s.evicted(&entry, false);
             s.update_queued();
             Some(entry)
@@ -365,7 +468,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// The length of the most important frame, without taking it; with a context,
     /// registers the waker when there is none.
     pub fn peek_len(&self, cx: Option<&mut Context<'_>>) -> Option<usize> {
-        self.with(|s| match s.entries.last() {
+        self.with(|s| match s.entries.front() {
             Some(entry) => Some(entry.frame.len()),
             None => {
                 if let Some(cx) = cx {
@@ -380,46 +483,30 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// the waker when there is none. For the device's one consumer, which reports the
     /// outcome with [`complete`](Self::complete).
     pub fn try_receive(&self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
-        self.with(|s| match s.entries.pop() {
-            Some(entry) => {
-                s.in_flight = true;
-                s.in_flight_priority = entry.priority;
-                s.in_flight_relayed = entry.relayed;
-                s.update_queued();
-                Some(entry.frame)
-            }
-            None => {
-                if let Some(cx) = cx {
-                    s.waker.register(cx.waker());
-                }
-                None
-            }
-        })
+        self.with(|s| s.receive(cx))
     }
 
-    /// Reports the outcome of writing the in-flight frame of `len` bytes: sent, or lost
-    /// for `reason` (a write error, or refused by the device's link layer).
-    pub fn complete(&self, len: usize, outcome: Result<(), DropReason>) {
+    /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
+    /// write error, or refused by the device's link layer), and releases the frame's
+    /// memory. The release takes the arena's lock inside this queue's (one critical
+    /// section per frame instead of two; nothing takes them in the other order). With
+    /// `take_next`, then takes the most important frame as
+    /// [`try_receive`](Self::try_receive) (without a context) does, under the same lock:
+    /// for a writer that writes the next frame as soon as a write completes.
+    pub fn complete(
+        &self,
+        frame: FrameBuf<'_>,
+        outcome: Result<(), DropReason>,
+        take_next: bool,
+    ) -> Option<FrameBuf<'a>> {
         self.with(|s| {
-            let priority = s.in_flight_priority;
-            let relayed = s.in_flight_relayed;
-            match outcome {
-                Ok(()) => {
-                    s.stats.sent = s.stats.sent.wrapping_add(1);
-                    s.stats.bytes_sent = s.stats.bytes_sent.wrapping_add(len as u32);
-                    let l = s.level(priority);
-                    l.sent = l.sent.wrapping_add(1);
-                    if relayed {
-                        s.stats.relayed.sent = s.stats.relayed.sent.wrapping_add(1);
-                        let l = s.relayed_level(priority);
-                        l.sent = l.sent.wrapping_add(1);
-                    }
-                }
-                Err(reason) => s.dropped(reason, priority, relayed),
+            s.complete(frame, outcome);
+            let next = if take_next { s.receive(None) } else { None };
+            if next.is_none() {
+                s.update_queued();
             }
-            s.in_flight = false;
-            s.update_queued();
-        });
+            next
+        })
     }
 }
 
@@ -490,7 +577,7 @@ mod tests {
                 if policy == Policy::Requeue {
                     let old = queue.with(|s| {
                         let at = s.entries.iter().position(|e| e.latest == key)?;
-                        Some(s.entries.remove(at))
+                        s.remove(at)
                     });
                     drop(old);
                 }
@@ -510,7 +597,7 @@ mod tests {
                 ages.push(end - u64::from_le_bytes(at));
                 gaps[i] = gaps[i].max(end - last[i]);
                 last[i] = end;
-                queue.complete(frame.len(), Ok(()));
+                queue.complete(frame, Ok(()), false);
                 link_free_us = end;
             }
         }

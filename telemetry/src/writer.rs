@@ -43,7 +43,7 @@ use embassy_time::{Instant, Timer};
 use embedded_io_async::Write;
 
 use crate::delivery::DeliveryWindow;
-use crate::downlink::{Device, Pacing, Port};
+use crate::downlink::{Device, Outgoing, Pacing, Port};
 use crate::layer::{LinkLayer, Plain};
 
 /// Runs the writer of `port`'s device forever, writing its frames to `io`. (The port is
@@ -62,46 +62,56 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
     layer: &L,
 ) -> ! {
     let device = port.device();
-    // Frames grow by up to this much when sealed: the modem model counts it.
-    let reserve = usize::from(device.config().reserve);
     let config = device.config();
+    // Frames grow by up to this much when sealed: the modem model counts it.
+    let reserve = usize::from(config.reserve);
     let mut modem = config.pacing.map(ModemModel::new);
     let window = config.delivery.filter(|_| config.transport.has_tx_status());
+    // Without pacing or a status window nothing waits between two frames: the next frame
+    // is taken under the lock that counts the last one, into the same `Outgoing`.
+    let back_to_back = modem.is_none() && window.is_none();
+    let mut frame = Outgoing::none(device);
     loop {
-        if let Some(window) = &window {
-            wait_for_room(device, window).await;
-        }
-        if let Some(model) = &modem {
-            // Wait for room for the most important frame; look again after waiting, as a
-            // more important (perhaps longer) frame may have arrived meanwhile.
-            let len = port.ready().await + reserve;
-            let at = model.ready_at(len);
-            if at > Instant::now().as_ticks() {
-                Timer::at(Instant::from_ticks(at)).await;
-                continue;
+        if !frame.is_taken() {
+            if let Some(window) = &window {
+                wait_for_room(device, window).await;
             }
+            if let Some(model) = &modem {
+                // Wait for room for the most important frame; look again after waiting,
+                // as a more important (perhaps longer) frame may have arrived meanwhile.
+                let len = port.ready().await + reserve;
+                let at = model.ready_at(len);
+                if at > Instant::now().as_ticks() {
+                    Timer::at(Instant::from_ticks(at)).await;
+                    continue;
+                }
+            }
+            frame = device.next().await;
         }
-        let mut frame = port.next().await;
         if frame.seal_with(layer).is_err() {
-            frame.refuse();
+            frame.refuse_in_place();
             continue;
         }
-        let now = Instant::now().as_ticks();
-        if let Some(model) = &mut modem {
-            model.add(frame.len(), now);
-        }
-        if let Some(window) = &window
-            && let Some(id) = device.delivery_start(window, now)
-        {
-            config.transport.set_frame_id(frame.bytes_mut(), id);
+        if !back_to_back {
+            // The clock is read only for the devices that use it.
+            let now = Instant::now().as_ticks();
+            if let Some(model) = &mut modem {
+                model.add(frame.len(), now);
+            }
+            if let Some(window) = &window
+                && let Some(id) = device.delivery_start(window, now)
+            {
+                config.transport.set_frame_id(frame.bytes_mut(), id);
+            }
         }
         let mut written = io.write_all(&frame).await.is_ok();
         if written && config.flush {
             written = io.flush().await.is_ok();
         }
         // Counted here; if this future is dropped mid-write, `frame` counts itself as a
-        // failed write when it drops.
-        frame.finish(written);
+        // failed write when it drops. A frame taken here is never held across an
+        // `.await` before its write.
+        frame.finish_and_take(written, back_to_back);
     }
 }
 

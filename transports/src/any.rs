@@ -136,6 +136,9 @@ impl Encoder for AnyTransport {
         dispatch!(self, t => t.max_payload_len())
     }
 
+    // Not inlined: callers (the downlink's send path) would otherwise hoist the
+    // constants of every transport's header out of their loops, whichever one is used.
+    #[inline(never)]
     fn finish_frame(
         &self,
         meta: &TxMeta,

@@ -67,6 +67,7 @@ impl PprzChecksum {
 }
 
 /// PPRZ checksum `(ck_a, ck_b)` of `bytes` (which must start at the `LEN` byte).
+#[inline]
 pub fn pprz(bytes: &[u8]) -> (u8, u8) {
     let mut ck = PprzChecksum::new();
     ck.update(bytes);

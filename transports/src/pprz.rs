@@ -75,11 +75,26 @@ fn finish<const K: usize>(
         available,
     };
     let frame = frame.get_mut(..len).ok_or(too_small)?;
-    let (body, ck) = frame.split_last_chunk_mut::<TAIL_LEN>().ok_or(too_small)?;
-    *body.first_chunk_mut::<K>().ok_or(too_small)? = head;
-    let (a, b) = checksum::pprz(body.get(field::LEN..).unwrap_or_default());
-    *ck = [a, b];
+    if len < K + TAIL_LEN {
+        return Err(too_small);
+    }
+    *frame.first_chunk_mut::<K>().ok_or(too_small)? = head;
+    put_checksum(frame);
     Ok(len)
+}
+
+/// Writes the checksum of `frame` (`LEN` .. last `DATA` byte) into its last two bytes
+/// (a slice shorter than the tail is left as it is).
+///
+/// A call rather than inlined into [`finish`]: across it the caller keeps only the
+/// frame's length live (the checksum is stored here), so encoding loops spill fewer
+/// registers around it.
+#[inline(never)]
+fn put_checksum(frame: &mut [u8]) {
+    if let Some((body, ck)) = frame.split_last_chunk_mut::<TAIL_LEN>() {
+        let (a, b) = checksum::pprz(body.get(field::LEN..).unwrap_or_default());
+        *ck = [a, b];
+    }
 }
 
 /// The `LEN` byte of a frame of `len` bytes.

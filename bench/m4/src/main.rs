@@ -1,6 +1,14 @@
-//! The secure link's costs on an emulated Cortex-M4 (issue 14): each handshake step of
-//! both ends and the per-frame seal and open of a frame with 40 bytes of message fields,
-//! with the firmware backend of `pprz-secure` (`salty`).
+//! Instruction counts of the telemetry stack on an emulated Cortex-M4:
+//!
+//! * workloads 1-3 of the host benchmarks (issue 16), the very same loops on the same
+//!   inputs (`pprz-bench-common`): encoding 10 000 GPS/ATTITUDE messages into PPRZ v2
+//!   frames, parsing that stream back, and sending them through the downlink (arena,
+//!   priority queue, writer, a memory sink), polled without an executor, with the
+//!   downlink's locks a Cortex-M critical section (`cortex-m`'s
+//!   `critical-section-single-core`: an interrupt mask);
+//! * the secure link's costs (issue 14): each handshake step of both ends and the
+//!   per-frame seal and open of a frame with 40 bytes of message fields, with the firmware
+//!   backend of `pprz-secure` (`salty`).
 //!
 //! Run under QEMU's `mps2-an386` with `-icount shift=0` (`run.sh`): QEMU then advances
 //! its virtual clock by 1 ns per guest instruction, and the board's timers count that
@@ -16,11 +24,14 @@
 #![no_main]
 
 mod hw;
+mod time_driver;
 
 use core::fmt::Write;
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
+use pprz_bench_common::downlink::{self as dl_workload, Sink};
+use pprz_bench_common::stream::{self, MESSAGES};
 use pprz_secure::keys::INSECURE_TEST_KEY_FILE;
 use pprz_secure::{
     Initiator, InitiatorEvent, KeyExchange, KeyFile, OVERHEAD, Policy, Responder, ResponderEvent,
@@ -63,10 +74,11 @@ fn main() -> ! {
     let systick = SysTick::start(cp.SYST);
     let _ = writeln!(
         out,
-        "bench-m4: pprz-secure (salty) on mps2-an386, 1 tick = {INSTRUCTIONS_PER_TICK} \
-         instructions under -icount shift=0"
+        "bench-m4: the telemetry stack and pprz-secure (salty) on mps2-an386, 1 tick = \
+         {INSTRUCTIONS_PER_TICK} instructions under -icount shift=0"
     );
     calibrate(&mut out, &timer, &systick);
+    workloads(&mut out, &timer);
     handshakes(&mut out, &timer);
     frames(&mut out, &timer);
     let _ = writeln!(out, "done");
@@ -119,9 +131,18 @@ fn calibrate(out: &mut Uart, timer: &Timer, systick: &SysTick) {
         ("timer0", &|| timer.now(), u32::MAX),
         ("systick", &|| systick.now(), 0x00FF_FFFF),
     ];
+    // Each measurement starts right after a tick, so that it counts whole ticks whatever
+    // ran before it (otherwise the phase of the first tick can add one to either loop).
+    let at_tick = |now: &dyn Fn() -> u32| {
+        let t = now();
+        while now() == t {}
+    };
     for (name, now, mask) in clocks {
+        at_tick(now);
         let ((), short) = ticks(now, mask, || spin(black_box(SHORT)));
+        at_tick(now);
         let ((), long) = ticks(now, mask, || spin(black_box(LONG)));
+        at_tick(now);
         let ((), empty) = ticks(now, mask, || ());
         let per_tick_milli = instructions * 1000 / u64::from(long - short).max(1);
         let _ = writeln!(
@@ -136,11 +157,78 @@ fn calibrate(out: &mut Uart, timer: &Timer, systick: &SysTick) {
     }
 }
 
-/// Prints one figure, `result <name> <instructions> <count> <what>`: `instructions` (from
-/// `ticks`) for `count` operations.
-fn result(out: &mut Uart, name: &str, ticks: u32, count: usize, what: &str) {
+/// Prints one figure, `result <name> <instructions> <count> <unit> <what>`:
+/// `instructions` (from `ticks`) for `count` units of work.
+fn result(out: &mut Uart, name: &str, ticks: u32, count: usize, unit: &str, what: &str) {
     let instructions = u64::from(ticks) * u64::from(INSTRUCTIONS_PER_TICK);
-    let _ = writeln!(out, "result {name} {instructions} {count} {what}");
+    let _ = writeln!(out, "result {name} {instructions} {count} {unit} {what}");
+}
+
+/// Bytes of the encoded stream of workloads 1 and 2.
+const STREAM_LEN: usize = stream::stream_len(MESSAGES);
+
+/// Workloads 1-3 of the host benchmarks (`BENCHMARKS.md`, sections 1-3), each checked
+/// against its expected result after the measurement, as on the host.
+fn workloads(out: &mut Uart, timer: &Timer) {
+    let now = || timer.now();
+    // 1. Encode: generated encoder + PPRZ v2 framing, frame after frame.
+    let mut bytes = [0u8; STREAM_LEN];
+    let (len, t_encode) = ticks(now, u32::MAX, || {
+        stream::encode_stream(black_box(MESSAGES), black_box(&mut bytes))
+    });
+    if len != Ok(STREAM_LEN) {
+        fail("encode");
+    }
+    // 2. Parse: `Decoder::feed_borrowed` (the reader's path) and the generated decoder.
+    let (summary, t_parse) = ticks(now, u32::MAX, || stream::parse_stream(black_box(&bytes)));
+    if summary != stream::expected_summary(MESSAGES) {
+        fail("parse");
+    }
+    // 3. Downlink: send -> arena -> queue -> writer -> sink.
+    let arena = dl_workload::BenchArena::new();
+    let downlink = dl_workload::new_downlink(&arena);
+    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+    let mut sink = Sink::default();
+    let (stats, t_downlink) = ticks(now, u32::MAX, || {
+        dl_workload::run_downlink(&downlink, &mut port, black_box(MESSAGES), &mut sink)
+    });
+    if stats.sent as usize != MESSAGES
+        || sink.bytes as usize != STREAM_LEN
+        || arena.stats().live != 0
+    {
+        fail("downlink");
+    }
+    let _ = writeln!(
+        out,
+        "workloads: {MESSAGES} messages (GPS/ATTITUDE alternating), {STREAM_LEN} bytes of \
+         PPRZ v2; downlink queue high water {}, arena high water {} B",
+        stats.queue_high_water,
+        arena.stats().high_water
+    );
+    result(
+        out,
+        "encode",
+        t_encode,
+        MESSAGES,
+        "message",
+        "generated encoder + PPRZ v2 framing (workload 1)",
+    );
+    result(
+        out,
+        "parse",
+        t_parse,
+        STREAM_LEN,
+        "byte",
+        "Decoder::feed_borrowed + generated decoder (workload 2)",
+    );
+    result(
+        out,
+        "downlink",
+        t_downlink,
+        MESSAGES,
+        "message",
+        "send -> arena -> queue -> writer -> sink (workload 3)",
+    );
 }
 
 /// `ROUNDS` complete handshakes between an initiator and a responder, each step
@@ -182,6 +270,7 @@ fn handshakes(out: &mut Uart, timer: &Timer) {
             "initiator-msg1",
             t1,
             1,
+            "handshake",
             "ground: ephemeral key (X25519 base point) -> message 1",
         );
         result(
@@ -189,6 +278,7 @@ fn handshakes(out: &mut Uart, timer: &Timer) {
             "responder-msg1",
             t2,
             1,
+            "handshake",
             "aircraft: message 1 -> message 2 (2 X25519, Ed25519 sign)",
         );
         result(
@@ -196,6 +286,7 @@ fn handshakes(out: &mut Uart, timer: &Timer) {
             "initiator-msg2",
             t3,
             1,
+            "handshake",
             "ground: message 2 -> message 3 (X25519, Ed25519 verify + sign)",
         );
         result(
@@ -203,6 +294,7 @@ fn handshakes(out: &mut Uart, timer: &Timer) {
             "responder-msg3",
             t4,
             1,
+            "handshake",
             "aircraft: message 3 -> session (Ed25519 verify)",
         );
     }
@@ -311,6 +403,7 @@ fn frames(out: &mut Uart, timer: &Timer) {
         "seal",
         t_seal,
         FRAMES,
+        "frame",
         "aircraft: seal_in_place, 48 -> 69 bytes",
     );
     result(
@@ -318,6 +411,7 @@ fn frames(out: &mut Uart, timer: &Timer) {
         "open",
         t_open,
         FRAMES,
+        "frame",
         "aircraft: open, 65 bytes of DATA -> 48-byte frame",
     );
 }

@@ -1,0 +1,114 @@
+//! Workload 3: the downlink end to end on the host.
+//!
+//! `Downlink::send` (encode into arena memory, priority queue) -> `run_writer` (the
+//! device's writer task) -> a [`Sink`] device that accepts every write at once, then the
+//! frame's arena memory is released. The same message sequence as [`crate::stream`]
+//! (GPS and ATTITUDE alternating), sent in batches of [`BATCH`] between which the
+//! producer yields, so the writer drains the queue as a firmware's writer task would
+//! between two scheduler ticks.
+//!
+//! Both futures are polled by `embassy_futures::block_on`, the smallest executor (one
+//! thread, no timer, no system call; on a Cortex-M without an executor it polls the same
+//! way), so the instruction count is deterministic. The arena's and the queue's lock is a
+//! `CriticalSectionRawMutex` (the downlink's ports and type-erased handles need a mutex
+//! that is `Sync`): on the host critical-section's `std` implementation (a process-wide
+//! `std::sync::Mutex` plus a thread-local flag), on a Cortex-M an interrupt mask of a
+//! few instructions (`cortex-m`'s `critical-section-single-core`), so the host figure
+//! overstates that part (see `BENCHMARKS.md`).
+
+use core::convert::Infallible;
+
+use embassy_futures::select::{Either, select};
+use embassy_futures::{block_on, yield_now};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use pprz_telemetry::stats::DeviceStats;
+use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, run_writer};
+use pprz_transports::PprzV2;
+
+use crate::stream::{AC_ID, attitude, gps};
+
+/// Bytes of the frame arena.
+pub const ARENA_BYTES: usize = 4096;
+/// Queue capacity of the device.
+pub const QUEUE: usize = 16;
+/// Messages sent between two yields of the producer.
+pub const BATCH: usize = 8;
+
+/// The arena of the workload.
+pub type BenchArena = FrameArena<CriticalSectionRawMutex, ARENA_BYTES>;
+/// The downlink of the workload: one PPRZ v2 device.
+pub type BenchDownlink<'a> = Downlink<'a, CriticalSectionRawMutex, 1, QUEUE>;
+
+/// A device that accepts every write at once, counting frames and bytes and folding the
+/// bytes into a digest (so the writes cannot be optimised away).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Sink {
+    /// Writes (one per frame: the writer uses `write_all`, which this device completes in
+    /// one `write`).
+    pub writes: u32,
+    /// Bytes written.
+    pub bytes: u64,
+    /// Sum of the bytes written (wrapping).
+    pub digest: u32,
+}
+
+impl embedded_io_async::ErrorType for Sink {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Write for Sink {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        self.writes += 1;
+        self.bytes += buf.len() as u64;
+        // First and last byte only: a UART driver copies the frame to DMA; the point is
+        // the stack's cost, not the device's.
+        if let (Some(&a), Some(&b)) = (buf.first(), buf.last()) {
+            self.digest = self.digest.wrapping_add(u32::from(a) + u32::from(b));
+        }
+        Ok(buf.len())
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+/// A downlink for the workload over `arena`.
+pub fn new_downlink(arena: &BenchArena) -> BenchDownlink<'_> {
+    Downlink::new(arena, AC_ID, [DeviceConfig::new(PprzV2::new().into())])
+}
+
+/// Workload 3: sends `count` messages through `downlink` to `sink`, written through
+/// `port` (the downlink's port); returns the device's statistics once every message has
+/// been written.
+pub fn run_downlink(
+    downlink: &BenchDownlink<'_>,
+    port: &mut Port<'_>,
+    count: usize,
+    sink: &mut Sink,
+) -> DeviceStats {
+    let producer = async {
+        let mut i = 0;
+        while i < count {
+            let end = (i + BATCH).min(count);
+            while i < end {
+                let index = i as u32;
+                // A drop is counted in the device statistics, which the caller checks.
+                let _ = if i % 2 == 0 {
+                    downlink.send(&gps(index))
+                } else {
+                    downlink.send(&attitude(index))
+                };
+                i += 1;
+            }
+            // The writer drains the queue before the producer runs again.
+            yield_now().await;
+        }
+    };
+    let writer = run_writer(port, sink);
+    match block_on(select(producer, writer)) {
+        Either::First(()) => {}
+        Either::Second(never) => never,
+    }
+    downlink.stats(0).unwrap_or_default()
+}
