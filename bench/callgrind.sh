@@ -8,6 +8,12 @@
 # unit), runs each mode under `valgrind --tool=callgrind --toggle-collect=<function>`, so
 # only the named workload function and what it calls are counted, and divides the total
 # by the count the mode prints on its `units` line. Needs valgrind (Debian: `valgrind`).
+#
+# The last column is the share of the host's critical sections in that figure (the
+# inclusive cost of `critical-section`'s acquire and release, per unit): on the host they
+# are `critical-section`'s `std` implementation (a process-wide mutex and a thread-local
+# flag, about 50 instructions a pair), on a Cortex-M an interrupt mask of a few
+# instructions, so "per unit - host lock" is the stack's own cost.
 # Output files stay in $CALLGRIND_DIR (default target/callgrind) for
 # `callgrind_annotate --inclusive=yes <file>`.
 set -euo pipefail
@@ -25,7 +31,7 @@ target_dir=$(cargo metadata -q --format-version 1 --no-deps |
 out_dir=${CALLGRIND_DIR:-$target_dir/callgrind}
 mkdir -p "$out_dir"
 
-printf '%-24s %-34s %12s %8s  %s\n' mode function instructions count "per unit"
+printf '%-24s %-34s %12s %8s  %-18s %s\n' mode function instructions count "per unit" "host lock"
 for mode in "${modes[@]}"; do
     # The function that mode measures: workload_<mode>, dashes as underscores.
     function="workload_${mode//-/_}"
@@ -47,5 +53,33 @@ for mode in "${modes[@]}"; do
         exit 1
     fi
     per=$(awk -v t="$total" -v c="$count" 'BEGIN { printf "%.1f", t / c }')
-    printf '%-24s %-34s %12s %8s  %s/%s\n' "$mode" "$function" "$total" "$count" "$per" "$unit"
+    # Inclusive cost of the critical-section functions (their own entries, whose names
+    # end with the binary's name in brackets).
+    lock=$(callgrind_annotate --inclusive=yes --threshold=100 "$file" 2>/dev/null |
+        awk '/:_critical_section_1_0_(acquire|release) \[/ { gsub(",", "", $1); s += $1 }
+             END { print s + 0 }')
+    lock_per=$(awk -v t="$lock" -v c="$count" 'BEGIN { printf "%.1f", t / c }')
+    printf '%-24s %-34s %12s %8s  %-18s %s\n' "$mode" "$function" "$total" "$count" \
+        "$per/$unit" "$lock_per"
+    if [[ $mode == arena-* ]]; then
+        # The allocator alone: the inclusive cost of `alloc` per call and of `release`
+        # per release, less one lock (every call takes the arena's lock once), beside the
+        # workload loop's own instructions (drawing sizes and victims, its `Vec`).
+        read -r allocs releases failed < <(sed -n \
+            's/^arena [0-9]* %: \([0-9]*\) allocs, \([0-9]*\) releases, \([0-9]*\) failed.*/\1 \2 \3/p' "$log")
+        costs=$(callgrind_annotate --inclusive=yes --threshold=100 "$file" 2>/dev/null |
+            awk '# A function is listed once per source file it inlines; its own entry,
+                 # the largest, is its inclusive cost.
+                 /:pprz_telemetry::arena::FrameArena<M,_>::alloc( \[|$)/ {
+                     gsub(",", "", $1); if ($1 + 0 > a) a = $1 + 0 }
+                 /:<pprz_telemetry::arena::FrameArena<M,_> as pprz_telemetry::arena::Grants>::release( \[|$)/ {
+                     gsub(",", "", $1); if ($1 + 0 > r) r = $1 + 0 }
+                 END { print a + 0, r + 0 }')
+        read -r alloc_total release_total <<<"$costs"
+        awk -v a="$alloc_total" -v r="$release_total" -v na="$((allocs + failed))" \
+            -v nr="$releases" -v l="$lock" -v n="$count" 'BEGIN {
+                pair = l / n; ca = a / na - pair; cr = r / nr - pair;
+                printf "%-24s allocator without the host lock: alloc %.1f, release %.1f, pair %.1f\n",
+                    "", ca, cr, ca + cr }'
+    fi
 done

@@ -608,8 +608,9 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     ///
     /// # Errors
     /// The message was dropped for at least one device (counted there).
+    #[inline]
     pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.send_on(msg, self.routes.to(GROUND_ID), Msg::PRIORITY)
+        self.send_fields(msg, Route::of::<Msg>(Msg::PRIORITY), None)
     }
 
     /// Sends `msg`, a **state** message (a periodic sample: attitude, position, status),
@@ -626,11 +627,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     /// # Errors
     /// The message was dropped for at least one device (counted there).
     pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.send_fields(
-            msg,
-            Route::latest::<Msg>(Msg::PRIORITY),
-            self.routes.to(GROUND_ID),
-        )
+        self.send_fields(msg, Route::latest::<Msg>(Msg::PRIORITY), None)
     }
 
     /// Sends `msg` to aircraft `destination` (or [`GROUND_ID`], or
@@ -647,11 +644,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         destination: u8,
         priority: u8,
     ) -> Result<(), SendError> {
-        self.send_fields(
-            msg,
-            Route::of::<Msg>(priority).to(destination),
-            self.routes.to(destination),
-        )
+        self.send_fields(msg, Route::of::<Msg>(priority).to(destination), None)
     }
 
     /// Sends `msg` on the devices in `targets` (indices beyond the last device are
@@ -671,18 +664,20 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
         targets: Targets,
         priority: u8,
     ) -> Result<(), SendError> {
-        self.send_fields(msg, Route::of::<Msg>(priority), targets)
+        self.send_fields(msg, Route::of::<Msg>(priority), Some(targets))
     }
 
     /// The send path of every message type: [`send_on`](Self::send_on) is a thin generic
     /// wrapper around it, so this is compiled once per downlink type instead of once per
     /// message type (about 450 bytes of flash each on a Cortex-M), for two indirect calls
     /// through the message's vtable (`fields_len`, and `encode_fields` per transport).
+    /// Without `targets`, the message goes on the route of its destination (looked up
+    /// here, so that the generic wrappers stay a few instructions each).
     fn send_fields(
         &self,
         msg: &dyn EncodeFields,
         route: Route,
-        targets: Targets,
+        targets: Option<Targets>,
     ) -> Result<(), SendError> {
         let Route {
             class,
@@ -693,6 +688,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             to,
             relayed,
         } = route;
+        let targets = targets.unwrap_or_else(|| self.routes.to(to));
         let (source, component, relay) = match relayed {
             Some(r) => (r.source, r.component, true),
             None => (self.ac_id, pprz_transports::COMPONENT_BROADCAST, false),
@@ -902,7 +898,7 @@ trait Core: Sync {
         &self,
         msg: &dyn EncodeFields,
         route: Route,
-        targets: Targets,
+        targets: Option<Targets>,
     ) -> Result<(), SendError>;
     fn stats(&self, device: usize) -> Option<DeviceStats>;
     fn undeliverable(&self) -> u32;
@@ -943,7 +939,7 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         &self,
         msg: &dyn EncodeFields,
         route: Route,
-        targets: Targets,
+        targets: Option<Targets>,
     ) -> Result<(), SendError> {
         Downlink::send_fields(self, msg, route, targets)
     }
@@ -1008,7 +1004,8 @@ impl<'d> Sender<'d> {
     /// The message was dropped for at least one device (counted there).
     #[inline]
     pub fn send<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.send_on(msg, self.core.routes().to(GROUND_ID), Msg::PRIORITY)
+        self.core
+            .send_fields(msg, Route::of::<Msg>(Msg::PRIORITY), None)
     }
 
     /// Sends `msg` to aircraft `destination` with `priority`, on the devices of its
@@ -1023,11 +1020,8 @@ impl<'d> Sender<'d> {
         destination: u8,
         priority: u8,
     ) -> Result<(), SendError> {
-        self.core.send_fields(
-            msg,
-            Route::of::<Msg>(priority).to(destination),
-            self.core.routes().to(destination),
-        )
+        self.core
+            .send_fields(msg, Route::of::<Msg>(priority).to(destination), None)
     }
 
     /// Sends `msg` on `targets` with `priority`, to the ground; see
@@ -1043,7 +1037,7 @@ impl<'d> Sender<'d> {
         priority: u8,
     ) -> Result<(), SendError> {
         self.core
-            .send_fields(msg, Route::of::<Msg>(priority), targets)
+            .send_fields(msg, Route::of::<Msg>(priority), Some(targets))
     }
 
     /// Sends the state message `msg` to the ground, superseding a waiting older one;
@@ -1053,11 +1047,8 @@ impl<'d> Sender<'d> {
     /// The message was dropped for at least one device (counted there).
     #[inline]
     pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.core.send_fields(
-            msg,
-            Route::latest::<Msg>(Msg::PRIORITY),
-            self.core.routes().to(GROUND_ID),
-        )
+        self.core
+            .send_fields(msg, Route::latest::<Msg>(Msg::PRIORITY), None)
     }
 
     /// Forwards another aircraft's `frame` on `targets` with `priority`: the same
@@ -1073,7 +1064,7 @@ impl<'d> Sender<'d> {
         self.core.send_fields(
             &RawFields(frame.payload()),
             Route::forward(frame, priority),
-            targets,
+            Some(targets),
         )
     }
 
@@ -1160,7 +1151,7 @@ impl<'d> Device<'d> {
         priority: u8,
     ) -> Result<(), SendError> {
         self.core
-            .send_fields(msg, Route::of::<Msg>(priority), Targets::from(*self))
+            .send_fields(msg, Route::of::<Msg>(priority), Some(Targets::from(*self)))
     }
 
     /// Sends the state message `msg` to this device only, superseding a waiting older
@@ -1173,7 +1164,7 @@ impl<'d> Device<'d> {
         self.core.send_fields(
             msg,
             Route::latest::<Msg>(Msg::PRIORITY),
-            Targets::from(*self),
+            Some(Targets::from(*self)),
         )
     }
 
@@ -1201,7 +1192,7 @@ impl<'d> Device<'d> {
         self.core.send_fields(
             msg,
             Route::reply::<Msg>().to(destination),
-            Targets::from(*self),
+            Some(Targets::from(*self)),
         )
     }
 
