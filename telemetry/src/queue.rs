@@ -180,18 +180,37 @@ impl<'a, const Q: usize> State<'a, Q> {
         &mut self.stats.relayed.levels[pprz_messages::priority::level(priority)]
     }
 
+    #[inline]
     fn submitted(&mut self, priority: u8, relayed: bool) {
         self.stats.submitted = self.stats.submitted.wrapping_add(1);
         let l = self.level(priority);
         l.submitted = l.submitted.wrapping_add(1);
         if relayed {
-            let r = &mut self.stats.relayed;
-            r.submitted = r.submitted.wrapping_add(1);
-            let l = self.relayed_level(priority);
-            l.submitted = l.submitted.wrapping_add(1);
+            self.relayed_submitted(priority);
         }
     }
 
+    /// The forwarded frames' share of [`submitted`](Self::submitted), out of the
+    /// common path (the aircraft's own messages).
+    #[cold]
+    #[inline(never)]
+    fn relayed_submitted(&mut self, priority: u8) {
+        let r = &mut self.stats.relayed;
+        r.submitted = r.submitted.wrapping_add(1);
+        let l = self.relayed_level(priority);
+        l.submitted = l.submitted.wrapping_add(1);
+    }
+
+    /// The forwarded frames' share of a frame sent.
+    #[cold]
+    #[inline(never)]
+    fn relayed_sent(&mut self, priority: u8) {
+        self.stats.relayed.sent = self.stats.relayed.sent.wrapping_add(1);
+        let l = self.relayed_level(priority);
+        l.sent = l.sent.wrapping_add(1);
+    }
+
+    #[inline]
     fn lost(&mut self, priority: u8, relayed: bool) {
         let l = self.level(priority);
         l.lost = l.lost.wrapping_add(1);
@@ -263,9 +282,7 @@ impl<'a, const Q: usize> State<'a, Q> {
                 let l = self.level(priority);
                 l.sent = l.sent.wrapping_add(1);
                 if relayed {
-                    self.stats.relayed.sent = self.stats.relayed.sent.wrapping_add(1);
-                    let l = self.relayed_level(priority);
-                    l.sent = l.sent.wrapping_add(1);
+                    self.relayed_sent(priority);
                 }
             }
             Err(reason) => self.dropped(reason, priority, relayed),
