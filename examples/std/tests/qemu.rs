@@ -98,11 +98,42 @@ impl Qemu {
         }
         Some(format!("QEMU exited ({status}): {}", stderr.trim()))
     }
+}
+
+/// The guest's UART0 as the test's serial link: QEMU and the connection to it. A failed
+/// read or write panics with QEMU's exit status and stderr if it exited.
+struct Serial {
+    qemu: Qemu,
+    stream: UnixStream,
+}
+
+impl Serial {
+    /// Writes `bytes` (`what` names them in a failure).
+    fn send(&mut self, bytes: &[u8], what: &str) {
+        if let Err(e) = self.stream.write_all(bytes) {
+            panic!("{}", self.failure(what, &e));
+        }
+    }
+
+    /// Reads what the guest sent into `buf` (0 bytes when nothing came within the read
+    /// timeout).
+    fn receive(&mut self, buf: &mut [u8]) -> usize {
+        match self.stream.read(buf) {
+            Ok(0) => panic!(
+                "QEMU closed the serial connection ({:?})",
+                self.qemu.exited()
+            ),
+            Ok(n) => n,
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
+            Err(e) => panic!("{}", self.failure("reading QEMU's serial port", &e)),
+        }
+    }
 
     /// Why the serial connection failed with `e`: QEMU's exit if it exited.
     fn failure(&mut self, what: &str, e: &std::io::Error) -> String {
         std::thread::sleep(Duration::from_millis(100));
         let exit = self
+            .qemu
             .exited()
             .unwrap_or_else(|| "QEMU still running".to_owned());
         format!("{what}: {e} ({exit})")
@@ -146,7 +177,7 @@ fn firmware_path(name: &str) -> PathBuf {
 
 /// Boots firmware `name` under QEMU and connects to its UART0, or `None` (the test is
 /// skipped, or fails where QEMU is required) when QEMU or the firmware is missing.
-fn boot(name: &str) -> Option<(Qemu, UnixStream)> {
+fn boot(name: &str) -> Option<Serial> {
     let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
     let firmware = firmware_path(name);
     if !firmware.is_file() {
@@ -175,7 +206,10 @@ fn boot(name: &str) -> Option<(Qemu, UnixStream)> {
     stream
         .set_read_timeout(Some(Duration::from_millis(20)))
         .expect("socket timeout");
-    Some((guard, stream))
+    Some(Serial {
+        qemu: guard,
+        stream,
+    })
 }
 
 /// The ground's requests: a PING, and the SETTING of the gain to [`GAIN`] (plain frames).
@@ -215,7 +249,7 @@ struct Received {
 
 #[test]
 fn firmware_answers_and_sends_telemetry_at_configured_rates() {
-    let Some((mut qemu, mut stream)) = boot("aircraft") else {
+    let Some(mut serial) = boot("aircraft") else {
         return;
     };
     let set = default_set();
@@ -243,27 +277,18 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         // PING once the aircraft talks, again every second until a PONG; then the
         // SETTING, again every second until acknowledged.
         if !received.is_empty() && pong_rtt.is_none() && now >= next_ping {
-            stream
-                .write_all(&ping)
-                .unwrap_or_else(|e| panic!("{}", qemu.failure("send PING", &e)));
+            serial.send(&ping, "send PING");
             monitor.ping_sent(now);
             next_ping = now + 1.0;
         }
         if pong_rtt.is_some() && ack.is_none() && now >= next_setting {
-            stream
-                .write_all(&setting)
-                .unwrap_or_else(|e| panic!("{}", qemu.failure("send SETTING", &e)));
+            serial.send(&setting, "send SETTING");
             monitor.setting_value_sent(now, GAIN_INDEX, f64::from(GAIN));
             setting_first_sent.get_or_insert(now);
             next_setting = now + 1.0;
         }
 
-        let n = match stream.read(&mut buf) {
-            Ok(0) => panic!("QEMU closed the serial connection ({:?})", qemu.exited()),
-            Ok(n) => n,
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
-            Err(e) => panic!("{}", qemu.failure("reading QEMU's serial port", &e)),
-        };
+        let n = serial.receive(&mut buf);
         let bytes = &buf[..n];
         let now = start.elapsed().as_secs_f64();
         if n > 0 {
@@ -413,7 +438,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
 /// exchange), and none is rejected by the ground.
 #[test]
 fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
-    let Some((mut qemu, mut stream)) = boot("aircraft-secure") else {
+    let Some(mut serial) = boot("aircraft-secure") else {
         return;
     };
     let keys = KeyFile::parse(pprz_secure::keys::INSECURE_TEST_KEY_FILE).expect("test keys");
@@ -435,16 +460,12 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
     while start.elapsed() < DEADLINE && !(pong_rtt.is_some() && acked) {
         let now = start.elapsed().as_secs_f64();
         for frame in monitor.poll_secure(now) {
-            stream
-                .write_all(&frame)
-                .unwrap_or_else(|e| panic!("{}", qemu.failure("send a key exchange", &e)));
+            serial.send(&frame, "send a key exchange");
         }
         if monitor.uplink_ready() && now >= next_request {
             let request = if pong_rtt.is_none() { &ping } else { &setting };
             let sealed = monitor.seal_uplink(request).expect("a session seals");
-            stream
-                .write_all(&sealed)
-                .unwrap_or_else(|e| panic!("{}", qemu.failure("send a request", &e)));
+            serial.send(&sealed, "send a request");
             if pong_rtt.is_none() {
                 monitor.ping_sent(now);
             } else {
@@ -452,12 +473,7 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
             }
             next_request = now + 1.0;
         }
-        let n = match stream.read(&mut buf) {
-            Ok(0) => panic!("QEMU closed the serial connection ({:?})", qemu.exited()),
-            Ok(n) => n,
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => 0,
-            Err(e) => panic!("{}", qemu.failure("reading QEMU's serial port", &e)),
-        };
+        let n = serial.receive(&mut buf);
         let bytes = &buf[..n];
         let mut input = bytes;
         while let Some(frame) = wire.feed(&mut input) {
