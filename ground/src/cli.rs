@@ -118,6 +118,15 @@ pub struct Args {
     /// --transport pprzlog). It must not be one of the inputs.
     #[arg(long, value_name = "PATH")]
     pub record: Option<PathBuf>,
+    /// Serve the decoded telemetry to Foxglove or Lichtblick over the Foxglove WebSocket
+    /// protocol at this address (e.g. `127.0.0.1:8765`; port 0: any free port, printed).
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<SocketAddr>,
+    /// Record the decoded telemetry to this MCAP file (same topics and schemas as
+    /// `--foxglove`), timestamped with the reception time, or with the log's time stamps
+    /// when replaying a PPRZLOG file. It must not be one of the inputs.
+    #[arg(long, value_name = "PATH")]
+    pub mcap: Option<PathBuf>,
     /// Stop after this many seconds (more than 0, at most a year).
     #[arg(long, value_name = "SECONDS", value_parser = parse_duration, allow_negative_numbers = true)]
     pub duration: Option<f64>,

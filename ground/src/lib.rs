@@ -25,7 +25,7 @@
 //! let mut monitor = Monitor::new(set, PprzV2::new().into());
 //! let mut lines = Vec::new();
 //! monitor.feed(0.0, &[0x99, 0x0C, 0x07, 0x00, 0x01, 0x02, 0x03, 0x00, 0x01, 0x02, 0x1C, 0xC4],
-//!     |line, _raw| lines.push(line.to_owned()));
+//!     |m| lines.push(m.line.to_owned()));
 //! assert_eq!(lines, ["7 telemetry ALIVE md5sum=0,1,2"]);
 //! ```
 
@@ -36,6 +36,7 @@ pub mod cli;
 pub mod escape;
 pub mod format;
 pub mod input;
+pub mod json;
 pub mod monitor;
 pub mod ping;
 pub mod record;
@@ -43,3 +44,4 @@ pub mod secure;
 pub mod set;
 pub mod settings;
 pub mod uplink;
+pub mod viewer;

@@ -479,10 +479,10 @@ impl Monitor {
         self
     }
 
-    /// Feeds received bytes at time `now`; `on_message` gets one text line per decoded
-    /// message (the plain output mode; escaped, without control characters), and the
-    /// raw frame bytes (for recording).
-    pub fn feed(&mut self, now: f64, bytes: &[u8], mut on_message: impl FnMut(&str, &[u8])) {
+    /// Feeds received bytes at time `now`; `on_message` gets each decoded message
+    /// ([`Decoded`]: its text line, escaped and without control characters, the raw
+    /// frame bytes for recording, and the decoded form for viewers).
+    pub fn feed(&mut self, now: f64, bytes: &[u8], mut on_message: impl FnMut(&Decoded<'_>)) {
         self.bytes += bytes.len() as u64;
         self.byte_rate.add(now, bytes.len() as u64);
         let mut input = bytes;
@@ -493,7 +493,7 @@ impl Monitor {
     }
 
     /// End of input: decodes frames held behind an incomplete false start.
-    pub fn flush(&mut self, now: f64, mut on_message: impl FnMut(&str, &[u8])) {
+    pub fn flush(&mut self, now: f64, mut on_message: impl FnMut(&Decoded<'_>)) {
         while let Some(frame) = self.decoder.flush() {
             let received = Received::of(&frame);
             self.deliver(now, received, &mut on_message);
@@ -501,10 +501,10 @@ impl Monitor {
     }
 
     /// Decodes a received frame, after opening it on a secure link.
-    fn deliver(&mut self, now: f64, frame: Received, on_message: &mut impl FnMut(&str, &[u8])) {
+    fn deliver(&mut self, now: f64, frame: Received, on_message: &mut impl FnMut(&Decoded<'_>)) {
         let Some(secure) = &mut self.secure else {
-            let line = self.handle(now, &frame.header, &frame.payload);
-            on_message(&line, &frame.raw);
+            let handled = self.handle(now, &frame.header, &frame.payload);
+            on_message(&handled.decoded(&frame.header, &frame.payload, &frame.raw, frame.log_time));
             return;
         };
         match secure.open(&frame.data, millis(now)) {
@@ -512,8 +512,8 @@ impl Monitor {
                 Ok(f) => {
                     let header = Header::of(&f);
                     let payload = f.payload().to_vec();
-                    let line = self.handle(now, &header, &payload);
-                    on_message(&line, &plain);
+                    let handled = self.handle(now, &header, &payload);
+                    on_message(&handled.decoded(&header, &payload, &plain, None));
                 }
                 // The channel gives well-formed frames only.
                 Err(_) => self.secure_rejected(now, Reject::Malformed),
@@ -561,7 +561,7 @@ impl Monitor {
     /// Input was dropped under overload just before the next bytes: counts it, notes it
     /// for the live view, and abandons the frame being assembled (its end was dropped),
     /// decoding the frames buffered behind it, as [`flush`](Self::flush) does.
-    pub fn input_gap(&mut self, now: f64, dropped: Drops, on_message: impl FnMut(&str, &[u8])) {
+    pub fn input_gap(&mut self, now: f64, dropped: Drops, on_message: impl FnMut(&Decoded<'_>)) {
         if dropped.is_empty() {
             return;
         }
@@ -597,7 +597,7 @@ impl Monitor {
             .or_insert_with(|| Aircraft::new(ac_id, pings, settings))
     }
 
-    fn handle(&mut self, now: f64, header: &Header, payload: &[u8]) -> String {
+    fn handle(&mut self, now: f64, header: &Header, payload: &[u8]) -> Handled {
         let &Header {
             source, class, id, ..
         } = header;
@@ -608,7 +608,12 @@ impl Monitor {
             if let Some(a) = aircraft {
                 a.unknown += 1;
             }
-            return format::line(source, class, id, None, payload);
+            let line = format::line(source, class, id, None, payload);
+            return Handled {
+                line,
+                message: None,
+                valid: false,
+            };
         };
         let body = format::fields(desc, payload);
         let line = format::known_line(source, desc, &body);
@@ -652,7 +657,11 @@ impl Monitor {
                 _ => {}
             }
         }
-        line
+        Handled {
+            line,
+            message: Some(desc),
+            valid: ok,
+        }
     }
 
     /// A PONG from `source` at `now`: it answers the oldest PING outstanding to
@@ -782,7 +791,7 @@ impl Monitor {
     /// // A PONG from aircraft 8 to the ground (source 8, destination 0).
     /// let mut pong = [0u8; 16];
     /// let n = PprzV2::new().encode(&TxMeta::new(MsgHeader::new(8, 0, 1, 3)), &[], &mut pong).unwrap();
-    /// monitor.feed(1.25, &pong[..n], |_, _| {});
+    /// monitor.feed(1.25, &pong[..n], |_| {});
     /// assert_eq!(monitor.last_rtt_of(8), Some(0.25));
     /// assert_eq!(monitor.last_rtt_of(7), None);
     /// assert_eq!(monitor.pings_of(7).unwrap().outstanding(), 1);
@@ -1317,6 +1326,8 @@ struct Received {
     payload: Vec<u8>,
     data: Vec<u8>,
     raw: Vec<u8>,
+    /// The PPRZLOG time stamp, in seconds.
+    log_time: Option<f64>,
 }
 
 impl Received {
@@ -1326,8 +1337,63 @@ impl Received {
             payload: frame.payload().to_vec(),
             data: frame.data().to_vec(),
             raw: frame.raw().to_vec(),
+            log_time: frame.timestamp().map(|ticks| f64::from(ticks) * 1e-4),
         }
     }
+}
+
+/// What [`Monitor::handle`] made of a message.
+struct Handled {
+    line: String,
+    message: Option<&'static MessageDescriptor<'static>>,
+    valid: bool,
+}
+
+impl Handled {
+    fn decoded<'a>(
+        &'a self,
+        header: &Header,
+        payload: &'a [u8],
+        raw: &'a [u8],
+        log_time: Option<f64>,
+    ) -> Decoded<'a> {
+        Decoded {
+            line: &self.line,
+            raw,
+            source: header.source,
+            class_id: header.class,
+            msg_id: header.id,
+            message: self.message,
+            payload,
+            valid: self.valid,
+            log_time,
+        }
+    }
+}
+
+/// A message the monitor decoded, as its callbacks ([`Monitor::feed`],
+/// [`Monitor::flush`], [`Monitor::input_gap`]) receive it.
+#[derive(Debug, Clone, Copy)]
+pub struct Decoded<'a> {
+    /// The text line (`--lines` output): escaped, without control characters.
+    pub line: &'a str,
+    /// The frame as received (opened, on a secure link), for recording.
+    pub raw: &'a [u8],
+    /// The aircraft that sent it (the frame's source id).
+    pub source: u8,
+    /// The message class id.
+    pub class_id: u8,
+    /// The message id within its class.
+    pub msg_id: u8,
+    /// The message's description, when the set knows the message.
+    pub message: Option<&'static MessageDescriptor<'static>>,
+    /// The payload (the fields' bytes).
+    pub payload: &'a [u8],
+    /// Whether the payload matches the description (false for unknown messages).
+    pub valid: bool,
+    /// The PPRZLOG time stamp of the frame, in seconds from the start of the log, when
+    /// the transport carries one.
+    pub log_time: Option<f64>,
 }
 
 /// A value read from the wire: a value that is exactly a `float` is written as the
@@ -1456,7 +1522,7 @@ mod tests {
 
     fn feed(m: &mut Monitor, now: f64, bytes: &[u8]) -> Vec<String> {
         let mut lines = Vec::new();
-        m.feed(now, bytes, |l, _| lines.push(l.to_owned()));
+        m.feed(now, bytes, |d| lines.push(d.line.to_owned()));
         lines
     }
 
@@ -1571,7 +1637,7 @@ mod tests {
                 bytes: 4000,
                 reads: 3,
             },
-            |l, _| lines.push(l.to_owned()),
+            |d| lines.push(d.line.to_owned()),
         );
         lines.extend(feed(&mut m, 0.1, &f));
         assert_eq!(lines, [r#"7 telemetry INFO_MSG msg="ok""#]);
@@ -1581,9 +1647,9 @@ mod tests {
                 bytes: 10,
                 reads: 1,
             },
-            |_, _| {},
+            |_| {},
         );
-        m.input_gap(0.3, Drops::default(), |_, _| {});
+        m.input_gap(0.3, Drops::default(), |_| {});
         assert_eq!(
             m.input_dropped(),
             Drops {

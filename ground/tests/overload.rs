@@ -9,7 +9,7 @@
 use std::time::Duration;
 
 use pprz_ground::input::{CHUNK_OVERHEAD, InputQueue, Overflow, Pop};
-use pprz_ground::monitor::Monitor;
+use pprz_ground::monitor::{Decoded, Monitor};
 use pprz_ground::set::RuntimeSet;
 use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
 
@@ -28,8 +28,8 @@ fn alive(n: u16) -> Vec<u8> {
 /// decoded.
 fn consume(queue: &InputQueue, monitor: &mut Monitor, now: f64) -> Option<(Vec<u8>, Vec<u16>)> {
     let mut found = Vec::new();
-    let mut on_line = |line: &str, _: &[u8]| {
-        if let Some(md5) = line.strip_prefix("7 telemetry ALIVE md5sum=") {
+    let mut on_line = |d: &Decoded<'_>| {
+        if let Some(md5) = d.line.strip_prefix("7 telemetry ALIVE md5sum=") {
             let v: Vec<u16> = md5.split(',').map(|x| x.parse().unwrap()).collect();
             found.push(v[0] | (v[1] << 8));
         }
@@ -95,8 +95,8 @@ fn a_flood_is_bounded_counted_shown_and_current_frames_decoded() {
     // The link is silent now: the monitor flushes the decoder (after
     // `monitor::IDLE_FLUSH`), which gives up the last false start of the flood and
     // decodes the frame held behind it.
-    let mut on_line = |line: &str, _: &[u8]| {
-        if let Some(md5) = line.strip_prefix("7 telemetry ALIVE md5sum=") {
+    let mut on_line = |d: &Decoded<'_>| {
+        if let Some(md5) = d.line.strip_prefix("7 telemetry ALIVE md5sum=") {
             let v: Vec<u16> = md5.split(',').map(|x| x.parse().unwrap()).collect();
             decoded.push(v[0] | (v[1] << 8));
         }

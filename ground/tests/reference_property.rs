@@ -13,7 +13,7 @@
 
 use pprz_ground::escape;
 use pprz_ground::input::Drops;
-use pprz_ground::monitor::{MAX_EVENTS, Monitor};
+use pprz_ground::monitor::{Decoded, MAX_EVENTS, Monitor};
 use pprz_ground::ping::PingTracker;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::SettingTracker;
@@ -130,9 +130,9 @@ fn random_reference_frames_through_the_monitor() {
         let mut now = 0.0;
         let mut lines = 0usize;
         let mut intact_frames = 0usize;
-        let mut on_line = |line: &str, raw: &[u8]| {
-            assert_clean(line);
-            assert!(!raw.is_empty());
+        let mut on_line = |d: &Decoded<'_>| {
+            assert_clean(d.line);
+            assert!(!d.raw.is_empty());
             lines += 1;
         };
         for round in 0..1000 {
@@ -208,7 +208,7 @@ fn hostile_text_in_reference_messages_is_escaped() {
         .unwrap();
     let mut m = Monitor::new(set, t);
     let mut lines = Vec::new();
-    m.feed(0.0, &buf[..n], |l, _| lines.push(l.to_owned()));
+    m.feed(0.0, &buf[..n], |d| lines.push(d.line.to_owned()));
     assert_eq!(
         lines,
         [
@@ -230,7 +230,7 @@ fn hostile_text_in_reference_messages_is_escaped() {
             )
             .unwrap();
         let mut lines = Vec::new();
-        m.feed(1.0, &buf[..n], |l, _| lines.push(l.to_owned()));
+        m.feed(1.0, &buf[..n], |d| lines.push(d.line.to_owned()));
         assert!(
             lines[0].contains("lat=434629172 [1e7deg] 43.4629172 deg"),
             "{}",

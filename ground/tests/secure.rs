@@ -149,7 +149,7 @@ impl Aircraft {
 
 fn feed(m: &mut Monitor, now: f64, bytes: &[u8]) -> Vec<String> {
     let mut lines = Vec::new();
-    m.feed(now, bytes, |l, _| lines.push(l.to_owned()));
+    m.feed(now, bytes, |d| lines.push(d.line.to_owned()));
     lines
 }
 

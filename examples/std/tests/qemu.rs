@@ -294,7 +294,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         if n > 0 {
             first_byte.get_or_insert(now);
         }
-        monitor.feed(now, bytes, |_, _| {});
+        monitor.feed(now, bytes, |_| {});
         let mut input = bytes;
         while let Some(frame) = decoder.feed(&mut input) {
             assert_eq!(frame.source(), AC_ID, "frame from another aircraft");
@@ -480,7 +480,7 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
             crypto_bytes.push(frame.data()[0]);
         }
         let now = start.elapsed().as_secs_f64();
-        monitor.feed(now, bytes, |_, _| {});
+        monitor.feed(now, bytes, |_| {});
         for (_, event) in monitor.events() {
             match event {
                 Event::SecureSession { .. } => {

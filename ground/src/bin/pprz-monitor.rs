@@ -12,17 +12,18 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use clap::Parser;
 use pprz_ground::cli::Args;
 use pprz_ground::escape;
 use pprz_ground::input::{self, DEFAULT_CAPACITY, End, InputQueue, Overflow, Pop};
-use pprz_ground::monitor::{IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
+use pprz_ground::monitor::{Decoded, IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
 use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
+use pprz_ground::viewer::Viewer;
 use pprz_transports::AnyTransport;
 
 /// Where uplink frames are written.
@@ -123,21 +124,55 @@ struct Output {
     recorder: Option<Recorder<BufWriter<File>>>,
     record_path: Option<PathBuf>,
     record_error: Option<String>,
+    /// `--foxglove` and `--mcap`.
+    viewer: Option<Viewer>,
+    /// The first error of the viewer's recording.
+    viewer_error: Option<String>,
+    /// The start of the run, in nanoseconds since the Unix epoch.
+    epoch_ns: u64,
+    /// The time of the latest message for the viewer, in nanoseconds.
+    last_ns: u64,
 }
 
 impl Output {
-    fn message(&mut self, now: f64, line: &str, raw: &[u8]) {
+    fn message(&mut self, now: f64, m: &Decoded<'_>) {
         if self.lines
             && self.stdout_error.is_none()
-            && let Err(e) = writeln!(self.stdout, "{line}")
+            && let Err(e) = writeln!(self.stdout, "{}", m.line)
         {
             self.stdout_error = Some(e);
         }
         if let Some(r) = self.recorder.as_mut()
             && self.record_error.is_none()
-            && let Err(e) = r.record(now, raw)
+            && let Err(e) = r.record(now, m.raw)
         {
             self.record_error = Some(self.record_failure(&e));
+        }
+        if let Some(v) = self.viewer.as_mut() {
+            // PPRZLOG time stamps when replaying a log, else the reception time.
+            let ns = match m.log_time {
+                Some(s) => (s * 1e9) as u64,
+                None => self.epoch_ns.saturating_add((now * 1e9) as u64),
+            };
+            self.last_ns = ns;
+            v.message(ns, m);
+        }
+    }
+
+    /// Publishes the link statistics and closes the recording's chunk (every second).
+    fn viewer_tick(&mut self, monitor: &Monitor, now: f64, live: bool) {
+        let ns = if live {
+            self.epoch_ns.saturating_add((now * 1e9) as u64)
+        } else {
+            self.last_ns
+        };
+        if let Some(v) = self.viewer.as_mut() {
+            v.link_stats(ns, monitor, |_| None);
+            if self.viewer_error.is_none()
+                && let Err(e) = v.flush()
+            {
+                self.viewer_error = Some(e.to_string());
+            }
         }
     }
 
@@ -156,7 +191,7 @@ impl Output {
 
     /// Whether the run must stop: the output or the recording failed.
     fn failed(&self) -> bool {
-        self.stdout_error.is_some() || self.record_error.is_some()
+        self.stdout_error.is_some() || self.record_error.is_some() || self.viewer_error.is_some()
     }
 
     /// Writes the table view.
@@ -267,6 +302,27 @@ fn send_secure(monitor: &mut Monitor, sink: &mut UplinkSink, t: f64) {
     }
 }
 
+/// Opens `--mcap` (after checking it is no input) and starts `--foxglove`.
+fn open_viewer(args: &Args, inputs: &Inputs) -> Result<Option<Viewer>, String> {
+    if args.mcap.is_none() && args.foxglove.is_none() {
+        return Ok(None);
+    }
+    let mut viewer = Viewer::new();
+    if let Some(path) = &args.mcap {
+        let file = record::open_recording(path, inputs).map_err(|e| e.to_string())?;
+        viewer
+            .record(file, &path.display().to_string())
+            .map_err(|e| e.to_string())?;
+    }
+    if let Some(addr) = args.foxglove {
+        let bound = viewer
+            .serve(addr, "pprz-monitor")
+            .map_err(|e| e.to_string())?;
+        eprintln!("foxglove: serving ws://{bound}");
+    }
+    Ok(Some(viewer))
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if let Err(e) = args.check() {
@@ -301,15 +357,19 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
     let set = RuntimeSet::load(&args.messages)
         .map_err(|e| format!("{e}\n(give the messages.xml of the aircraft with --messages)"))?;
     let transport: AnyTransport = args.transport.any();
-    let (source, mut uplink_sink, inputs) = open_input(args)?;
+    let (source, mut uplink_sink, mut inputs) = open_input(args)?;
     // The recording is opened (and emptied) only after checking it is no input.
     let recorder = match &args.record {
         Some(path) => {
             let file = record::open_recording(path, &inputs).map_err(|e| e.to_string())?;
+            if let Ok(id) = FileId::of_file(path, &file) {
+                inputs.push((id, format!("the --record file {}", path.display())));
+            }
             Some(Recorder::new(BufWriter::new(file), transport))
         }
         None => None,
     };
+    let viewer = open_viewer(args, &inputs)?;
     let queue = match source {
         Source::Udp(socket) => {
             let q = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
@@ -344,6 +404,12 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         recorder,
         record_path: args.record.clone(),
         record_error: None,
+        viewer,
+        viewer_error: None,
+        epoch_ns: SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
+        last_ns: 0,
     };
     let aircraft = args.aircraft();
     // The SETTINGs go at start, or once the secure session is up.
@@ -353,6 +419,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
     let mut next_render = 0.0;
     let mut next_flush = 0.0;
     let mut next_drop_warning = 0.0;
+    let mut next_viewer = 1.0;
     let mut input_error = None;
     let mut last_data: Option<f64> = None;
     let mut seen = (0, 0);
@@ -414,16 +481,16 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
                         );
                         next_drop_warning = t + 1.0;
                     }
-                    monitor.input_gap(t, dropped_before, |line, raw| out.message(t, line, raw));
+                    monitor.input_gap(t, dropped_before, |m| out.message(t, m));
                 }
-                monitor.feed(t, &bytes, |line, raw| out.message(t, line, raw));
+                monitor.feed(t, &bytes, |m| out.message(t, m));
                 last_data = Some(t);
             }
             Pop::Idle => {
                 // A silent link: decode the frames held behind a false start.
                 let t = now();
                 if live && last_data.is_some_and(|at| t - at >= IDLE_FLUSH) {
-                    monitor.flush(t, |line, raw| out.message(t, line, raw));
+                    monitor.flush(t, |m| out.message(t, m));
                     last_data = None;
                 }
             }
@@ -446,14 +513,18 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
             out.screen(&monitor.render(t));
             next_render = t + 0.5;
         }
+        if t >= next_viewer {
+            out.viewer_tick(&monitor, t, live);
+            next_viewer = t + 1.0;
+        }
     }
     // Input read but not decoded (a run stopped by --duration or Ctrl-C, or by an
     // error) counts as dropped too.
     let t = now();
     let lost = queue.close();
-    monitor.input_gap(t, lost, |line, raw| out.message(t, line, raw));
+    monitor.input_gap(t, lost, |m| out.message(t, m));
     if !out.failed() {
-        monitor.flush(t, |line, raw| out.message(t, line, raw));
+        monitor.flush(t, |m| out.message(t, m));
     }
     monitor.tick(t);
     if args.lines {
@@ -483,6 +554,31 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         }
     }
     if let Some(e) = out.record_error.take() {
+        errors.push(e);
+    }
+    if out.viewer.is_some() {
+        out.viewer_tick(&monitor, t, live);
+    }
+    if let Some(v) = out.viewer.take() {
+        let c = v.counts();
+        eprintln!(
+            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft",
+            c.messages, c.locations, c.link, c.topics, c.undecodable, c.untracked
+        );
+        match v.finish() {
+            Ok(_) => {
+                if let Some(path) = &args.mcap
+                    && out.viewer_error.is_none()
+                {
+                    eprintln!("recorded {} messages to {}", c.messages, path.display());
+                }
+            }
+            Err(e) => {
+                out.viewer_error.get_or_insert(e.to_string());
+            }
+        }
+    }
+    if let Some(e) = out.viewer_error.take() {
         errors.push(e);
     }
     match out.stdout_error.take() {

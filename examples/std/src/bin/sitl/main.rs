@@ -1004,13 +1004,13 @@ fn run_ground(
             setting_sent = true;
         }
         if let Ok((n, _)) = socket.recv_from(&mut buf) {
-            monitor.feed(sim_now(args.speed), &buf[..n], |line, frame| {
+            monitor.feed(sim_now(args.speed), &buf[..n], |m| {
                 if args.lines {
-                    println!("{line}");
+                    println!("{}", m.line);
                 }
                 // A secure link's frames are recorded here, opened (the radio's bridge
                 // sees them encrypted).
-                if secure && let Ok(f) = PprzV2::new().view(frame) {
+                if secure && let Ok(f) = PprzV2::new().view(m.raw) {
                     record::received(
                         f.source(),
                         f.class(),

@@ -1,0 +1,687 @@
+//! Telemetry for viewers: decoded messages served live over the Foxglove WebSocket
+//! protocol (Foxglove, Lichtblick) and recorded to MCAP files, with the official
+//! `foxglove` SDK.
+//!
+//! # Topics
+//!
+//! * `/ac/<id>/<class>/<MESSAGE>`: every message an aircraft sends, JSON-encoded, with a
+//!   JSON Schema generated from the `messages.xml` in use ([`json`](crate::json)).
+//! * `/ac/<id>/location`: `foxglove.LocationFix` from GPS_INT (`lat`, `lon`, `hmsl`, the
+//!   accuracy `pacc` as covariance) or GPS (UTM, northern hemisphere), so the Map panel
+//!   shows the track. Messages without a fix (`fix`/`mode` below 2D) are not placed.
+//! * `/ac/<id>/link`: link statistics ([`LINK_SCHEMA`]): frames, unknown and malformed
+//!   messages, per priority level the messages received (and, when the ground knows the
+//!   aircraft's side, as the SITL does, submitted, sent and shed), PINGs and their round
+//!   trip, and the fields of the latest DATALINK_REPORT. Published by
+//!   [`Viewer::link_stats`].
+//!
+//! Times are the reception time, or the PPRZLOG time stamps when the input is a PPRZLOG
+//! file ([`Viewer::message`] takes the time).
+//!
+//! # Bounds
+//!
+//! At most [`MAX_AIRCRAFT`] aircraft get topics (frames from further source ids are
+//! counted in [`ViewerCounts::untracked`]); each has at most one topic per message of the
+//! set. Each WebSocket client has a queue of [`CLIENT_BACKLOG`] messages in the SDK: a
+//! client that reads too slowly or vanishes loses the oldest messages of its own queue
+//! and never holds up decoding (logging to the server never waits). The recording is
+//! written as it goes, in chunks of [`CHUNK_SIZE`] bytes; [`Viewer::flush`] closes the
+//! current chunk (the monitor calls it every second), so a file cut short (power loss,
+//! `kill -9`) is readable up to its last chunk; [`Viewer::finish`] writes the index and
+//! summary. A write error is kept ([`Viewer::error`]) and ends the run.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex, PoisonError};
+
+use foxglove::{
+    ChannelBuilder, Context, McapWriteOptions, McapWriterHandle, PartialMetadata, RawChannel,
+    Schema, WebSocketServer, WebSocketServerHandle,
+};
+use pprz_messages::dynamic::{self, Value};
+use pprz_messages::{MessageDescriptor, priority};
+
+use crate::json;
+use crate::monitor::{Decoded, MAX_AIRCRAFT, Monitor};
+
+/// Messages each WebSocket client may have queued in the SDK before the oldest ones are
+/// dropped.
+pub const CLIENT_BACKLOG: usize = 4096;
+
+/// Size of an MCAP chunk, in bytes (uncompressed: the SDK is built without compressors).
+pub const CHUNK_SIZE: u64 = 256 * 1024;
+
+/// The JSON Schema of the link-statistics topic (`pprz.LinkStats`).
+pub const LINK_SCHEMA: &str = r#"{
+ "$schema": "https://json-schema.org/draft/2020-12/schema",
+ "title": "pprz.LinkStats",
+ "description": "Link statistics of one aircraft as the ground sees them",
+ "type": "object",
+ "properties": {
+  "frames": {"type": "integer", "description": "frames received from the aircraft"},
+  "unknown": {"type": "integer", "description": "messages the set does not know"},
+  "malformed": {"type": "integer", "description": "known messages whose payload did not match"},
+  "levels": {"type": "array", "items": {"type": "object", "properties": {
+    "level": {"type": "string", "description": "priority level: high, normal or low"},
+    "received": {"type": "integer", "description": "messages received"},
+    "submitted": {"type": ["integer", "null"], "description": "messages the aircraft submitted (known by the SITL only)"},
+    "sent": {"type": ["integer", "null"], "description": "messages the aircraft sent (known by the SITL only)"},
+    "shed": {"type": ["integer", "null"], "description": "messages the aircraft shed (known by the SITL only)"}},
+    "required": ["level", "received", "submitted", "sent", "shed"]}},
+  "ping_rtt_ms": {"type": ["number", "null"], "description": "latest PING round trip, ms"},
+  "pings_sent": {"type": "integer"},
+  "pings_answered": {"type": "integer"},
+  "pings_lost": {"type": "integer"},
+  "datalink_report": {"type": ["object", "null"], "description": "fields of the latest DATALINK_REPORT"}
+ },
+ "required": ["frames", "unknown", "malformed", "levels", "ping_rtt_ms", "datalink_report"]
+}"#;
+
+/// The JSON Schema of `foxglove.LocationFix` in JSON encoding.
+const LOCATION_SCHEMA: &str = r#"{
+ "$schema": "https://json-schema.org/draft/2020-12/schema",
+ "title": "foxglove.LocationFix",
+ "description": "A navigation satellite fix",
+ "type": "object",
+ "properties": {
+  "timestamp": {"type": "object", "properties": {"sec": {"type": "integer", "minimum": 0}, "nsec": {"type": "integer", "minimum": 0}}},
+  "frame_id": {"type": "string"},
+  "latitude": {"type": "number", "description": "degrees"},
+  "longitude": {"type": "number", "description": "degrees"},
+  "altitude": {"type": "number", "description": "meters"},
+  "position_covariance": {"type": "array", "items": {"type": "number"}, "minItems": 9, "maxItems": 9},
+  "position_covariance_type": {"type": "integer", "minimum": 0, "maximum": 3}
+ },
+ "required": ["timestamp", "frame_id", "latitude", "longitude", "altitude", "position_covariance", "position_covariance_type"]
+}"#;
+
+/// What went wrong with a viewer output.
+#[derive(Debug)]
+pub enum ViewerError {
+    /// The WebSocket server could not start.
+    Serve(String),
+    /// The recording could not be created or written.
+    Record(String),
+}
+
+impl std::fmt::Display for ViewerError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Serve(e) => write!(f, "cannot serve Foxglove: {e}"),
+            Self::Record(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for ViewerError {}
+
+/// The aircraft's own figures of one priority level, when the ground knows them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LevelFigures {
+    /// Messages submitted for sending.
+    pub submitted: u64,
+    /// Messages sent.
+    pub sent: u64,
+    /// Messages shed (dropped under overload, by any reason).
+    pub shed: u64,
+}
+
+/// What the viewer published and left out.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ViewerCounts {
+    /// Messages published on a message topic.
+    pub messages: u64,
+    /// Location fixes published.
+    pub locations: u64,
+    /// Link-statistics messages published.
+    pub link: u64,
+    /// Messages of aircraft beyond [`MAX_AIRCRAFT`]: not published.
+    pub untracked: u64,
+    /// Unknown or malformed messages: no topic, not published.
+    pub undecodable: u64,
+    /// Topics created.
+    pub topics: u64,
+}
+
+/// A writer that keeps its first error where the viewer can see it: the SDK's MCAP sink
+/// reports a failed write only to its log.
+struct Watched<W> {
+    inner: W,
+    error: Arc<Mutex<Option<String>>>,
+}
+
+impl<W> Watched<W> {
+    fn note<T>(&self, r: std::io::Result<T>) -> std::io::Result<T> {
+        if let Err(e) = &r {
+            let mut slot = self.error.lock().unwrap_or_else(PoisonError::into_inner);
+            slot.get_or_insert_with(|| e.to_string());
+        }
+        r
+    }
+}
+
+impl<W: Write> Write for Watched<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let r = self.inner.write(buf);
+        self.note(r)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        let r = self.inner.flush();
+        self.note(r)
+    }
+}
+
+impl<W: Seek> Seek for Watched<W> {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        let r = self.inner.seek(pos);
+        self.note(r)
+    }
+}
+
+/// The MCAP file being written.
+type McapFile = BufWriter<Watched<File>>;
+
+/// An MCAP recording in progress.
+struct Recording {
+    handle: McapWriterHandle<McapFile>,
+    error: Arc<Mutex<Option<String>>>,
+    path: String,
+}
+
+/// The topics of one aircraft besides its messages.
+struct AircraftTopics {
+    location: Arc<RawChannel>,
+    link: Arc<RawChannel>,
+    /// The JSON of the latest DATALINK_REPORT.
+    report: Option<String>,
+}
+
+/// Decoded telemetry published to viewers: a Foxglove WebSocket server, an MCAP
+/// recording, or both (one SDK context: same topics and schemas in both).
+pub struct Viewer {
+    context: Arc<Context>,
+    topics: HashMap<(u8, u8, u8), Arc<RawChannel>>,
+    schemas: HashMap<(u8, u8), Schema>,
+    aircraft: BTreeMap<u8, AircraftTopics>,
+    server: Option<WebSocketServerHandle>,
+    recording: Option<Recording>,
+    counts: ViewerCounts,
+}
+
+impl Default for Viewer {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Viewer {
+    /// A viewer with no output yet ([`serve`](Self::serve), [`record`](Self::record)).
+    pub fn new() -> Self {
+        Self {
+            context: Context::new(),
+            topics: HashMap::new(),
+            schemas: HashMap::new(),
+            aircraft: BTreeMap::new(),
+            server: None,
+            recording: None,
+            counts: ViewerCounts::default(),
+        }
+    }
+
+    /// Serves the topics over the Foxglove WebSocket protocol at `addr` (port 0: any free
+    /// port); returns the address it listens on.
+    ///
+    /// # Errors
+    /// The server could not bind or start.
+    pub fn serve(&mut self, addr: SocketAddr, name: &str) -> Result<SocketAddr, ViewerError> {
+        let handle = WebSocketServer::new()
+            .context(&self.context)
+            .name(name)
+            .bind(addr.ip().to_string(), addr.port())
+            .message_backlog_size(CLIENT_BACKLOG)
+            .start_blocking()
+            .map_err(|e| ViewerError::Serve(format!("{addr}: {e}")))?;
+        let bound = SocketAddr::new(addr.ip(), handle.port());
+        self.server = Some(handle);
+        Ok(bound)
+    }
+
+    /// Records the topics to `file` (an MCAP file; `path` names it in errors).
+    ///
+    /// # Errors
+    /// The MCAP header could not be written.
+    pub fn record(&mut self, file: File, path: &str) -> Result<(), ViewerError> {
+        let error = Arc::new(Mutex::new(None));
+        let writer = BufWriter::new(Watched {
+            inner: file,
+            error: error.clone(),
+        });
+        let options = McapWriteOptions::new()
+            .chunk_size(Some(CHUNK_SIZE))
+            .compression(None)
+            .library(format!("pprz-ground {}", env!("CARGO_PKG_VERSION")));
+        let handle = foxglove::McapWriter::with_options(options)
+            .context(&self.context)
+            .create(writer)
+            .map_err(|e| ViewerError::Record(format!("recording to {path} failed: {e}")))?;
+        self.recording = Some(Recording {
+            handle,
+            error,
+            path: path.to_owned(),
+        });
+        Ok(())
+    }
+
+    /// What was published so far.
+    pub fn counts(&self) -> ViewerCounts {
+        self.counts
+    }
+
+    /// WebSocket clients connected now.
+    pub fn clients(&self) -> usize {
+        self.server
+            .as_ref()
+            .map_or(0, WebSocketServerHandle::client_count)
+    }
+
+    /// The first error of the recording, if any: the run must end.
+    pub fn error(&self) -> Option<String> {
+        let r = self.recording.as_ref()?;
+        let e = r
+            .error
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()?;
+        Some(format!("recording to {} failed: {e}", r.path))
+    }
+
+    /// The topics of aircraft `ac_id`, created while fewer than [`MAX_AIRCRAFT`] have
+    /// topics.
+    fn aircraft(&mut self, ac_id: u8) -> Option<&mut AircraftTopics> {
+        if !self.aircraft.contains_key(&ac_id) {
+            if self.aircraft.len() >= MAX_AIRCRAFT {
+                return None;
+            }
+            let location = self.channel(
+                format!("/ac/{ac_id}/location"),
+                Schema::new(
+                    "foxglove.LocationFix",
+                    "jsonschema",
+                    LOCATION_SCHEMA.as_bytes(),
+                ),
+            )?;
+            let link = self.channel(
+                format!("/ac/{ac_id}/link"),
+                Schema::new("pprz.LinkStats", "jsonschema", LINK_SCHEMA.as_bytes()),
+            )?;
+            let topics = AircraftTopics {
+                location,
+                link,
+                report: None,
+            };
+            self.aircraft.insert(ac_id, topics);
+        }
+        self.aircraft.get_mut(&ac_id)
+    }
+
+    /// A JSON topic of the context.
+    fn channel(&mut self, topic: String, schema: Schema) -> Option<Arc<RawChannel>> {
+        let channel = ChannelBuilder::new(topic)
+            .context(&self.context)
+            .message_encoding("json")
+            .schema(schema)
+            .build_raw()
+            .ok()?;
+        self.counts.topics += 1;
+        Some(channel)
+    }
+
+    /// Publishes a decoded message received at `time_ns` (nanoseconds: since the Unix
+    /// epoch, or since the start of a replayed log).
+    pub fn message(&mut self, time_ns: u64, d: &Decoded<'_>) {
+        let Some(desc) = d.message.filter(|_| d.valid) else {
+            self.counts.undecodable += 1;
+            return;
+        };
+        let Ok(body) = json::message(desc, d.payload) else {
+            self.counts.undecodable += 1;
+            return;
+        };
+        if self.aircraft(d.source).is_none() {
+            self.counts.untracked += 1;
+            return;
+        }
+        let key = (d.source, desc.class_id, desc.id);
+        let channel = match self.topics.get(&key) {
+            Some(c) => c.clone(),
+            None => {
+                let schema = self
+                    .schemas
+                    .entry((desc.class_id, desc.id))
+                    .or_insert_with(|| {
+                        Schema::new(
+                            json::schema_name(desc),
+                            "jsonschema",
+                            json::schema(desc).into_bytes(),
+                        )
+                    })
+                    .clone();
+                let Some(c) = self.channel(json::topic(d.source, desc), schema) else {
+                    self.counts.undecodable += 1;
+                    return;
+                };
+                self.topics.insert(key, c.clone());
+                c
+            }
+        };
+        channel.log_with_meta(body.as_bytes(), PartialMetadata::with_log_time(time_ns));
+        self.counts.messages += 1;
+        if desc.name == "DATALINK_REPORT"
+            && let Some(a) = self.aircraft.get_mut(&d.source)
+        {
+            a.report = Some(body);
+        }
+        if let Some(fix) = location(desc, d.payload)
+            && let Some(a) = self.aircraft.get(&d.source)
+        {
+            let text = fix.json(d.source, time_ns);
+            a.location
+                .log_with_meta(text.as_bytes(), PartialMetadata::with_log_time(time_ns));
+            self.counts.locations += 1;
+        }
+    }
+
+    /// Publishes the link statistics of every aircraft the monitor tracks at `time_ns`;
+    /// `aircraft_side` gives, when known, the aircraft's own figures per priority level
+    /// (high, normal, low).
+    pub fn link_stats(
+        &mut self,
+        time_ns: u64,
+        monitor: &Monitor,
+        aircraft_side: impl Fn(u8) -> Option<[LevelFigures; 3]>,
+    ) {
+        for ac_id in monitor.aircraft() {
+            let Some(state) = monitor.aircraft_state(ac_id) else {
+                continue;
+            };
+            let side = aircraft_side(ac_id);
+            let Some(topics) = self.aircraft(ac_id) else {
+                continue;
+            };
+            let mut received = [0u64; 3];
+            for (p, n) in state.per_priority() {
+                received[priority::level(p.0)] += n;
+            }
+            let levels: Vec<serde_json::Value> = (0..3)
+                .map(|i| {
+                    let s = side.map(|s| s[i]);
+                    serde_json::json!({
+                        "level": priority::LEVEL_NAMES[i],
+                        "received": received[i],
+                        "submitted": s.map(|s| s.submitted),
+                        "sent": s.map(|s| s.sent),
+                        "shed": s.map(|s| s.shed),
+                    })
+                })
+                .collect();
+            let report = topics
+                .report
+                .as_deref()
+                .and_then(|r| serde_json::from_str::<serde_json::Value>(r).ok());
+            let pings = state.pings();
+            let text = serde_json::json!({
+                "frames": state.frames(),
+                "unknown": state.unknown(),
+                "malformed": state.malformed(),
+                "levels": levels,
+                "ping_rtt_ms": state.last_rtt().map(|s| s * 1000.0),
+                "pings_sent": pings.sent_count(),
+                "pings_answered": pings.answered(),
+                "pings_lost": pings.lost(),
+                "datalink_report": report,
+            })
+            .to_string();
+            topics
+                .link
+                .log_with_meta(text.as_bytes(), PartialMetadata::with_log_time(time_ns));
+            self.counts.link += 1;
+        }
+    }
+
+    /// Closes the recording's current chunk and writes it out (a file cut short later
+    /// is readable up to here).
+    ///
+    /// # Errors
+    /// The recording failed (now or earlier).
+    pub fn flush(&mut self) -> Result<(), ViewerError> {
+        if let Some(r) = &self.recording
+            && let Err(e) = r.handle.flush()
+        {
+            return Err(ViewerError::Record(format!(
+                "recording to {} failed: {e}",
+                r.path
+            )));
+        }
+        match self.error() {
+            Some(e) => Err(ViewerError::Record(e)),
+            None => Ok(()),
+        }
+    }
+
+    /// Stops the server and finalises the recording (index and summary).
+    ///
+    /// # Errors
+    /// The recording failed (now or earlier).
+    pub fn finish(mut self) -> Result<ViewerCounts, ViewerError> {
+        if let Some(server) = self.server.take() {
+            server.stop().wait_blocking();
+        }
+        let earlier = self.error();
+        if let Some(r) = self.recording.take() {
+            let path = r.path.clone();
+            let fail = |e: &dyn std::fmt::Display| {
+                ViewerError::Record(format!("recording to {path} failed: {e}"))
+            };
+            let mut file = r.handle.close().map_err(|e| fail(&e))?;
+            file.flush().map_err(|e| fail(&e))?;
+            let watched = file
+                .into_inner()
+                .map_err(|e| fail(&e.error().to_string()))?;
+            watched.inner.sync_all().map_err(|e| fail(&e))?;
+            if let Some(e) = watched
+                .error
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .clone()
+            {
+                return Err(fail(&e));
+            }
+        }
+        match earlier {
+            Some(e) => Err(ViewerError::Record(e)),
+            None => Ok(self.counts),
+        }
+    }
+}
+
+/// A position fix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Fix {
+    latitude: f64,
+    longitude: f64,
+    altitude: f64,
+    /// Horizontal and vertical accuracy (1 sigma), metres.
+    accuracy: Option<f64>,
+}
+
+impl Fix {
+    fn json(&self, ac_id: u8, time_ns: u64) -> String {
+        let (cov, kind) = match self.accuracy {
+            Some(a) => {
+                let v = a * a;
+                ([v, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v], 2)
+            }
+            None => ([0.0; 9], 0),
+        };
+        serde_json::json!({
+            "timestamp": {"sec": time_ns / 1_000_000_000, "nsec": time_ns % 1_000_000_000},
+            "frame_id": format!("ac{ac_id}"),
+            "latitude": self.latitude,
+            "longitude": self.longitude,
+            "altitude": self.altitude,
+            "position_covariance": cov,
+            "position_covariance_type": kind,
+        })
+        .to_string()
+    }
+}
+
+/// The numeric scalar fields of a payload, by name.
+fn numbers<'a>(desc: &'a MessageDescriptor<'a>, payload: &[u8]) -> HashMap<&'a str, f64> {
+    dynamic::fields(desc, payload)
+        .filter_map(Result::ok)
+        .filter(|(_, v)| !matches!(v, Value::Array(_) | Value::Text(_)))
+        .filter_map(|(f, v)| Some((f.name, v.as_f64()?)))
+        .collect()
+}
+
+/// The position in GPS_INT (`lat`/`lon` in 1e7 degrees, `hmsl` or `alt` in mm) or GPS
+/// (UTM in cm, `alt` in mm), if the message is one with a fix.
+fn location(desc: &MessageDescriptor<'_>, payload: &[u8]) -> Option<Fix> {
+    if desc.name != "GPS_INT" && desc.name != "GPS" {
+        return None;
+    }
+    let n = numbers(desc, payload);
+    let fix = n.get("fix").or_else(|| n.get("mode")).copied();
+    if fix.is_some_and(|f| f < 2.0) {
+        return None;
+    }
+    let fix = if desc.name == "GPS_INT" {
+        Fix {
+            latitude: n.get("lat")? * 1e-7,
+            longitude: n.get("lon")? * 1e-7,
+            altitude: n.get("hmsl").or_else(|| n.get("alt"))? / 1000.0,
+            accuracy: n.get("pacc").map(|cm| cm / 100.0),
+        }
+    } else {
+        let zone = *n.get("utm_zone")?;
+        let (latitude, longitude) = utm_to_wgs84(
+            zone,
+            n.get("utm_east")? / 100.0,
+            n.get("utm_north")? / 100.0,
+        )?;
+        Fix {
+            latitude,
+            longitude,
+            altitude: n.get("alt")? / 1000.0,
+            accuracy: None,
+        }
+    };
+    let valid = fix.latitude.abs() <= 90.0
+        && fix.longitude.abs() <= 180.0
+        && fix.altitude.is_finite()
+        && !(fix.latitude == 0.0 && fix.longitude == 0.0);
+    valid.then_some(fix)
+}
+
+/// UTM (northern hemisphere, WGS84) to latitude and longitude in degrees; `None` for a
+/// zone outside 1..=60.
+fn utm_to_wgs84(zone: f64, east: f64, north: f64) -> Option<(f64, f64)> {
+    if !(1.0..=60.0).contains(&zone) || !east.is_finite() || !north.is_finite() {
+        return None;
+    }
+    let a = 6_378_137.0f64;
+    let f = 1.0 / 298.257_223_563;
+    let k0 = 0.9996;
+    let e2 = f * (2.0 - f);
+    let ep2 = e2 / (1.0 - e2);
+    let x = east - 500_000.0;
+    let m = north / k0;
+    let mu = m / (a * (1.0 - e2 / 4.0 - 3.0 * e2 * e2 / 64.0 - 5.0 * e2 * e2 * e2 / 256.0));
+    let e1 = (1.0 - (1.0 - e2).sqrt()) / (1.0 + (1.0 - e2).sqrt());
+    let phi1 = mu
+        + (3.0 * e1 / 2.0 - 27.0 * e1.powi(3) / 32.0) * (2.0 * mu).sin()
+        + (21.0 * e1 * e1 / 16.0 - 55.0 * e1.powi(4) / 32.0) * (4.0 * mu).sin()
+        + (151.0 * e1.powi(3) / 96.0) * (6.0 * mu).sin()
+        + (1097.0 * e1.powi(4) / 512.0) * (8.0 * mu).sin();
+    let (s, c, t) = (phi1.sin(), phi1.cos(), phi1.tan());
+    let c1 = ep2 * c * c;
+    let t1 = t * t;
+    let n1 = a / (1.0 - e2 * s * s).sqrt();
+    let r1 = a * (1.0 - e2) / (1.0 - e2 * s * s).powf(1.5);
+    let d = x / (n1 * k0);
+    let lat = phi1
+        - (n1 * t / r1)
+            * (d * d / 2.0
+                - (5.0 + 3.0 * t1 + 10.0 * c1 - 4.0 * c1 * c1 - 9.0 * ep2) * d.powi(4) / 24.0
+                + (61.0 + 90.0 * t1 + 298.0 * c1 + 45.0 * t1 * t1 - 252.0 * ep2 - 3.0 * c1 * c1)
+                    * d.powi(6)
+                    / 720.0);
+    let lon0 = (zone - 1.0) * 6.0 - 180.0 + 3.0;
+    let lon = lon0
+        + ((d - (1.0 + 2.0 * t1 + c1) * d.powi(3) / 6.0
+            + (5.0 - 2.0 * c1 + 28.0 * t1 - 3.0 * c1 * c1 + 8.0 * ep2 + 24.0 * t1 * t1)
+                * d.powi(5)
+                / 120.0)
+            / c)
+            .to_degrees();
+    Some((lat.to_degrees(), lon))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utm_central_meridian_and_equator() {
+        let (lat, lon) = utm_to_wgs84(31.0, 500_000.0, 0.0).unwrap();
+        assert!(lat.abs() < 1e-9 && (lon - 3.0).abs() < 1e-9, "{lat} {lon}");
+        // 999 274 m north on the central meridian is about 9.04 degrees.
+        let (lat, lon) = utm_to_wgs84(31.0, 500_000.0, 999_274.0).unwrap();
+        assert!(
+            (lat - 9.04).abs() < 1e-3 && (lon - 3.0).abs() < 1e-9,
+            "{lat}"
+        );
+        // East of the meridian: a larger longitude, same zone.
+        let (_, lon) = utm_to_wgs84(31.0, 600_000.0, 4_800_000.0).unwrap();
+        assert!(lon > 3.0 && lon < 6.0, "{lon}");
+        assert_eq!(utm_to_wgs84(0.0, 500_000.0, 0.0), None);
+        assert_eq!(utm_to_wgs84(61.0, 500_000.0, 0.0), None);
+    }
+
+    #[test]
+    fn gps_int_gives_a_fix_and_no_fix_gives_none() {
+        let set = crate::set::RuntimeSet::parse(
+            "m.xml",
+            r#"<protocol><msg_class name="telemetry" id="1">
+            <message name="GPS_INT" id="155">
+              <field name="lat" type="int32"/><field name="lon" type="int32"/>
+              <field name="hmsl" type="int32"/><field name="pacc" type="uint32"/>
+              <field name="fix" type="uint8"/></message></msg_class></protocol>"#,
+        )
+        .unwrap();
+        let d = set.find(1, 155).unwrap();
+        let payload = |fix: u8| {
+            let mut p = Vec::new();
+            p.extend(434_629_172i32.to_le_bytes());
+            p.extend(14_727_000i32.to_le_bytes());
+            p.extend(152_300i32.to_le_bytes());
+            p.extend(250u32.to_le_bytes());
+            p.push(fix);
+            p
+        };
+        let f = location(d, &payload(3)).unwrap();
+        assert!((f.latitude - 43.462_917_2).abs() < 1e-9);
+        assert!((f.longitude - 1.4727).abs() < 1e-9);
+        assert!((f.altitude - 152.3).abs() < 1e-9);
+        assert_eq!(f.accuracy, Some(2.5));
+        assert_eq!(location(d, &payload(0)), None);
+        let j: serde_json::Value = serde_json::from_str(&f.json(7, 1_500_000_001)).unwrap();
+        assert_eq!(j["timestamp"]["sec"], 1);
+        assert_eq!(j["timestamp"]["nsec"], 500_000_001);
+        assert_eq!(j["frame_id"], "ac7");
+        assert_eq!(j["position_covariance_type"], 2);
+    }
+}
