@@ -30,7 +30,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration as StdDuration, Instant as StdInstant};
+use std::time::{Duration as StdDuration, Instant as StdInstant, SystemTime, UNIX_EPOCH};
 
 use clap::error::ErrorKind;
 use clap::{CommandFactory, Parser, ValueEnum};
@@ -51,6 +51,7 @@ use pprz_ground::monitor::Monitor;
 use pprz_ground::secure::{GroundSecure, key_file_from_path};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
+use pprz_ground::viewer::{LevelFigures, Viewer};
 use pprz_messages::{Message, VarArray};
 use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
@@ -151,6 +152,12 @@ struct Args {
     /// aircraft on the same UDP port and PINGs both.
     #[arg(long, default_value_t = 1, value_parser = parse_fleet)]
     fleet: u8,
+    /// Serve the ground's decoded telemetry to Foxglove or Lichtblick over the Foxglove
+    /// WebSocket protocol at this address (e.g. `127.0.0.1:8765`; port 0: any free port,
+    /// printed), with the aircraft's own per-level figures on `/ac/<id>/link`. Needs the
+    /// in-process ground (not `--headless`).
+    #[arg(long, value_name = "ADDR")]
+    foxglove: Option<SocketAddr>,
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))]
     messages: PathBuf,
@@ -586,6 +593,9 @@ impl RadioPlan {
             None if xbee => DEFAULT_XBEE_BUFFER,
             None => DEFAULT_MODEM_BUFFER,
         };
+        if args.headless && args.foxglove.is_some() {
+            return Err("--foxglove serves the in-process ground's telemetry: drop --headless (or run pprz-monitor --foxglove beside it)".into());
+        }
         if args.fleet > 1 && (xbee || args.secure.is_some()) {
             return Err(
                 "--fleet 2 needs --transport pprz2 without --secure (the relay forwards PPRZ v2 frames; the secure link is between one aircraft and the ground)"
@@ -874,7 +884,24 @@ fn main() -> ExitCode {
                 },
                 None => monitor,
             };
-            Some(run_ground(&args, socket, monitor, &stop, start))
+            let viewer = match args.foxglove {
+                Some(addr) => {
+                    let mut viewer = Viewer::new();
+                    match viewer.serve(addr, "pprz sitl") {
+                        Ok(bound) => eprintln!("foxglove: serving ws://{bound}"),
+                        Err(e) => {
+                            eprintln!("sitl: {e}");
+                            return ExitCode::FAILURE;
+                        }
+                    }
+                    Some(viewer)
+                }
+                None => None,
+            };
+            let side = |ac: u8| aircraft_levels(ac, downlink, fleet_8.map(|(_, d)| d));
+            Some(run_ground(
+                &args, socket, monitor, viewer, &side, &stop, start,
+            ))
         }
         _ => {
             let who = if args.fleet > 1 {
@@ -948,6 +975,8 @@ fn run_ground(
     args: &Args,
     socket: UdpSocket,
     mut monitor: Monitor,
+    mut viewer: Option<Viewer>,
+    aircraft_side: &dyn Fn(u8) -> Option<[LevelFigures; 3]>,
     stop: &AtomicBool,
     start: StdInstant,
 ) -> Monitor {
@@ -966,6 +995,7 @@ fn run_ground(
     let mut next_ping = 1.0;
     let mut setting_sent = false;
     let mut next_render = 0.0;
+    let mut next_link = 0.0;
     while !stop.load(Ordering::SeqCst) && start.elapsed().as_secs_f64() < wall_limit {
         let t = sim_now(args.speed);
         // The key exchange (--secure): message 1 until answered, message 3.
@@ -1008,6 +1038,9 @@ fn run_ground(
                 if args.lines {
                     println!("{}", m.line);
                 }
+                if let Some(v) = viewer.as_mut() {
+                    v.message(unix_ns(), m);
+                }
                 // A secure link's frames are recorded here, opened (the radio's bridge
                 // sees them encrypted).
                 if secure && let Ok(f) = PprzV2::new().view(m.raw) {
@@ -1025,8 +1058,66 @@ fn run_ground(
             print!("\x1b[2J\x1b[H{}", monitor.render(t));
             next_render = t + 0.5 * args.speed.max(1.0);
         }
+        if let Some(v) = viewer.as_mut()
+            && t >= next_link
+        {
+            v.link_stats(unix_ns(), &monitor, aircraft_side);
+            next_link = t + args.speed;
+        }
+    }
+    if let Some(v) = viewer {
+        let c = v.counts();
+        eprintln!(
+            "foxglove: published {} messages, {} locations, {} link statistics on {} topics",
+            c.messages, c.locations, c.link, c.topics
+        );
+        if let Err(e) = v.finish() {
+            eprintln!("sitl: {e}");
+        }
     }
     monitor
+}
+
+/// Now, in nanoseconds since the Unix epoch.
+fn unix_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+/// The aircraft's own figures per priority level (what it submitted, sent and shed of
+/// its own messages; frames it relays are the other aircraft's), for the viewer's link
+/// statistics.
+fn aircraft_levels(ac: u8, downlink: &Dl, second: Option<&Dl8>) -> Option<[LevelFigures; 3]> {
+    let figures = |f: &dyn Fn(usize) -> (u32, u32, u32)| {
+        [0, 1, 2].map(|i| {
+            let (submitted, sent, shed) = f(i);
+            LevelFigures {
+                submitted: submitted.into(),
+                sent: sent.into(),
+                shed: shed.into(),
+            }
+        })
+    };
+    if ac == AC_ID {
+        let s = downlink.stats(0)?;
+        Some(figures(&|i| {
+            let (all, relayed) = (s.levels[i], s.relayed.levels[i]);
+            (
+                all.submitted.saturating_sub(relayed.submitted),
+                all.sent.saturating_sub(relayed.sent),
+                all.lost.saturating_sub(relayed.lost),
+            )
+        }))
+    } else if ac == SECOND_AC_ID {
+        let s = second?.stats(0)?;
+        Some(figures(&|i| {
+            let l = s.levels[i];
+            (l.submitted, l.sent, l.lost)
+        }))
+    } else {
+        None
+    }
 }
 
 /// The figures of the run so far.
