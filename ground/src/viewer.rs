@@ -15,6 +15,9 @@
 //!   trip, and the fields of the latest DATALINK_REPORT. Published by
 //!   [`Viewer::link_stats`].
 //!
+//! Settings: with [`Viewer::serve`]'s `settings` on, the Parameters panel reads and
+//! writes the aircraft's settings ([`settings`]).
+//!
 //! Times are the reception time, or the PPRZLOG time stamps when the input is a PPRZLOG
 //! file ([`Viewer::message`] takes the time).
 //!
@@ -45,6 +48,11 @@ use pprz_messages::{MessageDescriptor, priority};
 
 use crate::json;
 use crate::monitor::{Decoded, MAX_AIRCRAFT, Monitor};
+
+pub mod settings;
+
+pub use settings::SettingRequest;
+use settings::Settings;
 
 /// Messages each WebSocket client may have queued in the SDK before the oldest ones are
 /// dropped.
@@ -206,6 +214,7 @@ pub struct Viewer {
     schemas: HashMap<(u8, u8), Schema>,
     aircraft: BTreeMap<u8, AircraftTopics>,
     server: Option<WebSocketServerHandle>,
+    settings: Option<Settings>,
     recording: Option<Recording>,
     counts: ViewerCounts,
 }
@@ -225,22 +234,36 @@ impl Viewer {
             schemas: HashMap::new(),
             aircraft: BTreeMap::new(),
             server: None,
+            settings: None,
             recording: None,
             counts: ViewerCounts::default(),
         }
     }
 
     /// Serves the topics over the Foxglove WebSocket protocol at `addr` (port 0: any free
-    /// port); returns the address it listens on.
+    /// port); returns the address it listens on. With `settings`, clients can read and
+    /// write the aircraft's settings as parameters: the ground takes the requests with
+    /// [`setting_requests`](Self::setting_requests) and sends them.
     ///
     /// # Errors
     /// The server could not bind or start.
-    pub fn serve(&mut self, addr: SocketAddr, name: &str) -> Result<SocketAddr, ViewerError> {
-        let handle = WebSocketServer::new()
+    pub fn serve(
+        &mut self,
+        addr: SocketAddr,
+        name: &str,
+        settings: bool,
+    ) -> Result<SocketAddr, ViewerError> {
+        let mut server = WebSocketServer::new()
             .context(&self.context)
             .name(name)
             .bind(addr.ip().to_string(), addr.port())
-            .message_backlog_size(CLIENT_BACKLOG)
+            .message_backlog_size(CLIENT_BACKLOG);
+        if settings {
+            let (state, handler) = Settings::new();
+            server = server.parameter_handler(Arc::new(handler));
+            self.settings = Some(state);
+        }
+        let handle = server
             .start_blocking()
             .map_err(|e| ViewerError::Serve(format!("{addr}: {e}")))?;
         let bound = SocketAddr::new(addr.ip(), handle.port());
@@ -272,6 +295,29 @@ impl Viewer {
             path: path.to_owned(),
         });
         Ok(())
+    }
+
+    /// The settings requests the viewers made since the last call (GET_SETTING and
+    /// SETTING to send to the aircraft, in order), at `now` (seconds, the monitor's
+    /// time); requests unanswered for [`settings::ANSWER_TIMEOUT`] seconds are answered
+    /// with what is known.
+    pub fn setting_requests(&mut self, now: f64) -> Vec<SettingRequest> {
+        let Some(s) = self.settings.as_mut() else {
+            return Vec::new();
+        };
+        let requests = s.poll(now);
+        let warnings = s.expire(now);
+        self.warn(warnings);
+        requests
+    }
+
+    /// Sends warnings to every client.
+    fn warn(&self, warnings: Vec<settings::Warning>) {
+        if let Some(server) = &self.server {
+            for w in warnings {
+                server.publish_status(foxglove::websocket::Status::warning(w.0));
+            }
+        }
     }
 
     /// What was published so far.
@@ -383,6 +429,9 @@ impl Viewer {
         {
             a.report = Some(body);
         }
+        if desc.name == "DL_VALUE" {
+            self.dl_value(desc, d);
+        }
         if let Some(fix) = location(desc, d.payload)
             && let Some(a) = self.aircraft.get(&d.source)
         {
@@ -391,6 +440,32 @@ impl Viewer {
                 .log_with_meta(text.as_bytes(), PartialMetadata::with_log_time(time_ns));
             self.counts.locations += 1;
         }
+    }
+
+    /// A DL_VALUE: answers the viewers' settings requests, publishes the value.
+    fn dl_value(&mut self, desc: &MessageDescriptor<'_>, d: &Decoded<'_>) {
+        let Some(s) = self.settings.as_mut() else {
+            return;
+        };
+        let mut index = None;
+        let mut value = None;
+        for (f, v) in dynamic::fields(desc, d.payload).filter_map(Result::ok) {
+            match f.name {
+                "index" => index = v.as_i64().and_then(|i| u8::try_from(i).ok()),
+                "value" if !matches!(v, Value::Array(_) | Value::Text(_)) => {
+                    value = v.as_f64().map(|x| (x, f.ty.base()));
+                }
+                _ => {}
+            }
+        }
+        let (Some(index), Some((value, base))) = (index, value) else {
+            return;
+        };
+        let (parameter, warnings) = s.dl_value(d.source, index, value, base);
+        if let Some(server) = &self.server {
+            server.publish_parameter_values(vec![parameter]);
+        }
+        self.warn(warnings);
     }
 
     /// Publishes the link statistics of every aircraft the monitor tracks at `time_ns`;

@@ -23,7 +23,7 @@ use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
-use pprz_ground::viewer::Viewer;
+use pprz_ground::viewer::{SettingRequest, Viewer};
 use pprz_transports::AnyTransport;
 
 /// Where uplink frames are written.
@@ -303,7 +303,7 @@ fn send_secure(monitor: &mut Monitor, sink: &mut UplinkSink, t: f64) {
 }
 
 /// Opens `--mcap` (after checking it is no input) and starts `--foxglove`.
-fn open_viewer(args: &Args, inputs: &Inputs) -> Result<Option<Viewer>, String> {
+fn open_viewer(args: &Args, inputs: &Inputs, uplink: bool) -> Result<Option<Viewer>, String> {
     if args.mcap.is_none() && args.foxglove.is_none() {
         return Ok(None);
     }
@@ -316,7 +316,7 @@ fn open_viewer(args: &Args, inputs: &Inputs) -> Result<Option<Viewer>, String> {
     }
     if let Some(addr) = args.foxglove {
         let bound = viewer
-            .serve(addr, "pprz-monitor")
+            .serve(addr, "pprz-monitor", uplink)
             .map_err(|e| e.to_string())?;
         eprintln!("foxglove: serving ws://{bound}");
     }
@@ -369,7 +369,8 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         }
         None => None,
     };
-    let viewer = open_viewer(args, &inputs)?;
+    let has_uplink = !matches!(uplink_sink, UplinkSink::None);
+    let viewer = open_viewer(args, &inputs, has_uplink)?;
     let queue = match source {
         Source::Udp(socket) => {
             let q = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
@@ -445,6 +446,39 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
                     let sink = &mut uplink_sink;
                     if send(&mut monitor, sink, transport, ac_id, "SETTING", &values) {
                         monitor.setting_value_sent_to(now(), ac_id, index, f64::from(value));
+                    }
+                }
+            }
+        }
+        // Settings read and written from the viewer.
+        let requests = match out.viewer.as_mut() {
+            Some(v) => v.setting_requests(t),
+            None => Vec::new(),
+        };
+        for request in requests {
+            if !monitor.uplink_ready() {
+                continue; // answered "no answer" when it times out
+            }
+            let sink = &mut uplink_sink;
+            match request {
+                SettingRequest::Get { ac_id, index } => {
+                    let values = [("index", f64::from(index)), ("ac_id", f64::from(ac_id))];
+                    if send(&mut monitor, sink, transport, ac_id, "GET_SETTING", &values) {
+                        monitor.get_setting_sent_to(now(), ac_id, index);
+                    }
+                }
+                SettingRequest::Set {
+                    ac_id,
+                    index,
+                    value,
+                } => {
+                    let values = [
+                        ("index", f64::from(index)),
+                        ("ac_id", f64::from(ac_id)),
+                        ("value", value),
+                    ];
+                    if send(&mut monitor, sink, transport, ac_id, "SETTING", &values) {
+                        monitor.setting_value_sent_to(now(), ac_id, index, value);
                     }
                 }
             }

@@ -51,7 +51,7 @@ use pprz_ground::monitor::Monitor;
 use pprz_ground::secure::{GroundSecure, key_file_from_path};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
-use pprz_ground::viewer::{LevelFigures, Viewer};
+use pprz_ground::viewer::{LevelFigures, SettingRequest, Viewer};
 use pprz_messages::{Message, VarArray};
 use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
@@ -887,7 +887,7 @@ fn main() -> ExitCode {
             let viewer = match args.foxglove {
                 Some(addr) => {
                     let mut viewer = Viewer::new();
-                    match viewer.serve(addr, "pprz sitl") {
+                    match viewer.serve(addr, "pprz sitl", true) {
                         Ok(bound) => eprintln!("foxglove: serving ws://{bound}"),
                         Err(e) => {
                             eprintln!("sitl: {e}");
@@ -1032,6 +1032,49 @@ fn run_ground(
                 }
             }
             setting_sent = true;
+        }
+        // Settings read and written from the viewer.
+        let requests = match viewer.as_mut() {
+            Some(v) => v.setting_requests(t),
+            None => Vec::new(),
+        };
+        for request in requests {
+            let (ac, name, values) = match request {
+                SettingRequest::Get { ac_id, index } => (
+                    ac_id,
+                    "GET_SETTING",
+                    vec![("index", f64::from(index)), ("ac_id", f64::from(ac_id))],
+                ),
+                SettingRequest::Set {
+                    ac_id,
+                    index,
+                    value,
+                } => (
+                    ac_id,
+                    "SETTING",
+                    vec![
+                        ("index", f64::from(index)),
+                        ("ac_id", f64::from(ac_id)),
+                        ("value", value),
+                    ],
+                ),
+            };
+            if monitor.uplink_ready()
+                && let Ok(frame) = uplink::frame(monitor.set(), transport, ac, name, &values)
+                && let Ok(frame) = monitor.seal_uplink(&frame)
+                && socket.send_to(&frame, args.uplink).is_ok()
+            {
+                match request {
+                    SettingRequest::Get { ac_id, index } => {
+                        monitor.get_setting_sent_to(t, ac_id, index);
+                    }
+                    SettingRequest::Set {
+                        ac_id,
+                        index,
+                        value,
+                    } => monitor.setting_value_sent_to(t, ac_id, index, value),
+                }
+            }
         }
         if let Ok((n, _)) = socket.recv_from(&mut buf) {
             monitor.feed(sim_now(args.speed), &buf[..n], |m| {
