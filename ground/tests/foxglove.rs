@@ -1,0 +1,331 @@
+//! `pprz-monitor --mcap` and `--foxglove`, checked by independent readers.
+//!
+//! * A PPRZLOG file of every message of the full PPRZLINK reference set (random field
+//!   values, two aircraft) is converted with `--file log --transport pprzlog --mcap`;
+//!   PyPI's `mcap` reads the recording back (`ground/tests/foxglove/check_mcap.py`):
+//!   every topic has its schema, every message validates, counts and values equal the
+//!   monitor's `--lines` output. The log's time stamps are the recording's times.
+//! * Write errors end the run with a failure; Ctrl-C finalises the recording.
+//! * A client that subscribes to everything and then stops reading does not hold up
+//!   decoding.
+//!
+//! The tools are found with `pprz_test_support::viewer_tools` (skipped, with a printed
+//! reason, when they are not installed; a failure when `PPRZ_REQUIRE_REFERENCE` is set).
+
+mod common;
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpListener;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+use common::{MESSAGES, monitor, run};
+use pprz_ground::set::RuntimeSet;
+use pprz_messages::dynamic;
+use pprz_test_support::rng::Rng;
+use pprz_test_support::viewer_tools;
+use pprz_transports::{AnyTransport, Encoder, MsgHeader, PprzLog, PprzV2, TxMeta};
+
+/// Frames of every message of `set`, `per_message` times from each of `sources`, with
+/// random field values; the PPRZLOG time stamps (100 µs ticks) are increasing.
+fn stream(
+    set: &RuntimeSet,
+    transport: AnyTransport,
+    sources: &[u8],
+    per_message: usize,
+    seed: u64,
+) -> (Vec<u8>, Vec<u32>) {
+    let mut rng = Rng::new(seed);
+    let mut out = Vec::new();
+    let mut stamps = Vec::new();
+    let mut stamp = 1_000u32;
+    for _ in 0..per_message {
+        for &source in sources {
+            for desc in set.set().messages() {
+                let mut payload = vec![0u8; transport.max_payload_len()];
+                let elements = [0, 1, 7, 255][rng.below(4)];
+                let Ok(n) =
+                    dynamic::synthesize(desc, &mut payload, elements, || rng.next_u64() as u8)
+                else {
+                    continue;
+                };
+                payload.truncate(n);
+                stamp += 1 + rng.below(50) as u32;
+                let meta = TxMeta::new(MsgHeader::new(source, 0, desc.class_id, desc.id)).at(stamp);
+                let mut buf = vec![0u8; transport.max_frame_len()];
+                if let Ok(len) = transport.encode(&meta, &payload, &mut buf) {
+                    out.extend_from_slice(&buf[..len]);
+                    stamps.push(stamp);
+                }
+            }
+        }
+    }
+    (out, stamps)
+}
+
+/// Runs `check_mcap.py` on a recording and the lines of the same run.
+fn check_mcap(python: &Path, mcap: &Path, lines: &str, extra: &[&str]) -> (bool, String) {
+    let lines_path = mcap.with_extension("lines");
+    std::fs::write(&lines_path, lines).unwrap();
+    let script = viewer_tools::scripts().join("check_mcap.py");
+    let out = Command::new(python)
+        .arg(script)
+        .arg(mcap)
+        .arg(&lines_path)
+        .args(extra)
+        .output()
+        .expect("python runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+/// The log times of the recording's message topics (not location or link), in order.
+fn message_log_times(path: &Path) -> Vec<u64> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut times = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let m = m.expect("a readable message");
+        let topic = &m.channel.topic;
+        if !(topic.ends_with("/location") || topic.ends_with("/link")) {
+            times.push(m.log_time);
+        }
+    }
+    times
+}
+
+#[test]
+fn a_pprzlog_of_the_full_reference_set_converts_to_an_mcap_an_independent_reader_agrees_with() {
+    let who = "pprz-ground mcap_of_the_full_reference_set";
+    let Some(dir) = pprz_test_support::reference::locate_for_test(who) else {
+        return;
+    };
+    let Some(python) = viewer_tools::python(who) else {
+        return;
+    };
+    let messages = dir.join("messages.xml");
+    let set = RuntimeSet::load(&messages).unwrap();
+    assert!(set.set().len() > 300);
+    let (log, stamps) = stream(&set, PprzLog::TELEMETRY.into(), &[7, 8], 2, 0xF0C5_61E0);
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("flight.log");
+    std::fs::write(&input, &log).unwrap();
+    let out = tmp.path().join("flight.mcap");
+    let (code, lines, err) = run(monitor()
+        .args(["--transport", "pprzlog", "--lines", "--messages"])
+        .arg(&messages)
+        .arg("--file")
+        .arg(&input)
+        .arg("--mcap")
+        .arg(&out));
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(lines.lines().count(), stamps.len(), "{err}");
+    assert!(err.contains("foxglove: published"), "{err}");
+
+    let (ok, report) = check_mcap(
+        &python,
+        &out,
+        &lines,
+        &[
+            "--messages",
+            messages.to_str().unwrap(),
+            "--log-times",
+            "replay",
+        ],
+    );
+    assert!(ok, "{report}");
+    assert!(report.contains("checked"), "{report}");
+
+    // The times are the log's (100 µs ticks), in order, for every decoded message.
+    let valid: Vec<u64> = lines
+        .lines()
+        .zip(&stamps)
+        .filter(|(l, _)| !l.contains("<error:") && !l.contains("unknown message"))
+        .map(|(_, &s)| u64::from(s) * 100_000)
+        .collect();
+    assert_eq!(message_log_times(&out), valid);
+}
+
+#[test]
+fn a_recording_that_cannot_be_written_ends_the_run_with_a_failure() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("skipped: no /dev/full");
+        return;
+    }
+    let set = RuntimeSet::load(MESSAGES).unwrap();
+    let (log, _) = stream(&set, PprzV2::new().into(), &[7], 40, 1);
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in.bin");
+    std::fs::write(&input, &log).unwrap();
+    let (code, _, err) = run(monitor()
+        .args([
+            "--lines",
+            "--messages",
+            MESSAGES,
+            "--mcap",
+            "/dev/full",
+            "--file",
+        ])
+        .arg(&input));
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("recording to /dev/full failed"), "{err}");
+}
+
+#[test]
+fn a_recording_cannot_overwrite_an_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in.bin");
+    std::fs::write(&input, b"keep").unwrap();
+    let (code, _, err) = run(monitor()
+        .args(["--messages", MESSAGES, "--file"])
+        .arg(&input)
+        .arg("--mcap")
+        .arg(&input));
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(std::fs::read(&input).unwrap(), b"keep");
+    // Nor the PPRZLOG recording of the same run.
+    let rec = tmp.path().join("rec.log");
+    let (code, _, err) = run(monitor()
+        .args(["--messages", MESSAGES, "--file"])
+        .arg(&input)
+        .arg("--record")
+        .arg(&rec)
+        .arg("--mcap")
+        .arg(&rec));
+    assert_eq!(code, Some(1), "{err}");
+}
+
+/// Reads lines of `child`'s standard output until `n` arrived; returns them.
+fn read_lines(out: &mut impl BufRead, n: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    while lines.len() < n {
+        let mut line = String::new();
+        if out.read_line(&mut line).unwrap() == 0 {
+            break;
+        }
+        lines.push(line);
+    }
+    lines
+}
+
+/// Sends SIGINT (Ctrl-C) to `child`.
+fn interrupt(child: &Child) {
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+#[test]
+fn ctrl_c_finalises_the_recording() {
+    let Some(python) = viewer_tools::python("pprz-ground ctrl_c_finalises_the_recording") else {
+        return;
+    };
+    let set = RuntimeSet::load(MESSAGES).unwrap();
+    let (bytes, stamps) = stream(&set, PprzV2::new().into(), &[7], 3, 2);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("live.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"))
+        .args(["--stdin", "--lines", "--messages", MESSAGES, "--mcap"])
+        .arg(&out)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The input stays open (a live link): only Ctrl-C ends the run.
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(&bytes).unwrap();
+    stdin.flush().unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut lines = read_lines(&mut stdout, stamps.len());
+    assert_eq!(lines.len(), stamps.len());
+    interrupt(&child);
+    lines.extend(read_lines(&mut stdout, usize::MAX));
+    let status = child.wait().unwrap();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    drop(stdin);
+    assert_eq!(status.code(), Some(0), "{err}");
+    let (ok, report) = check_mcap(&python, &out, &lines.concat(), &["--log-times", "wall"]);
+    assert!(ok, "{report}");
+}
+
+#[test]
+fn a_client_that_stops_reading_does_not_hold_up_decoding() {
+    let who = "pprz-ground a_client_that_stops_reading_does_not_hold_up_decoding";
+    let Some(client) = viewer_tools::node_client(who) else {
+        return;
+    };
+    let set = RuntimeSet::load(MESSAGES).unwrap();
+    let transport: AnyTransport = PprzV2::new().into();
+    let (first, first_stamps) = stream(&set, transport, &[7], 1, 3);
+    // Enough JSON to fill any socket buffer many times over.
+    let (bulk, bulk_stamps) = stream(&set, transport, &[7], 1500, 4);
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"))
+        .args([
+            "--lines",
+            "--messages",
+            MESSAGES,
+            "--foxglove",
+            "127.0.0.1:0",
+            "--tcp",
+        ])
+        .arg(addr.to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut link, _) = listener.accept().unwrap();
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut url = String::new();
+    while !url.contains("ws://") {
+        url.clear();
+        assert!(stderr.read_line(&mut url).unwrap() > 0, "no server line");
+    }
+    let url = url.trim().rsplit(' ').next().unwrap().to_owned();
+    // One of each message: every topic exists; the client subscribes to all of them.
+    link.write_all(&first).unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    assert_eq!(
+        read_lines(&mut stdout, first_stamps.len()).len(),
+        first_stamps.len()
+    );
+    let mut stalled = Command::new("node")
+        .arg(&client)
+        .arg(&url)
+        .arg("--stall")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut said = String::new();
+    BufReader::new(stalled.stdout.take().unwrap())
+        .read_line(&mut said)
+        .unwrap();
+    assert_eq!(said.trim(), "stalled");
+    // Every message of the bulk is decoded while the client reads nothing.
+    link.write_all(&bulk).unwrap();
+    drop(link);
+    let rest = read_lines(&mut stdout, usize::MAX);
+    let status = child.wait().unwrap();
+    let _ = stalled.kill();
+    let _ = stalled.wait();
+    let mut err = String::new();
+    stderr.read_to_string(&mut err).unwrap();
+    assert_eq!(status.code(), Some(0), "{err}");
+    assert_eq!(rest.len(), bulk_stamps.len(), "{err}");
+    assert!(err.contains("input dropped 0 B"), "{err}");
+}
