@@ -1326,8 +1326,8 @@ struct Received {
     payload: Vec<u8>,
     data: Vec<u8>,
     raw: Vec<u8>,
-    /// The PPRZLOG time stamp, in seconds.
-    log_time: Option<f64>,
+    /// The PPRZLOG time stamp.
+    log_time: Option<std::time::Duration>,
 }
 
 impl Received {
@@ -1337,7 +1337,9 @@ impl Received {
             payload: frame.payload().to_vec(),
             data: frame.data().to_vec(),
             raw: frame.raw().to_vec(),
-            log_time: frame.timestamp().map(|ticks| f64::from(ticks) * 1e-4),
+            log_time: frame
+                .timestamp()
+                .map(|ticks| std::time::Duration::from_micros(u64::from(ticks) * 100)),
         }
     }
 }
@@ -1355,7 +1357,7 @@ impl Handled {
         header: &Header,
         payload: &'a [u8],
         raw: &'a [u8],
-        log_time: Option<f64>,
+        log_time: Option<std::time::Duration>,
     ) -> Decoded<'a> {
         Decoded {
             line: &self.line,
@@ -1391,9 +1393,9 @@ pub struct Decoded<'a> {
     pub payload: &'a [u8],
     /// Whether the payload matches the description (false for unknown messages).
     pub valid: bool,
-    /// The PPRZLOG time stamp of the frame, in seconds from the start of the log, when
-    /// the transport carries one.
-    pub log_time: Option<f64>,
+    /// The PPRZLOG time stamp of the frame (from the start of the log), when the
+    /// transport carries one.
+    pub log_time: Option<std::time::Duration>,
 }
 
 /// A value read from the wire: a value that is exactly a `float` is written as the

@@ -151,7 +151,7 @@ impl Output {
         if let Some(v) = self.viewer.as_mut() {
             // PPRZLOG time stamps when replaying a log, else the reception time.
             let ns = match m.log_time {
-                Some(s) => (s * 1e9) as u64,
+                Some(t) => u64::try_from(t.as_nanos()).unwrap_or(u64::MAX),
                 None => self.epoch_ns.saturating_add((now * 1e9) as u64),
             };
             self.last_ns = ns;
