@@ -329,3 +329,39 @@ fn a_client_that_stops_reading_does_not_hold_up_decoding() {
     assert_eq!(rest.len(), bulk_stamps.len(), "{err}");
     assert!(err.contains("input dropped 0 B"), "{err}");
 }
+
+#[test]
+fn the_suggested_layout_plots_fields_that_exist() {
+    let layout: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../docs/foxglove-layout.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let set = RuntimeSet::load(MESSAGES).unwrap();
+    let link: serde_json::Value = serde_json::from_str(pprz_ground::viewer::LINK_SCHEMA).unwrap();
+    let mut checked = 0;
+    for panel in layout["configById"].as_object().unwrap().values() {
+        for path in panel["paths"].as_array().into_iter().flatten() {
+            let value = path["value"].as_str().unwrap();
+            let (topic, field) = value.split_once('.').unwrap();
+            let field = field.split(['.', '[']).next().unwrap();
+            let properties = match topic.rsplit('/').next().unwrap() {
+                "link" => link["properties"].clone(),
+                name => {
+                    let desc = set
+                        .find_by_name("telemetry", name)
+                        .unwrap_or_else(|| panic!("{value}"));
+                    let schema: serde_json::Value =
+                        serde_json::from_str(&pprz_ground::json::schema(desc)).unwrap();
+                    schema["properties"].clone()
+                }
+            };
+            assert!(properties.get(field).is_some(), "{value}: no field {field}");
+            checked += 1;
+        }
+    }
+    assert!(checked >= 10, "{checked}");
+}
