@@ -14,6 +14,9 @@
 //! * [`cli`]: the command line, with every value checked.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
 //! * [`secure`]: the ground's end of a secure PPRZ v2 link (`pprz-monitor --secure`).
+//! * [`viewer`]: decoded telemetry for Foxglove and Lichtblick: a WebSocket server
+//!   (`--foxglove`), MCAP recordings (`--mcap`), settings as parameters; [`json`](mod@json)
+//!   gives the messages' JSON forms and JSON Schemas.
 //!
 //! ```
 //! use pprz_ground::{monitor::Monitor, set::RuntimeSet};

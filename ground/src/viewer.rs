@@ -5,7 +5,7 @@
 //! # Topics
 //!
 //! * `/ac/<id>/<class>/<MESSAGE>`: every message an aircraft sends, JSON-encoded, with a
-//!   JSON Schema generated from the `messages.xml` in use ([`json`](crate::json)).
+//!   JSON Schema generated from the `messages.xml` in use ([`json`](mod@crate::json)).
 //! * `/ac/<id>/location`: `foxglove.LocationFix` from GPS_INT (`lat`, `lon`, `hmsl`, the
 //!   accuracy `pacc` as covariance) or GPS (UTM, northern hemisphere), so the Map panel
 //!   shows the track. Messages without a fix (`fix`/`mode` below 2D) are not placed.
