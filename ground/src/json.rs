@@ -362,6 +362,27 @@ mod tests {
     }
 
     #[test]
+    fn the_largest_arrays_stay_small() {
+        let s = set(r#"<field name="a" type="double[30]" unit="rad" alt_unit="deg"/>"#);
+        let d = s.find(1, 5).unwrap();
+        let p: Vec<u8> = (0..30)
+            .flat_map(|i| (-1e300 / f64::from(i + 1)).to_le_bytes())
+            .collect();
+        let text = message(d, &p).unwrap();
+        // 30 values and 30 converted ones, each written in full (no exponent: at most
+        // about 330 characters for a double): bounded by the payload, whatever the file.
+        assert!(text.len() < 30 * 2 * 330 + 32, "{}", text.len());
+        assert!(parse(&text)["a"].as_array().unwrap().len() == 30);
+        let s = set(r#"<field name="v" type="int8[]"/>"#);
+        let d = s.find(1, 5).unwrap();
+        let mut p = vec![246u8];
+        p.extend([0x80; 246]);
+        let j = parse(&message(d, &p).unwrap());
+        assert_eq!(j["v"].as_array().unwrap().len(), 246);
+        assert_eq!(parse(&schema(d))["properties"]["v"]["maxItems"], 255);
+    }
+
+    #[test]
     fn malformed_payloads_have_no_json() {
         let s = set(r#"<field name="x" type="int32"/>"#);
         assert!(message(s.find(1, 5).unwrap(), &[1, 2]).is_err());

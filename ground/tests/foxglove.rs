@@ -365,3 +365,33 @@ fn the_suggested_layout_plots_fields_that_exist() {
     }
     assert!(checked >= 10, "{checked}");
 }
+
+#[test]
+fn hostile_names_are_refused_before_anything_is_served_or_recorded() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out.mcap");
+    for (name, field) in [
+        ("A/../B", "x"),
+        ("A B", "x"),
+        ("A", "x&quot;y"),
+        ("A", "x&#10;y"),
+    ] {
+        let xml = tmp.path().join("hostile.xml");
+        std::fs::write(
+            &xml,
+            format!(
+                r#"<protocol><msg_class name="telemetry" id="1"><message name="{name}" id="5"><field name="{field}" type="uint8"/></message></msg_class></protocol>"#
+            ),
+        )
+        .unwrap();
+        let (code, _, err) = run(monitor()
+            .args(["--stdin", "--foxglove", "127.0.0.1:0", "--messages"])
+            .arg(&xml)
+            .arg("--mcap")
+            .arg(&out));
+        assert_eq!(code, Some(1), "{err}");
+        assert!(err.contains("not a valid identifier"), "{err}");
+        assert!(!err.contains("serving"), "{err}");
+        assert!(!out.exists());
+    }
+}
