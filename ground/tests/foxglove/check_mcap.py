@@ -631,11 +631,14 @@ class ChannelCheck:
     described: bool = False
 
 
-def check_channel(schema, channel, problems: Problems, xml: Optional[dict]) -> ChannelCheck:
+def check_channel(schema, channel, problems: Problems, xml: Optional[dict], allowed=()) -> ChannelCheck:
     topic = channel.topic
     m = TOPIC_MSG_RE.match(topic)
     a = TOPIC_AUX_RE.match(topic)
-    if a:
+    if any(r.fullmatch(topic) for r in allowed):
+        cc = ChannelCheck(topic, "other")
+        expected_name = None
+    elif a:
         cc = ChannelCheck(topic, a.group(2), ac=int(a.group(1)))
         expected_name = "foxglove.LocationFix" if a.group(2) == "location" else "pprz.LinkStats"
     elif m:
@@ -814,8 +817,21 @@ def main(argv=None) -> int:
         default="any",
         help="replay: log times are a PPRZLOG's (below one year); wall: ns since the epoch, after 2020",
     )
+    ap.add_argument(
+        "--allow-topic",
+        action="append",
+        default=[],
+        metavar="REGEX",
+        help="also accept topics matching this (whole-topic) regular expression: json and "
+        "jsonschema checked, not compared with the lines",
+    )
     ap.add_argument("--max-reported", type=int, default=MAX_REPORTED)
     args = ap.parse_args(argv)
+    try:
+        allowed = [re.compile(r) for r in args.allow_topic]
+    except re.error as e:
+        print(f"check_mcap.py: --allow-topic: {e}", file=sys.stderr)
+        return 2
 
     problems = Problems(args.max_reported)
     xml = None
@@ -847,7 +863,7 @@ def main(argv=None) -> int:
                 cc = channels.get(channel.id)
                 problems.topic = channel.topic
                 if cc is None:
-                    cc = channels[channel.id] = check_channel(schema, channel, problems, xml)
+                    cc = channels[channel.id] = check_channel(schema, channel, problems, xml, allowed)
                 n = cc.count
                 cc.count += 1
                 total += 1
@@ -907,7 +923,7 @@ def main(argv=None) -> int:
         for cid, ch in sorted(summary.channels.items()):
             if cid not in channels:
                 sch = summary.schemas.get(ch.schema_id) if ch.schema_id else None
-                channels[cid] = check_channel(sch, ch, problems, xml)
+                channels[cid] = check_channel(sch, ch, problems, xml, allowed)
 
     # Counts per topic: MCAP against lines.
     mcap_counts = Counter()
