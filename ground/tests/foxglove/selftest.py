@@ -786,7 +786,8 @@ def main() -> int:
     case("location-frame", False, "frame_id", alter=wrong_frame)
 
     def unexpected_topic(r):
-        r.schemas["/other"] = ["x", "jsonschema", b"{}", "json"]
+        other = {"$schema": check_mcap.DRAFT_2020_12, "type": "object"}
+        r.schemas["/other"] = ["x", "jsonschema", json.dumps(other).encode(), "json"]
         r.messages.append(["/other", 0, b"{}"])
 
     case("unexpected-topic", False, "unexpected topic", alter=unexpected_topic)
