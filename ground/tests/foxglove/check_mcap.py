@@ -627,7 +627,6 @@ class ChannelCheck:
     key: Optional[tuple] = None  # (class, MESSAGE)
     count: int = 0
     valid_cache: dict = dc_field(default_factory=dict)
-    digest: Any = dc_field(default_factory=hashlib.sha256)
     described: bool = False
 
 
@@ -795,9 +794,9 @@ def indexed_pass(path: str, problems: Problems):
             problems.add(f"{path}: {summary.statistics.chunk_count} chunks but no chunk index in the summary")
         digests: dict = {}
         for _schema, channel, message in reader.iter_messages(log_time_order=False):
-            d = digests.get(channel.id)
+            d = digests.get(channel.topic)
             if d is None:
-                d = digests[channel.id] = [channel.topic, 0, hashlib.sha256()]
+                d = digests[channel.topic] = [channel.topic, 0, hashlib.sha256()]
             d[1] += 1
             d[2].update(message.log_time.to_bytes(8, "little"))
             d[2].update(message.data)
@@ -854,6 +853,7 @@ def main(argv=None) -> int:
         indexed, summary = None, None
 
     channels: dict = {}
+    by_topic: dict = {}  # topic -> [messages so far, digest]
     total = 0
     now_ns = time.time_ns()
     try:
@@ -864,11 +864,16 @@ def main(argv=None) -> int:
                 problems.topic = channel.topic
                 if cc is None:
                     cc = channels[channel.id] = check_channel(schema, channel, problems, xml, allowed)
-                n = cc.count
                 cc.count += 1
                 total += 1
-                cc.digest.update(message.log_time.to_bytes(8, "little"))
-                cc.digest.update(message.data)
+                # Per topic (a topic could have several channels): its n-th message.
+                ts = by_topic.get(cc.topic)
+                if ts is None:
+                    ts = by_topic[cc.topic] = [0, hashlib.sha256()]
+                n = ts[0]
+                ts[0] += 1
+                ts[1].update(message.log_time.to_bytes(8, "little"))
+                ts[1].update(message.data)
                 ctx = f"{cc.topic} #{n + 1}"
                 lt = message.log_time
                 if args.log_times == "replay" and lt >= 365 * 86400 * 10**9:
@@ -937,9 +942,7 @@ def main(argv=None) -> int:
 
     # The indexed reading and the summary agree with the stream.
     if indexed is not None:
-        stream = {}
-        for cc in channels.values():
-            stream[cc.topic] = (cc.count, cc.digest.hexdigest())
+        stream = {t: (c, h.hexdigest()) for t, (c, h) in by_topic.items()}
         for topic in sorted(set(stream) | set(indexed)):
             s, i = stream.get(topic, (0, None)), indexed.get(topic, (0, None))
             if s[0] != i[0]:

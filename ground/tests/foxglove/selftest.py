@@ -393,7 +393,7 @@ class Recording:
                 self.schemas.setdefault(link, ["pprz.LinkStats", "jsonschema", json.dumps(LINK_SCHEMA).encode(), "json"])
                 self.messages.append([link, t, json.dumps({"received": i, "lost": 0}).encode()])
 
-    def write(self, path: str, lines_path: str, summary: bool = True, truncate: int = 0) -> None:
+    def write(self, path: str, lines_path: str, summary: bool = True, truncate: int = 0, split: str = "") -> None:
         with open(path, "wb") as out:
             kw = {}
             if not summary:
@@ -410,8 +410,20 @@ class Recording:
             for topic, (name, enc, data, menc) in self.schemas.items():
                 sid = w.register_schema(name, enc, data) if name is not None else 0
                 channels[topic] = w.register_channel(topic, menc, sid)
+            second = None
             for seq, (topic, t, data) in enumerate(self.messages):
-                w.add_message(channels[topic], log_time=t, data=data, publish_time=t, sequence=seq)
+                channel = channels[topic]
+                if topic == split:
+                    # From the 3rd message on, a second channel of the same topic.
+                    if second is None:
+                        second = (channel, 0)
+                    if second[1] >= 2:
+                        if not isinstance(second[0], tuple):
+                            name, enc, sdata, menc = self.schemas[topic]
+                            second = ((w.register_channel(topic, menc, w.register_schema(name, enc, sdata)),), second[1])
+                        channel = second[0][0]
+                    second = (second[0], second[1] + 1)
+                w.add_message(channel, log_time=t, data=data, publish_time=t, sequence=seq)
             w.finish()
         if truncate:
             with open(path, "r+b") as f:
@@ -792,6 +804,8 @@ def main() -> int:
 
     case("unexpected-topic", False, "unexpected topic", alter=unexpected_topic)
     case("allowed-topic", True, alter=unexpected_topic, extra=("--allow-topic", "/oth.*"))
+    case("topic-on-two-channels", True, write_kw={"split": "/ac/7/telemetry/GPS_INT"})
+    case("topic-on-two-channels-swapped", False, "GPS_INT", alter=swapped, write_kw={"split": "/ac/7/telemetry/GPS_INT"})
     case("no-summary", False, "no summary", write_kw={"summary": False})
     case("truncated-file", False, "", write_kw={"truncate": 40})
 
