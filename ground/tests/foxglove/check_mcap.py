@@ -627,15 +627,17 @@ class ChannelCheck:
     key: Optional[tuple] = None  # (class, MESSAGE)
     count: int = 0
     valid_cache: dict = dc_field(default_factory=dict)
-    digest: Any = dc_field(default_factory=hashlib.sha256)
     described: bool = False
 
 
-def check_channel(schema, channel, problems: Problems, xml: Optional[dict]) -> ChannelCheck:
+def check_channel(schema, channel, problems: Problems, xml: Optional[dict], allowed=()) -> ChannelCheck:
     topic = channel.topic
     m = TOPIC_MSG_RE.match(topic)
     a = TOPIC_AUX_RE.match(topic)
-    if a:
+    if any(r.fullmatch(topic) for r in allowed):
+        cc = ChannelCheck(topic, "other")
+        expected_name = None
+    elif a:
         cc = ChannelCheck(topic, a.group(2), ac=int(a.group(1)))
         expected_name = "foxglove.LocationFix" if a.group(2) == "location" else "pprz.LinkStats"
     elif m:
@@ -792,9 +794,9 @@ def indexed_pass(path: str, problems: Problems):
             problems.add(f"{path}: {summary.statistics.chunk_count} chunks but no chunk index in the summary")
         digests: dict = {}
         for _schema, channel, message in reader.iter_messages(log_time_order=False):
-            d = digests.get(channel.id)
+            d = digests.get(channel.topic)
             if d is None:
-                d = digests[channel.id] = [channel.topic, 0, hashlib.sha256()]
+                d = digests[channel.topic] = [channel.topic, 0, hashlib.sha256()]
             d[1] += 1
             d[2].update(message.log_time.to_bytes(8, "little"))
             d[2].update(message.data)
@@ -814,8 +816,21 @@ def main(argv=None) -> int:
         default="any",
         help="replay: log times are a PPRZLOG's (below one year); wall: ns since the epoch, after 2020",
     )
+    ap.add_argument(
+        "--allow-topic",
+        action="append",
+        default=[],
+        metavar="REGEX",
+        help="also accept topics matching this (whole-topic) regular expression: json and "
+        "jsonschema checked, not compared with the lines",
+    )
     ap.add_argument("--max-reported", type=int, default=MAX_REPORTED)
     args = ap.parse_args(argv)
+    try:
+        allowed = [re.compile(r) for r in args.allow_topic]
+    except re.error as e:
+        print(f"check_mcap.py: --allow-topic: {e}", file=sys.stderr)
+        return 2
 
     problems = Problems(args.max_reported)
     xml = None
@@ -838,6 +853,7 @@ def main(argv=None) -> int:
         indexed, summary = None, None
 
     channels: dict = {}
+    by_topic: dict = {}  # topic -> [messages so far, digest]
     total = 0
     now_ns = time.time_ns()
     try:
@@ -847,12 +863,17 @@ def main(argv=None) -> int:
                 cc = channels.get(channel.id)
                 problems.topic = channel.topic
                 if cc is None:
-                    cc = channels[channel.id] = check_channel(schema, channel, problems, xml)
-                n = cc.count
+                    cc = channels[channel.id] = check_channel(schema, channel, problems, xml, allowed)
                 cc.count += 1
                 total += 1
-                cc.digest.update(message.log_time.to_bytes(8, "little"))
-                cc.digest.update(message.data)
+                # Per topic (a topic could have several channels): its n-th message.
+                ts = by_topic.get(cc.topic)
+                if ts is None:
+                    ts = by_topic[cc.topic] = [0, hashlib.sha256()]
+                n = ts[0]
+                ts[0] += 1
+                ts[1].update(message.log_time.to_bytes(8, "little"))
+                ts[1].update(message.data)
                 ctx = f"{cc.topic} #{n + 1}"
                 lt = message.log_time
                 if args.log_times == "replay" and lt >= 365 * 86400 * 10**9:
@@ -907,7 +928,7 @@ def main(argv=None) -> int:
         for cid, ch in sorted(summary.channels.items()):
             if cid not in channels:
                 sch = summary.schemas.get(ch.schema_id) if ch.schema_id else None
-                channels[cid] = check_channel(sch, ch, problems, xml)
+                channels[cid] = check_channel(sch, ch, problems, xml, allowed)
 
     # Counts per topic: MCAP against lines.
     mcap_counts = Counter()
@@ -921,9 +942,7 @@ def main(argv=None) -> int:
 
     # The indexed reading and the summary agree with the stream.
     if indexed is not None:
-        stream = {}
-        for cc in channels.values():
-            stream[cc.topic] = (cc.count, cc.digest.hexdigest())
+        stream = {t: (c, h.hexdigest()) for t, (c, h) in by_topic.items()}
         for topic in sorted(set(stream) | set(indexed)):
             s, i = stream.get(topic, (0, None)), indexed.get(topic, (0, None))
             if s[0] != i[0]:

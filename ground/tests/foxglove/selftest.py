@@ -393,7 +393,7 @@ class Recording:
                 self.schemas.setdefault(link, ["pprz.LinkStats", "jsonschema", json.dumps(LINK_SCHEMA).encode(), "json"])
                 self.messages.append([link, t, json.dumps({"received": i, "lost": 0}).encode()])
 
-    def write(self, path: str, lines_path: str, summary: bool = True, truncate: int = 0) -> None:
+    def write(self, path: str, lines_path: str, summary: bool = True, truncate: int = 0, split: str = "") -> None:
         with open(path, "wb") as out:
             kw = {}
             if not summary:
@@ -410,8 +410,20 @@ class Recording:
             for topic, (name, enc, data, menc) in self.schemas.items():
                 sid = w.register_schema(name, enc, data) if name is not None else 0
                 channels[topic] = w.register_channel(topic, menc, sid)
+            second = None
             for seq, (topic, t, data) in enumerate(self.messages):
-                w.add_message(channels[topic], log_time=t, data=data, publish_time=t, sequence=seq)
+                channel = channels[topic]
+                if topic == split:
+                    # From the 3rd message on, a second channel of the same topic.
+                    if second is None:
+                        second = (channel, 0)
+                    if second[1] >= 2:
+                        if not isinstance(second[0], tuple):
+                            name, enc, sdata, menc = self.schemas[topic]
+                            second = ((w.register_channel(topic, menc, w.register_schema(name, enc, sdata)),), second[1])
+                        channel = second[0][0]
+                    second = (second[0], second[1] + 1)
+                w.add_message(channel, log_time=t, data=data, publish_time=t, sequence=seq)
             w.finish()
         if truncate:
             with open(path, "r+b") as f:
@@ -505,10 +517,162 @@ def parser_cases() -> list:
     return failures
 
 
+# --------------------------------------------------------------------------------------
+# With the real monitor: its --lines output against the MCAP the contract describes.
+# --------------------------------------------------------------------------------------
+
+PACK = {
+    "uint8": "B", "int8": "b", "uint16": "H", "int16": "h", "uint32": "I", "int32": "i",
+    "uint64": "Q", "int64": "q", "float": "f", "double": "d",
+}
+
+
+def wire_message(rng: random.Random, fields):
+    """(payload, json object, line body) of one message, its values drawn at random."""
+    payload = bytearray()
+    obj = {}
+    parts = []
+    for f, ty, unit, alt, coef, values in fields:
+        b, kind, size = base_of(ty)
+        if b == "char":
+            if kind == "scalar":
+                byte = rng.choice([0x41, 0x1B, 0x22, 0x5C, 0x20, 0x3D, 0xE9, 0x00, 0x85])
+                payload.append(byte)
+                ch = chr(byte)  # format.rs: char::from(u8)
+                obj[f] = ch
+                parts.append(f"{token(f)}={quoted(ch)}")
+            else:
+                raw = rng.choice(HOSTILE).encode("utf-8")
+                if rng.random() < 0.2:
+                    raw += bytes([0xFF, 0xC3])  # invalid UTF-8
+                if kind == "array":
+                    raw = raw[:size].ljust(size, b"\0")
+                else:
+                    raw = raw[:200]
+                    payload.append(len(raw))
+                payload += raw
+                text = raw.decode("utf-8", "replace").rstrip("\x00")
+                obj[f] = text
+                parts.append(f"{token(f)}={quoted(text)}")
+            if check_mcap.is_unit(unit):
+                parts[-1] += f" [{token(unit)}]"
+            continue
+        if kind == "scalar":
+            vals = [random_value(rng, b)]
+        elif kind == "array":
+            vals = [random_value(rng, b) for _ in range(size)]
+        else:
+            vals = [random_value(rng, b) for _ in range(rng.choice([0, 1, 5, 16]))]
+            payload.append(len(vals))
+        if b == "double" and rng.random() < 0.3:
+            vals = [rng.choice([1e300, -1e300, 5e-324]) for _ in vals]
+        for v in vals:
+            payload += struct.pack("<" + PACK[b], v)
+        jvals = [json_number(v, b) for v in vals]
+        obj[f] = jvals[0] if kind == "scalar" else jvals
+        s = f"{token(f)}={','.join(display(v, b) for v in vals)}"
+        if values and kind == "scalar" and 0 <= vals[0] < len(values):
+            s += f"({token(values[vals[0]])})"
+        if check_mcap.is_unit(unit):
+            s += f" [{token(unit)}]"
+        if alt and coef:
+            prec = alt_precision(coef)
+            xs = [float(v) * coef for v in vals]
+            obj[f + "_alt"] = [x if math.isfinite(x) else None for x in xs]
+            if kind == "scalar":
+                obj[f + "_alt"] = obj[f + "_alt"][0]
+            if xs:
+                s += f" {','.join(fmt_fixed(x, prec) for x in xs)} {token(alt)}"
+        parts.append(s)
+    body = " ".join(parts)
+    if len(body.encode()) > check_mcap.MAX_FIELDS_LEN:
+        b8 = body.encode()
+        end = check_mcap.MAX_FIELDS_LEN - 3
+        while end > 0 and (b8[end] & 0xC0) == 0x80:
+            end -= 1
+        body = b8[:end].decode() + "..."
+    return bytes(payload), obj, body
+
+
+def pprz2_frame(source: int, class_id: int, msg_id: int, payload: bytes) -> bytes:
+    data = bytes([source, 0, class_id, msg_id]) + payload
+    length = len(data) + 4
+    assert length <= 255
+    ck_a = ck_b = 0
+    for byte in bytes([length]) + data:
+        ck_a = (ck_a + byte) & 0xFF
+        ck_b = (ck_b + ck_a) & 0xFF
+    return bytes([0x99, length]) + data + bytes([ck_a, ck_b])
+
+
+def with_monitor(monitor: str, d: str, xml_path: str, count: int) -> list:
+    """Frames of random messages through the real `pprz-monitor --lines`; the MCAP the
+    contract describes is written here. check_mcap.py must accept the pair, and the
+    lines must be those this test expects (its reading of format.rs)."""
+    failures = []
+    rng = random.Random(7)
+    ids = {}
+    classes = {}
+    for cls, name, fields in MESSAGES:
+        cid = classes.setdefault(cls, len(classes) + 1)
+        ids[(cls, name)] = (cid, sum(1 for c, _n, _f in MESSAGES[: MESSAGES.index((cls, name, fields))] if c == cls) + 1)
+    rec = Recording(0)
+    frames = bytearray()
+    expected = []
+    for i in range(count):
+        cls, name, fields = rng.choice(MESSAGES)
+        cid, mid = ids[(cls, name)]
+        src = rng.choice([7, 12])
+        payload, obj, body = wire_message(rng, fields)
+        if len(payload) > 247:
+            continue
+        frames += pprz2_frame(src, cid, mid, payload)
+        topic = f"/ac/{src}/{cls}/{name}"
+        if topic not in rec.schemas:
+            rec.schemas[topic] = [f"pprz.{cls}.{name}", "jsonschema", json.dumps(schema_for(cls, name, fields)).encode(), "json"]
+        rec.messages.append([topic, i * 1000, json.dumps(obj, allow_nan=False).encode()])
+        expected.append(f"{src} {token(cls)} {token(name)} {body}" if body else f"{src} {cls} {name}")
+    frames += pprz2_frame(7, 1, 200, b"\x01\x02")  # unknown
+    expected.append("7 class1 id=200 unknown message (2 bytes)")
+    bin_path = os.path.join(d, "monitor-input.pprz2")
+    with open(bin_path, "wb") as f:
+        f.write(frames)
+    p = subprocess.run(
+        [monitor, "--messages", xml_path, "--file", bin_path, "--transport", "pprz2", "--lines"],
+        capture_output=True,
+        timeout=600,
+    )
+    got = p.stdout.decode("utf-8").split("\n")
+    if got and got[-1] == "":
+        got.pop()
+    if p.returncode != 0 or len(got) != len(expected):
+        failures.append(f"monitor: exit {p.returncode}, {len(got)} lines for {len(expected)} frames: {p.stderr.decode()[-500:]}")
+        return failures
+    diffs = [(k, e, g) for k, (e, g) in enumerate(zip(expected, got)) if e != g]
+    for k, e, g in diffs[:5]:
+        print(f"FAIL line {k + 1} differs from this test's reading of format.rs:\n  expected {e[:300]}\n  monitor  {g[:300]}")
+    if diffs:
+        failures.append(f"monitor: {len(diffs)} lines differ")
+    rec.lines = got
+    mc, ln = os.path.join(d, "monitor.mcap"), os.path.join(d, "monitor.txt")
+    rec.write(mc, ln)
+    code, out = run_check(mc, ln, "--messages", xml_path)
+    print(f"{'ok  ' if code == 0 else 'FAIL'} real monitor lines ({len(got)}) against the contract's MCAP: exit {code}")
+    print("     " + out.strip()[-3000:].replace("\n", "\n     "))
+    if code != 0:
+        failures.append("monitor: check_mcap.py rejects the real lines")
+    return failures
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--count", type=int, default=3000)
     ap.add_argument("--keep", help="write the files to this directory and keep them")
+    ap.add_argument(
+        "--monitor",
+        help="a pprz-monitor binary: also check its real --lines output (of random frames) "
+        "against the MCAP the contract describes",
+    )
     args = ap.parse_args()
 
     failures = parser_cases()
@@ -634,12 +798,19 @@ def main() -> int:
     case("location-frame", False, "frame_id", alter=wrong_frame)
 
     def unexpected_topic(r):
-        r.schemas["/other"] = ["x", "jsonschema", b"{}", "json"]
+        other = {"$schema": check_mcap.DRAFT_2020_12, "type": "object"}
+        r.schemas["/other"] = ["x", "jsonschema", json.dumps(other).encode(), "json"]
         r.messages.append(["/other", 0, b"{}"])
 
     case("unexpected-topic", False, "unexpected topic", alter=unexpected_topic)
+    case("allowed-topic", True, alter=unexpected_topic, extra=("--allow-topic", "/oth.*"))
+    case("topic-on-two-channels", True, write_kw={"split": "/ac/7/telemetry/GPS_INT"})
+    case("topic-on-two-channels-swapped", False, "GPS_INT", alter=swapped, write_kw={"split": "/ac/7/telemetry/GPS_INT"})
     case("no-summary", False, "no summary", write_kw={"summary": False})
     case("truncated-file", False, "", write_kw={"truncate": 40})
+
+    if args.monitor:
+        failures += with_monitor(args.monitor, d, xml_path, args.count)
 
     if failures:
         print(f"selftest FAILED: {', '.join(failures)}")
