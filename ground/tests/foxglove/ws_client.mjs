@@ -28,6 +28,10 @@ import WebSocket from "ws";
 
 const { FoxgloveClient } = pkg;
 
+// The protocol's name: `foxglove.websocket.v1` (this package's client, as published) and
+// `foxglove.sdk.v1` (the same messages, the name the Foxglove SDK servers negotiate).
+const SUBPROTOCOLS = [FoxgloveClient.SUPPORTED_SUBPROTOCOL, "foxglove.sdk.v1"];
+
 const USAGE = `usage: node ws_client.mjs ws://HOST:PORT
   (--topic T ... --count N | --stall [--settle S] | --vanish [--count N] | --params NAME ... [--set VALUE])
   [--timeout S]`;
@@ -132,7 +136,7 @@ function advertisedList() {
 }
 
 try {
-  ws = new WebSocket(opts.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+  ws = new WebSocket(opts.url, SUBPROTOCOLS);
 } catch (e) {
   finish(3, `cannot connect to ${opts.url}: ${e.message}`);
 }
@@ -146,8 +150,8 @@ function subscribe(channel) {
 }
 
 client.on("open", () => {
-  if (ws.protocol !== FoxgloveClient.SUPPORTED_SUBPROTOCOL) {
-    finish(3, `server chose subprotocol ${JSON.stringify(ws.protocol)}, not ${FoxgloveClient.SUPPORTED_SUBPROTOCOL}`);
+  if (!SUBPROTOCOLS.includes(ws.protocol)) {
+    finish(3, `server chose subprotocol ${JSON.stringify(ws.protocol)}, not one of ${SUBPROTOCOLS.join(", ")}`);
   }
 });
 
