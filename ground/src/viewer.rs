@@ -545,13 +545,16 @@ impl Viewer {
         }
     }
 
-    /// Stops the server and finalises the recording (index and summary).
+    /// Stops the server (without waiting for its clients) and finalises the recording
+    /// (index and summary).
     ///
     /// # Errors
     /// The recording failed (now or earlier).
     pub fn finish(mut self) -> Result<ViewerCounts, ViewerError> {
         if let Some(server) = self.server.take() {
-            server.stop().wait_blocking();
+            // Not waiting for the clients' connections to close: a client that stopped
+            // reading would hold the end of the run forever.
+            server.stop().detach_all();
         }
         let earlier = self.error();
         if let Some(r) = self.recording.take() {

@@ -289,13 +289,24 @@ fn a_client_that_stops_reading_does_not_hold_up_decoding() {
         .spawn()
         .unwrap();
     let (mut link, _) = listener.accept().unwrap();
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
-    let mut url = String::new();
-    while !url.contains("ws://") {
-        url.clear();
-        assert!(stderr.read_line(&mut url).unwrap() > 0, "no server line");
-    }
-    let url = url.trim().rsplit(' ').next().unwrap().to_owned();
+    // Standard error: the server's address, then everything else (read to the end, so
+    // that the monitor never waits on it).
+    let stderr = BufReader::new(child.stderr.take().unwrap());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let stderr = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in stderr.lines().map_while(Result::ok) {
+            if let Some(url) = line.strip_prefix("foxglove: serving ") {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("the monitor serves Foxglove");
     // One of each message: every topic exists; the client subscribes to all of them.
     link.write_all(&first).unwrap();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
@@ -316,15 +327,17 @@ fn a_client_that_stops_reading_does_not_hold_up_decoding() {
         .read_line(&mut said)
         .unwrap();
     assert_eq!(said.trim(), "stalled");
-    // Every message of the bulk is decoded while the client reads nothing.
-    link.write_all(&bulk).unwrap();
-    drop(link);
+    // Every message of the bulk is decoded while the client reads nothing (written from
+    // a thread: the monitor's output is read here meanwhile).
+    let writer = std::thread::spawn(move || {
+        link.write_all(&bulk).unwrap();
+    });
     let rest = read_lines(&mut stdout, usize::MAX);
+    writer.join().unwrap();
     let status = child.wait().unwrap();
     let _ = stalled.kill();
     let _ = stalled.wait();
-    let mut err = String::new();
-    stderr.read_to_string(&mut err).unwrap();
+    let err = stderr.join().unwrap();
     assert_eq!(status.code(), Some(0), "{err}");
     assert_eq!(rest.len(), bulk_stamps.len(), "{err}");
     assert!(err.contains("input dropped 0 B"), "{err}");
