@@ -83,6 +83,24 @@ fn a_foxglove_client_receives_the_values_the_monitor_prints() {
         .recv_timeout(Duration::from_secs(30))
         .expect("the SITL serves Foxglove");
 
+    // A setting written from the viewer: the SETTING goes to the aircraft, and the answer
+    // is the value its DL_VALUE reports (setting 2 is the example's `gain`;
+    // before the SITL's own SETTING of it, at 3 s).
+    let params = Command::new("node")
+        .args([client.to_str().unwrap(), &url])
+        .args([
+            "--params",
+            "/ac/7/settings/2",
+            "--set",
+            "1.5",
+            "--timeout",
+            "20",
+        ])
+        .output()
+        .unwrap();
+    let params_out = String::from_utf8_lossy(&params.stdout).into_owned();
+    let params_err = String::from_utf8_lossy(&params.stderr).into_owned();
+
     // A client that vanishes without a close handshake.
     let vanished = Command::new("node")
         .args([client.to_str().unwrap(), &url, "--vanish"])
@@ -113,6 +131,23 @@ fn a_foxglove_client_receives_the_values_the_monitor_prints() {
     assert!(sitl_out.status.success(), "{sitl_err}");
     let lines = String::from_utf8_lossy(&sitl_out.stdout).into_owned();
 
+    assert!(params.status.success(), "{params_err}");
+    let reply: Vec<Value> = params_out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(
+        reply
+            .iter()
+            .any(|r| r.to_string().contains("/ac/7/settings/2") && r.to_string().contains("1.5")),
+        "{params_out}"
+    );
+    assert!(
+        lines
+            .lines()
+            .any(|l| l == "7 telemetry DL_VALUE index=2 value=1.5"),
+        "the aircraft never reported the new value"
+    );
     let received: Vec<Value> = String::from_utf8_lossy(&out.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
