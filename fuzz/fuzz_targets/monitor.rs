@@ -22,7 +22,7 @@ use libfuzzer_sys::fuzz_target;
 use pprz_ground::escape;
 use pprz_ground::format::MAX_FIELDS_LEN;
 use pprz_ground::input::Drops;
-use pprz_ground::monitor::{Monitor, MAX_EVENTS};
+use pprz_ground::monitor::{Decoded, Monitor, MAX_EVENTS};
 use pprz_ground::ping::PingTracker;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::SettingTracker;
@@ -77,9 +77,9 @@ fuzz_target!(|data: &[u8]| {
         state ^= state << 5;
         state
     };
-    let on_line = |line: &str, raw: &[u8]| {
-        assert_clean(line);
-        assert!(!raw.is_empty());
+    let on_line = |d: &Decoded<'_>| {
+        assert_clean(d.line);
+        assert!(!d.raw.is_empty());
     };
     let mut now = 0.0;
     let mut rest = stream;
