@@ -291,22 +291,7 @@ fn a_client_that_stops_reading_does_not_hold_up_decoding() {
     let (mut link, _) = listener.accept().unwrap();
     // Standard error: the server's address, then everything else (read to the end, so
     // that the monitor never waits on it).
-    let stderr = BufReader::new(child.stderr.take().unwrap());
-    let (tx, rx) = std::sync::mpsc::channel();
-    let stderr = std::thread::spawn(move || {
-        let mut all = String::new();
-        for line in stderr.lines().map_while(Result::ok) {
-            if let Some(url) = line.strip_prefix("foxglove: serving ") {
-                let _ = tx.send(url.to_owned());
-            }
-            all.push_str(&line);
-            all.push('\n');
-        }
-        all
-    });
-    let url = rx
-        .recv_timeout(std::time::Duration::from_secs(30))
-        .expect("the monitor serves Foxglove");
+    let (url, stderr) = viewer_tools::served_url(child.stderr.take().unwrap());
     // One of each message: every topic exists; the client subscribes to all of them.
     link.write_all(&first).unwrap();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());

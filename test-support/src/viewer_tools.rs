@@ -99,3 +99,29 @@ pub fn node_client(who: &str) -> Option<PathBuf> {
         )
     }
 }
+
+/// Reads a child's standard error to its end in a thread (so that the child never waits
+/// on it), and returns the address of the Foxglove server it announces
+/// (`foxglove: serving ws://...`) and the thread, which gives the whole text.
+///
+/// # Panics
+/// No announcement within 30 s.
+pub fn served_url(stderr: std::process::ChildStderr) -> (String, std::thread::JoinHandle<String>) {
+    use std::io::{BufRead, BufReader};
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if let Some(url) = line.strip_prefix("foxglove: serving ") {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("a Foxglove server is announced on standard error");
+    (url, reader)
+}

@@ -7,11 +7,8 @@
 //! The client is found with `pprz_test_support::viewer_tools` (skipped, with a printed
 //! reason, when it is not installed; a failure when `PPRZ_REQUIRE_REFERENCE` is set).
 
-use std::io::{BufRead, BufReader};
 use std::net::UdpSocket;
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
-use std::time::Duration;
 
 use serde_json::Value;
 
@@ -66,22 +63,7 @@ fn a_foxglove_client_receives_the_values_the_monitor_prints() {
         .spawn()
         .unwrap();
     // Standard error: the server's address, then whatever else (read to the end).
-    let (tx, rx) = mpsc::channel();
-    let stderr = BufReader::new(sitl.stderr.take().unwrap());
-    let reader = std::thread::spawn(move || {
-        let mut all = String::new();
-        for line in stderr.lines().map_while(Result::ok) {
-            if let Some(url) = line.strip_prefix("foxglove: serving ") {
-                let _ = tx.send(url.to_owned());
-            }
-            all.push_str(&line);
-            all.push('\n');
-        }
-        all
-    });
-    let url = rx
-        .recv_timeout(Duration::from_secs(30))
-        .expect("the SITL serves Foxglove");
+    let (url, reader) = pprz_test_support::viewer_tools::served_url(sitl.stderr.take().unwrap());
 
     // A setting written from the viewer: the SETTING goes to the aircraft, and the answer
     // is the value its DL_VALUE reports (setting 2 is the example's `gain`;
