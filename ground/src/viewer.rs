@@ -153,6 +153,24 @@ pub struct ViewerCounts {
     pub topics: u64,
 }
 
+impl std::fmt::Display for ViewerCounts {
+    /// The end-of-run line: `foxglove: published ...; not published: ...`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft",
+            self.messages, self.locations, self.link, self.topics, self.undecodable, self.untracked
+        )
+    }
+}
+
+/// Now, in nanoseconds since the Unix epoch (the time of live messages).
+pub fn unix_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
 /// A writer that keeps its first error where the viewer can see it: the SDK's MCAP sink
 /// reports a failed write only to its log.
 struct Watched<W> {

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use clap::Parser;
 use pprz_ground::cli::Args;
@@ -23,7 +23,7 @@ use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
-use pprz_ground::viewer::{SettingRequest, Viewer};
+use pprz_ground::viewer::{self, Viewer};
 use pprz_transports::AnyTransport;
 
 /// Where uplink frames are written.
@@ -407,9 +407,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         record_error: None,
         viewer,
         viewer_error: None,
-        epoch_ns: SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
+        epoch_ns: viewer::unix_ns(),
         last_ns: 0,
     };
     let aircraft = args.aircraft();
@@ -459,28 +457,17 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
             if !monitor.uplink_ready() {
                 continue; // answered "no answer" when it times out
             }
+            let (name, values) = request.message();
             let sink = &mut uplink_sink;
-            match request {
-                SettingRequest::Get { ac_id, index } => {
-                    let values = [("index", f64::from(index)), ("ac_id", f64::from(ac_id))];
-                    if send(&mut monitor, sink, transport, ac_id, "GET_SETTING", &values) {
-                        monitor.get_setting_sent_to(now(), ac_id, index);
-                    }
-                }
-                SettingRequest::Set {
-                    ac_id,
-                    index,
-                    value,
-                } => {
-                    let values = [
-                        ("index", f64::from(index)),
-                        ("ac_id", f64::from(ac_id)),
-                        ("value", value),
-                    ];
-                    if send(&mut monitor, sink, transport, ac_id, "SETTING", &values) {
-                        monitor.setting_value_sent_to(now(), ac_id, index, value);
-                    }
-                }
+            if send(
+                &mut monitor,
+                sink,
+                transport,
+                request.ac_id(),
+                name,
+                &values,
+            ) {
+                request.sent(&mut monitor, now());
             }
         }
         if let (Some(period), Some(at)) = (args.ping, next_ping)
@@ -595,10 +582,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
     }
     if let Some(v) = out.viewer.take() {
         let c = v.counts();
-        eprintln!(
-            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft",
-            c.messages, c.locations, c.link, c.topics, c.undecodable, c.untracked
-        );
+        eprintln!("{c}");
         match v.finish() {
             Ok(_) => {
                 if let Some(path) = &args.mcap

@@ -25,6 +25,7 @@ use foxglove::websocket::{
 };
 use pprz_messages::BaseType;
 
+use crate::monitor::Monitor;
 use crate::settings::quantize;
 
 /// Parameters per request, at most (further names are ignored).
@@ -71,6 +72,51 @@ pub enum SettingRequest {
         /// The value asked for.
         value: f64,
     },
+}
+
+impl SettingRequest {
+    /// The aircraft it is for.
+    pub fn ac_id(&self) -> u8 {
+        match *self {
+            Self::Get { ac_id, .. } | Self::Set { ac_id, .. } => ac_id,
+        }
+    }
+
+    /// The uplink message to send (`GET_SETTING` or `SETTING`) and its field values, for
+    /// [`uplink::frame`](crate::uplink::frame).
+    pub fn message(&self) -> (&'static str, Vec<(&'static str, f64)>) {
+        match *self {
+            Self::Get { ac_id, index } => (
+                "GET_SETTING",
+                vec![("index", f64::from(index)), ("ac_id", f64::from(ac_id))],
+            ),
+            Self::Set {
+                ac_id,
+                index,
+                value,
+            } => (
+                "SETTING",
+                vec![
+                    ("index", f64::from(index)),
+                    ("ac_id", f64::from(ac_id)),
+                    ("value", value),
+                ],
+            ),
+        }
+    }
+
+    /// Tells `monitor` the request was sent at `now`, so that the aircraft's DL_VALUE
+    /// is matched to it.
+    pub fn sent(&self, monitor: &mut Monitor, now: f64) {
+        match *self {
+            Self::Get { ac_id, index } => monitor.get_setting_sent_to(now, ac_id, index),
+            Self::Set {
+                ac_id,
+                index,
+                value,
+            } => monitor.setting_value_sent_to(now, ac_id, index, value),
+        }
+    }
 }
 
 /// Where an answer goes (a Foxglove responder; a closure in tests).

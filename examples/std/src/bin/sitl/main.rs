@@ -30,7 +30,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration as StdDuration, Instant as StdInstant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration as StdDuration, Instant as StdInstant};
 
 use clap::error::ErrorKind;
 use clap::{CommandFactory, Parser, ValueEnum};
@@ -51,7 +51,7 @@ use pprz_ground::monitor::Monitor;
 use pprz_ground::secure::{GroundSecure, key_file_from_path};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
-use pprz_ground::viewer::{LevelFigures, SettingRequest, Viewer};
+use pprz_ground::viewer::{LevelFigures, Viewer, unix_ns};
 use pprz_messages::{Message, VarArray};
 use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
@@ -1039,41 +1039,14 @@ fn run_ground(
             None => Vec::new(),
         };
         for request in requests {
-            let (ac, name, values) = match request {
-                SettingRequest::Get { ac_id, index } => (
-                    ac_id,
-                    "GET_SETTING",
-                    vec![("index", f64::from(index)), ("ac_id", f64::from(ac_id))],
-                ),
-                SettingRequest::Set {
-                    ac_id,
-                    index,
-                    value,
-                } => (
-                    ac_id,
-                    "SETTING",
-                    vec![
-                        ("index", f64::from(index)),
-                        ("ac_id", f64::from(ac_id)),
-                        ("value", value),
-                    ],
-                ),
-            };
+            let (name, values) = request.message();
             if monitor.uplink_ready()
-                && let Ok(frame) = uplink::frame(monitor.set(), transport, ac, name, &values)
+                && let Ok(frame) =
+                    uplink::frame(monitor.set(), transport, request.ac_id(), name, &values)
                 && let Ok(frame) = monitor.seal_uplink(&frame)
                 && socket.send_to(&frame, args.uplink).is_ok()
             {
-                match request {
-                    SettingRequest::Get { ac_id, index } => {
-                        monitor.get_setting_sent_to(t, ac_id, index);
-                    }
-                    SettingRequest::Set {
-                        ac_id,
-                        index,
-                        value,
-                    } => monitor.setting_value_sent_to(t, ac_id, index, value),
-                }
+                request.sent(&mut monitor, t);
             }
         }
         if let Ok((n, _)) = socket.recv_from(&mut buf) {
@@ -1109,23 +1082,12 @@ fn run_ground(
         }
     }
     if let Some(v) = viewer {
-        let c = v.counts();
-        eprintln!(
-            "foxglove: published {} messages, {} locations, {} link statistics on {} topics",
-            c.messages, c.locations, c.link, c.topics
-        );
+        eprintln!("{}", v.counts());
         if let Err(e) = v.finish() {
             eprintln!("sitl: {e}");
         }
     }
     monitor
-}
-
-/// Now, in nanoseconds since the Unix epoch.
-fn unix_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 /// The aircraft's own figures per priority level (what it submitted, sent and shed of
