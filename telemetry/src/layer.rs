@@ -20,12 +20,10 @@
 //! frame the layer rejects or consumes is counted by the layer.
 //!
 //! Without a layer, the writer uses [`Plain`], which changes nothing and costs nothing,
-//! and the reader delivers straight to its inbox.
+//! and the reader delivers straight to its inbox. A reader delivers through a layer with
+//! [`Layered`](crate::reader::Layered).
 
-use pprz_transports::{Frame, Framing, MAX_FRAME_LEN, PprzV2};
-
-use crate::reader::Inbox;
-use crate::registry::Received;
+use pprz_transports::{Frame, MAX_FRAME_LEN};
 
 /// Why a [`LinkLayer`] did not let a frame go to the wire (the layer counts its reasons).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -95,48 +93,5 @@ impl<L: LinkLayer + ?Sized> LinkLayer for &L {
     #[inline]
     fn open(&self, frame: &Frame<'_>, out: &mut [u8; MAX_FRAME_LEN]) -> Opened {
         (**self).open(frame, out)
-    }
-}
-
-/// An [`Inbox`] that opens every frame with a [`LinkLayer`] before handing it to
-/// `inbox`: what a device's [`Reader`](crate::reader::Reader) delivers to when the
-/// device has a layer (`reader.run(&Layered::new(&layer, &datalink))`).
-#[derive(Debug)]
-pub struct Layered<'l, L: ?Sized, I: ?Sized> {
-    layer: &'l L,
-    inbox: &'l I,
-}
-
-impl<'l, L: ?Sized, I: ?Sized> Layered<'l, L, I> {
-    /// Frames from the reader go through `layer`, then to `inbox`.
-    pub const fn new(layer: &'l L, inbox: &'l I) -> Self {
-        Self { layer, inbox }
-    }
-}
-
-impl<'d, L: LinkLayer + ?Sized, I: Inbox<'d> + ?Sized> Inbox<'d> for Layered<'_, L, I> {
-    fn deliver(&self, rx: &Received<'_, 'd>) {
-        let mut out = [0u8; MAX_FRAME_LEN];
-        match self.layer.open(&rx.frame, &mut out) {
-            Opened::Unchanged => self.inbox.deliver(rx),
-            Opened::Withheld => {}
-            Opened::Rewritten(len) => {
-                // A layer that returns a bad frame delivers nothing (nothing to count it
-                // under: a bug of the layer, not an input).
-                let Some(bytes) = out.get(..len) else {
-                    return;
-                };
-                if let Ok(frame) = PprzV2::new().view(bytes) {
-                    self.inbox.deliver(&Received {
-                        device: rx.device,
-                        frame,
-                    });
-                }
-            }
-        }
-    }
-
-    fn read_error(&self) {
-        self.inbox.read_error();
     }
 }

@@ -12,6 +12,7 @@ mod queue;
 pub mod reader;
 pub mod registry;
 pub mod relay;
+pub mod route;
 pub mod scheduler;
 pub mod services;
 pub mod stats;
@@ -23,11 +24,12 @@ pub use pprz_transports;
 pub use arena::{AllocError, FrameArena, FrameBuf};
 pub use delivery::{DeliveryStats, DeliveryWindow};
 pub use downlink::{
-    Device, DeviceConfig, Downlink, FrameAlloc, Outgoing, Pacing, Port, PortsTaken, ReplyLimit,
-    SendError, Sender, Targets,
+    Device, DeviceConfig, Downlink, FrameAlloc, Pacing, ReplyLimit, SendError, SendOptions, Sender,
 };
-pub use layer::{Layered, LinkLayer, Plain};
+pub use layer::{LinkLayer, Plain};
 pub use link::{Link, LinkMutex, LinkStats};
-pub use relay::{Relay, RelayStats, Routes};
+pub use reader::Layered;
+pub use relay::{Relay, RelayStats};
+pub use route::{Routes, Targets};
 pub use stats::{DeviceStats, DropReason, RelayedStats};
-pub use writer::{run_writer, run_writer_with};
+pub use writer::{Outgoing, Port, PortsTaken, run_writer, run_writer_with};

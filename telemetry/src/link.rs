@@ -62,13 +62,13 @@ use pprz_transports::{AnyTransport, PprzV2};
 
 use crate::arena::ArenaStats;
 use crate::delivery::DeliveryStats;
-use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, Port, PortsTaken, SendError, Sender};
-use crate::layer::{Layered, LinkLayer, Plain};
-use crate::reader::{Datalink, Inbox, Reader, UplinkStats};
+use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, SendError, SendOptions, Sender};
+use crate::layer::{LinkLayer, Plain};
+use crate::reader::{Datalink, Inbox, Layered, Reader, UplinkStats};
 use crate::registry::{Filter, Received, RegistryFull, Subscriber};
 use crate::services::{ServiceStats, Services, Settings};
 use crate::stats::DeviceStats;
-use crate::writer::run_writer_with;
+use crate::writer::{Port, PortsTaken, run_writer_with};
 
 /// The mutex of a [`Link`] (a critical section: the link may be used from any task and
 /// from interrupts); also the one to give its [`FrameArena`](crate::FrameArena).
@@ -152,27 +152,17 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
         self.downlink.send(msg)
     }
 
-    /// Sends the state message `msg` (a periodic sample) at its own priority: a newer
-    /// one takes the place of an older one still waiting, so a saturated link carries
-    /// the latest value; see [`Downlink::send_latest`]. Never blocks.
+    /// Sends `msg` as `options` say (a priority override, a state message whose newer
+    /// value replaces a waiting one, ...; see [`SendOptions`]). Never blocks.
     ///
     /// # Errors
     /// As [`send`](Self::send).
-    pub fn send_latest<Msg: Message>(&self, msg: &Msg) -> Result<(), SendError> {
-        self.downlink.send_latest(msg)
-    }
-
-    /// Sends `msg` with `priority` instead of its own; never blocks.
-    ///
-    /// # Errors
-    /// As [`send`](Self::send).
-    pub fn send_with_priority<Msg: Message>(
+    pub fn send_with<Msg: Message>(
         &self,
         msg: &Msg,
-        priority: u8,
+        options: SendOptions,
     ) -> Result<(), SendError> {
-        self.downlink
-            .send_to(msg, pprz_transports::GROUND_ID, priority)
+        self.downlink.send_with(msg, options)
     }
 
     /// A copyable handle that sends through this link, for code that should not name

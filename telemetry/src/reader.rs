@@ -69,9 +69,10 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::Read;
-use pprz_transports::{BROADCAST_ID, Decoder, DecoderStats, Frame, Framing, MAX_FRAME_LEN};
+use pprz_transports::{BROADCAST_ID, Decoder, DecoderStats, Frame, Framing, MAX_FRAME_LEN, PprzV2};
 
 use crate::downlink::Device;
+use crate::layer::{LinkLayer, Opened};
 use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber};
 
 /// Counters of the uplink (all readers of one [`Datalink`]).
@@ -321,5 +322,48 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
                 }
             }
         }
+    }
+}
+
+/// An [`Inbox`] that opens every frame with a [`LinkLayer`] before handing it to
+/// `inbox`: what a device's [`Reader`] delivers to when the
+/// device has a layer (`reader.run(&Layered::new(&layer, &datalink))`).
+#[derive(Debug)]
+pub struct Layered<'l, L: ?Sized, I: ?Sized> {
+    layer: &'l L,
+    inbox: &'l I,
+}
+
+impl<'l, L: ?Sized, I: ?Sized> Layered<'l, L, I> {
+    /// Frames from the reader go through `layer`, then to `inbox`.
+    pub const fn new(layer: &'l L, inbox: &'l I) -> Self {
+        Self { layer, inbox }
+    }
+}
+
+impl<'d, L: LinkLayer + ?Sized, I: Inbox<'d> + ?Sized> Inbox<'d> for Layered<'_, L, I> {
+    fn deliver(&self, rx: &Received<'_, 'd>) {
+        let mut out = [0u8; MAX_FRAME_LEN];
+        match self.layer.open(&rx.frame, &mut out) {
+            Opened::Unchanged => self.inbox.deliver(rx),
+            Opened::Withheld => {}
+            Opened::Rewritten(len) => {
+                // A layer that returns a bad frame delivers nothing (nothing to count it
+                // under: a bug of the layer, not an input).
+                let Some(bytes) = out.get(..len) else {
+                    return;
+                };
+                if let Ok(frame) = PprzV2::new().view(bytes) {
+                    self.inbox.deliver(&Received {
+                        device: rx.device,
+                        frame,
+                    });
+                }
+            }
+        }
+    }
+
+    fn read_error(&self) {
+        self.inbox.read_error();
     }
 }

@@ -33,7 +33,7 @@ use embassy_sync::channel::Channel;
 use pprz_messages::{Decode, DecodeError, Message};
 use pprz_transports::Frame;
 
-use crate::downlink::{Device, SendError};
+use crate::downlink::{Device, SendError, SendOptions};
 
 /// A message received on a device: the checksum-verified frame view (borrowed from the
 /// reader's buffer for `'f`) and the device it came in on (the reader's, a handle that
@@ -88,7 +88,7 @@ impl<'f, 'd> Received<'f, 'd> {
     /// Sends `msg` on the device the message came in on, addressed to its
     /// [`source`](Self::source) (the ground for a PPRZ v1 frame, which names no
     /// destination), at `msg`'s priority, within that device's reply rate limit
-    /// ([`Device::reply_to`]); never blocks.
+    /// ([`SendOptions::reply`]); never blocks.
     ///
     /// # Errors
     /// The reply was dropped (counted in that device's statistics).
@@ -97,7 +97,8 @@ impl<'f, 'd> Received<'f, 'd> {
             Some(_) => self.frame.source(),
             None => pprz_transports::GROUND_ID,
         };
-        self.device.reply_to(msg, to)
+        self.device
+            .send_with(msg, SendOptions::new().to(to).reply())
     }
 }
 

@@ -72,7 +72,7 @@
 //! ```
 //! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 //! use pprz_telemetry::reader::{Datalink, Reader};
-//! use pprz_telemetry::relay::{Relay, Routes};
+//! use pprz_telemetry::{Relay, Routes};
 //! use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Targets};
 //! use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
 //! use pprz_default::messages::MESSAGES; // any generated message set
@@ -106,66 +106,12 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use pprz_messages::MessageSet;
 use pprz_messages::dynamic;
-use pprz_transports::{BROADCAST_ID, Frame, GROUND_ID};
+use pprz_transports::{BROADCAST_ID, Frame};
 
-use crate::downlink::{Device, Targets};
+use crate::downlink::Device;
 use crate::reader::Inbox;
 use crate::registry::Received;
-
-/// The route table of an aircraft: which devices lead to which destination. `const`, so
-/// it can be given to a `static` [`Downlink`](crate::Downlink); see the
-/// [module documentation](self).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Routes<'r> {
-    table: &'r [(u8, Targets)],
-    default: Targets,
-    broadcast: Targets,
-}
-
-impl Routes<'static> {
-    /// No table: every device leads to every destination, broadcast included (one radio,
-    /// or a radio and a log).
-    pub const DIRECT: Self = Self {
-        table: &[],
-        default: Targets::ALL,
-        broadcast: Targets::ALL,
-    };
-}
-
-impl<'r> Routes<'r> {
-    /// `table` gives the devices leading to each listed destination (the first entry for
-    /// a destination counts), `default` those leading to any other (the way to the
-    /// ground, unless the table lists [`GROUND_ID`]); broadcast goes out on every device.
-    pub const fn new(table: &'r [(u8, Targets)], default: Targets) -> Self {
-        Self {
-            table,
-            default,
-            broadcast: Targets::ALL,
-        }
-    }
-
-    /// With broadcast frames going out on `targets` only.
-    pub const fn broadcast(mut self, targets: Targets) -> Self {
-        self.broadcast = targets;
-        self
-    }
-
-    /// The devices leading to `destination`.
-    pub fn to(&self, destination: u8) -> Targets {
-        if destination == BROADCAST_ID {
-            return self.broadcast;
-        }
-        self.table
-            .iter()
-            .find(|(id, _)| *id == destination)
-            .map_or(self.default, |(_, targets)| *targets)
-    }
-
-    /// The devices leading to the ground.
-    pub fn to_ground(&self) -> Targets {
-        self.to(GROUND_ID)
-    }
-}
+use crate::route::Targets;
 
 /// The relay of an aircraft: an [`Inbox`] in front of its datalink (or any inbox) that
 /// forwards frames for other aircraft and broadcast frames over the downlink's

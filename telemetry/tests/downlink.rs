@@ -10,6 +10,7 @@
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use pprz_default::messages::telemetry::{Attitude, DlValue, Payload};
 use pprz_messages::{Decode, Message, VarArray};
+use pprz_telemetry::SendOptions;
 use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, PprzLog, PprzV1, PprzV2, XBee24};
 use pprz_telemetry::{DeviceConfig, DeviceStats, Downlink, DropReason, FrameArena, Port, Targets};
 use proptest::prelude::*;
@@ -43,7 +44,10 @@ fn thesis_figure_27_trace() {
     let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2()]);
     for (index, priority) in [(1, 0), (2, 1), (3, 0), (4, 1)] {
         downlink
-            .send_on(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+            .send_with(
+                &DlValue { index, value: 0.0 },
+                SendOptions::new().on(Targets::ALL).priority(priority),
+            )
             .unwrap();
     }
     let [mut port] = downlink.ports().unwrap();
@@ -57,13 +61,12 @@ fn many_levels_strictly_higher_first_fifo_among_equals() {
     let prios = [5u8, 255, 0, 5, 128, 255, 0, 128, 5, 1];
     for (i, p) in prios.iter().enumerate() {
         downlink
-            .send_on(
+            .send_with(
                 &DlValue {
                     index: i as u8,
                     value: 0.0,
                 },
-                Targets::ALL,
-                *p,
+                SendOptions::new().on(Targets::ALL).priority(*p),
             )
             .unwrap();
     }
@@ -83,7 +86,10 @@ fn full_queue_evicts_oldest_of_least_important_never_equal() {
     let arena = Arena::new();
     let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2().depth(3)]);
     let send = |index: u8, priority: u8| {
-        downlink.send_on(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+        downlink.send_with(
+            &DlValue { index, value: 0.0 },
+            SendOptions::new().on(Targets::ALL).priority(priority),
+        )
     };
     send(1, 10).unwrap();
     send(2, 5).unwrap();
@@ -125,7 +131,13 @@ fn full_arena_evicts_across_devices_least_important_first() {
     // Fill the arena with low-priority frames alternating between the devices.
     let mut queued = 0;
     for i in 0..64 {
-        if downlink.send_on(&payload, Targets::only(i % 2), 1).is_err() {
+        if downlink
+            .send_with(
+                &payload,
+                SendOptions::new().on(Targets::only(i % 2)).priority(1),
+            )
+            .is_err()
+        {
             break;
         }
         queued += 1;
@@ -134,20 +146,22 @@ fn full_arena_evicts_across_devices_least_important_first() {
     // Equal priority cannot get in.
     assert_eq!(
         downlink
-            .send_on(&payload, Targets::only(0), 1)
+            .send_with(
+                &payload,
+                SendOptions::new().on(Targets::only(0)).priority(1)
+            )
             .unwrap_err()
             .reason,
         DropReason::ArenaFull
     );
     // A more important frame evicts the oldest low-priority frame (device 0's first).
     downlink
-        .send_on(
+        .send_with(
             &DlValue {
                 index: 9,
                 value: 1.0,
             },
-            Targets::only(1),
-            200,
+            SendOptions::new().on(Targets::only(1)).priority(200),
         )
         .unwrap();
     let (s0, s1) = (downlink.stats(0).unwrap(), downlink.stats(1).unwrap());
@@ -191,7 +205,9 @@ fn too_large_and_encode_errors_are_counted_per_device() {
     let bad = Payload {
         values: VarArray::new(&too_many),
     };
-    let err = downlink.send_on(&bad, Targets::only(0), 1).unwrap_err();
+    let err = downlink
+        .send_with(&bad, SendOptions::new().on(Targets::only(0)).priority(1))
+        .unwrap_err();
     assert_eq!(err.reason, DropReason::TooLarge);
     for d in 0..2 {
         assert!(downlink.stats(d).unwrap().is_balanced());
@@ -292,7 +308,7 @@ proptest! {
             match op {
                 Op::Send { size, priority, targets } => {
                     let msg = Payload { values: VarArray::new(&bytes[..usize::from(size)]) };
-                    let _ = downlink.send_on(&msg, Targets::from_bits(u32::from(targets)), priority);
+                    let _ = downlink.send_with(&msg, SendOptions::new().on(Targets::from_bits(u32::from(targets))).priority(priority));
                 }
                 Op::Write { device, ok } => {
                     if let Some(frame) = ports[usize::from(device)].try_next() {
@@ -301,9 +317,9 @@ proptest! {
                 }
                 Op::Latest { attitude } => {
                     let _ = if attitude {
-                        downlink.send_latest(&Attitude { phi: 0.1, psi: 0.2, theta: 0.3 })
+                        downlink.send_with(&Attitude { phi: 0.1, psi: 0.2, theta: 0.3 }, SendOptions::new().latest())
                     } else {
-                        downlink.send_latest(&DlValue { index: 1, value: 2.0 })
+                        downlink.send_with(&DlValue { index: 1, value: 2.0 }, SendOptions::new().latest())
                     };
                 }
                 Op::Abandon { device } => {
@@ -426,14 +442,25 @@ fn latest_value_wins_for_state_messages() {
         theta: 0.0,
     };
     let value = |index: u8| DlValue { index, value: 0.0 };
-    downlink.send_latest(&attitude(1.0)).unwrap();
+    downlink
+        .send_with(&attitude(1.0), SendOptions::new().latest())
+        .unwrap();
     downlink.send(&value(1)).unwrap(); // an event of another message
-    downlink.send_latest(&attitude(2.0)).unwrap();
-    downlink.send_latest(&attitude(3.0)).unwrap();
+    downlink
+        .send_with(&attitude(2.0), SendOptions::new().latest())
+        .unwrap();
+    downlink
+        .send_with(&attitude(3.0), SendOptions::new().latest())
+        .unwrap();
     // The same message at another priority is another stream.
     downlink
         .sender()
-        .send_on(&attitude(9.0), Targets::ALL, Attitude::PRIORITY + 1)
+        .send_with(
+            &attitude(9.0),
+            SendOptions::new()
+                .on(Targets::ALL)
+                .priority(Attitude::PRIORITY + 1),
+        )
         .unwrap();
     let s = downlink.stats(0).unwrap();
     assert_eq!((s.submitted, s.superseded, s.queued), (5, 2, 3));
@@ -472,9 +499,13 @@ fn latest_value_wins_for_state_messages() {
     );
 
     // A frame being written is on the wire already: a newer one queues behind it.
-    downlink.send_latest(&attitude(4.0)).unwrap();
+    downlink
+        .send_with(&attitude(4.0), SendOptions::new().latest())
+        .unwrap();
     let writing = port.try_next().unwrap();
-    downlink.send_latest(&attitude(5.0)).unwrap();
+    downlink
+        .send_with(&attitude(5.0), SendOptions::new().latest())
+        .unwrap();
     let s = downlink.stats(0).unwrap();
     assert_eq!((s.superseded, s.queued, s.waiting), (2, 2, 1));
     writing.finish(true);

@@ -6,6 +6,7 @@
 //! thread only waits for the result (with a generous guard against a hang, not a timing
 //! assertion).
 
+use pprz_telemetry::SendOptions;
 use std::convert::Infallible;
 use std::sync::Mutex as StdMutex;
 use std::sync::mpsc;
@@ -93,7 +94,10 @@ async fn app(spawner: Spawner, downlink: &'static Dl, done: mpsc::Sender<()>) {
     let sender = downlink.sender();
     for (index, priority) in [(0u8, 9u8), (1, 0), (2, 1), (3, 0), (4, 1)] {
         sender
-            .send_on(&DlValue { index, value: 0.0 }, Targets::ALL, priority)
+            .send_with(
+                &DlValue { index, value: 0.0 },
+                SendOptions::new().on(Targets::ALL).priority(priority),
+            )
             .unwrap();
         if let Some([radio, log]) = ports.take() {
             assert_eq!((radio.device().index(), log.device().index()), (0, 1));

@@ -8,6 +8,7 @@
 
 mod common;
 
+use pprz_telemetry::SendOptions;
 use std::cell::RefCell;
 use std::sync::Mutex as StdMutex;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -17,7 +18,8 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_time::{Duration, Timer};
 use pprz_default::messages::telemetry::{Attitude, Payload};
 use pprz_messages::VarArray;
-use pprz_telemetry::layer::{Layered, LinkLayer, Opened, Refused};
+use pprz_telemetry::Layered;
+use pprz_telemetry::layer::{LinkLayer, Opened, Refused};
 use pprz_telemetry::pprz_transports::{AnyTransport, Frame, MAX_FRAME_LEN, PprzV2};
 use pprz_telemetry::reader::{Datalink, Inbox};
 use pprz_telemetry::registry::{Filter, Received};
@@ -112,7 +114,9 @@ fn the_writer_seals_in_priority_order_and_counts_refusals() {
     };
     // Queued before the writer runs: it takes them most important first.
     for priority in [10, 200, 100, 50, 150, 20] {
-        device.send_with_priority(&attitude, priority).unwrap();
+        device
+            .send_with(&attitude, SendOptions::new().priority(priority))
+            .unwrap();
     }
     let log = RefCell::new(Vec::new());
     let uart = SimUart {

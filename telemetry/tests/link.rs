@@ -8,6 +8,7 @@
 
 mod common;
 
+use pprz_telemetry::SendOptions;
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::sync::Mutex as StdMutex;
@@ -267,14 +268,23 @@ fn device_handles_and_the_type_erased_sender() {
     assert_eq!((sender.ac_id(), sender.devices()), (AC_ID, 2));
     let value = |index: u8| DlValue { index, value: 0.5 };
     sender
-        .send_on(&value(1), Targets::from(d1), priority::LOW)
+        .send_with(
+            &value(1),
+            SendOptions::new()
+                .on(Targets::from(d1))
+                .priority(priority::LOW),
+        )
         .unwrap();
     d0.send(&value(2)).unwrap(); // at DL_VALUE's own priority (high)
-    d1.send_with_priority(&value(3), priority::NORMAL).unwrap();
+    d1.send_with(&value(3), SendOptions::new().priority(priority::NORMAL))
+        .unwrap();
     sender.send(&value(4)).unwrap(); // every device, high
     // Nowhere: refused and counted, never accepted silently.
     for nowhere in [Targets::NONE, Targets::only(2), Targets::only(31).with(5)] {
-        let err = d0.sender().send_on(&value(5), nowhere, 0).unwrap_err();
+        let err = d0
+            .sender()
+            .send_with(&value(5), SendOptions::new().on(nowhere).priority(0))
+            .unwrap_err();
         assert_eq!((err.device, err.reason), (2, DropReason::NoDevice));
     }
     assert_eq!((sender.undeliverable(), downlink.undeliverable()), (3, 3));
@@ -610,13 +620,14 @@ fn a_static_downlink_hands_out_static_handles() {
         // Depth 1: an equal priority cannot get in.
         assert!(
             sender
-                .send_on(
+                .send_with(
                     &DlValue {
                         index: 2,
                         value: 0.0
                     },
-                    Targets::from(device),
-                    DlValue::PRIORITY
+                    SendOptions::new()
+                        .on(Targets::from(device))
+                        .priority(DlValue::PRIORITY)
                 )
                 .is_err()
         );

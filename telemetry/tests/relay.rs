@@ -14,6 +14,7 @@
 
 mod common;
 
+use pprz_telemetry::SendOptions;
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::convert::Infallible;
@@ -35,7 +36,7 @@ use pprz_telemetry::pprz_transports::{
 };
 use pprz_telemetry::reader::{Datalink, Reader};
 use pprz_telemetry::registry::{Filter, Received};
-use pprz_telemetry::relay::{Relay, Routes};
+use pprz_telemetry::{Relay, Routes};
 use pprz_telemetry::services::Services;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, Targets, run_writer};
 
@@ -321,13 +322,12 @@ fn ground_reaches_8_through_7() {
         a8.downlink.send(&attitude).unwrap();
         // And 8 to 7 directly (send_to a destination).
         a8.downlink
-            .send_to(
+            .send_with(
                 &Block {
                     block_id: 3,
                     ac_id: 7,
                 },
-                7,
-                100,
+                SendOptions::new().to(7).priority(100),
             )
             .unwrap();
         Timer::after(Duration::from_millis(300)).await;
@@ -667,26 +667,24 @@ fn broadcast_is_delivered_once_and_a_loop_does_not_circulate() {
     assert_eq!(a8.relay.stats().no_route, 1);
     // 8 sending to 9 itself: 7's route for 9 is the link it came from.
     a8.downlink
-        .send_to(
+        .send_with(
             &Block {
                 block_id: 2,
                 ac_id: 9,
             },
-            9,
-            100,
+            SendOptions::new().to(9).priority(100),
         )
         .unwrap();
     assert_eq!(fleet.pump(&[link_78], 10), [1]);
     assert_eq!(a7.relay.stats().no_route, 1);
     // A broadcast from 8 reaches 7 and the ground, and not 8 again.
     a8.downlink
-        .send_to(
+        .send_with(
             &Block {
                 block_id: 3,
                 ac_id: 0,
             },
-            BROADCAST_ID,
-            100,
+            SendOptions::new().to(BROADCAST_ID).priority(100),
         )
         .unwrap();
     assert_eq!(fleet.pump(&[link_78], 10), [1]);
@@ -714,23 +712,21 @@ fn a_ring_of_misconfigured_defaults_stops_every_frame() {
     // Each sends a message to an unknown aircraft and a broadcast.
     for ac in [&a7, &a8, &a9] {
         ac.downlink
-            .send_to(
+            .send_with(
                 &Block {
                     block_id: 1,
                     ac_id: 5,
                 },
-                5,
-                100,
+                SendOptions::new().to(5).priority(100),
             )
             .unwrap();
         ac.downlink
-            .send_to(
+            .send_with(
                 &Block {
                     block_id: 2,
                     ac_id: 0,
                 },
-                BROADCAST_ID,
-                100,
+                SendOptions::new().to(BROADCAST_ID).priority(100),
             )
             .unwrap();
     }
