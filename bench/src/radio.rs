@@ -13,7 +13,7 @@
 //!   The RF side (250 kbit/s) is faster than the UART, so the UART is the bottleneck.
 //! * **c. A 4800-baud flow-controlled radio** ([`SCENARIO_C`]): no payload; the status
 //!   telemetry alone (about 700 B/s) exceeds the link (480 B/s). The stack sends the
-//!   status with `send_latest`.
+//!   status with `SendOptions::latest`.
 //!
 //! Scenario d of the issue (no regression) is workload 4 ([`crate::overload`]) and the
 //! telemetry crate's saturation test, unchanged.
@@ -44,6 +44,7 @@
 //! the MAC acknowledgement, then writes the transmit status (7 bytes) on its UART output,
 //! which the stack's real `Reader` decodes and hands to the writer.
 
+use pprz_telemetry::SendOptions;
 use std::cell::{Cell, RefCell};
 use std::collections::{HashMap, VecDeque};
 use std::convert::Infallible;
@@ -218,7 +219,7 @@ pub struct Setup {
     pub pacing: Option<Pacing>,
     /// Transmit status window (XBee).
     pub window: Option<DeliveryWindow>,
-    /// Status sent with `send_latest` (else `send`).
+    /// Status sent as latest values (`SendOptions::latest`; else `send`).
     pub latest: bool,
 }
 
@@ -748,7 +749,7 @@ impl Submit for Producer<'_> {
         self.counts[level.index()] += 1;
         // Dropped or not, the stack counts it; the ground tells what arrived.
         let _ = if state && self.latest {
-            self.device.send_latest(msg)
+            self.device.send_with(msg, SendOptions::new().latest())
         } else {
             self.device.send(msg)
         };

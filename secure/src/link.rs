@@ -55,6 +55,7 @@
 //! ```
 
 use core::cell::{Cell, RefCell};
+use pprz_telemetry::SendOptions;
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
@@ -216,7 +217,12 @@ impl<M: RawMutex> SecureLink<M> {
                 Ok(ResponderEvent::Reply(reply)) => {
                     // A drop (queue full of replies, ...) is counted by the downlink;
                     // the ground repeats message 1.
-                    let _ = out.send_on(&KeyExchangeUav(&reply), targets, KEY_EXCHANGE_PRIORITY);
+                    let _ = out.send_with(
+                        &KeyExchangeUav(&reply),
+                        SendOptions::new()
+                            .on(targets)
+                            .priority(KEY_EXCHANGE_PRIORITY),
+                    );
                 }
                 Ok(ResponderEvent::Established(keys)) => {
                     self.channel.lock(|c| c.borrow_mut().install(keys));

@@ -8,6 +8,7 @@
 
 #![cfg(feature = "embassy")]
 
+use pprz_telemetry::SendOptions;
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::convert::Infallible;
@@ -305,7 +306,9 @@ fn an_aircraft_with_a_secure_radio_talks_only_encrypted_to_its_ground() {
     // the counters follow the order on the wire.
     ground.got.clear();
     for priority in [10, 200, 100] {
-        device.send_with_priority(&attitude, priority).unwrap();
+        device
+            .send_with(&attitude, SendOptions::new().priority(priority))
+            .unwrap();
     }
     run_for(&mut aircraft, &mut ground, 20, &wire, &uplink);
     let counters: Vec<u32> = ground.got.iter().filter_map(Got::counter).collect();

@@ -31,9 +31,10 @@
 //! ```
 //!
 //! The message set must have the services' messages (PING, PONG, SETTING, GET_SETTING,
-//! DL_VALUE): with a set that lacks them, `run` does not compile.
+//! DL_VALUE): with a set that lacks them, `run` does not compile, and the compiler's note
+//! names the messages to add.
 //!
-//! ```compile_fail,E0599
+//! ```compile_fail,E0277
 //! use pprz_telemetry::{FrameArena, Link, LinkMutex};
 //! struct NoServices; // a set without the services' messages
 //! static ARENA: FrameArena<LinkMutex, 1024> = FrameArena::new();
@@ -201,7 +202,10 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
     }
 }
 
-impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
+/// The bound `S: ServiceSet` is on each method, not on this block, so that a message set
+/// without the services' messages gets the trait's explanation (E0277), not a bare
+/// "method not found" (E0599).
+impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
     Link<'a, S, Q, SETTINGS, SUBSCRIBERS>
 {
     /// Runs the link forever: writes the queued frames to `tx` (most important first),
@@ -214,7 +218,10 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
     /// # Errors
     /// Returns at once with [`PortsTaken`] if the link is running already: a device has
     /// one writer.
-    pub async fn run<W: Write, R: Read>(&'a self, tx: W, rx: R) -> Result<Infallible, PortsTaken> {
+    pub async fn run<W: Write, R: Read>(&'a self, tx: W, rx: R) -> Result<Infallible, PortsTaken>
+    where
+        S: ServiceSet,
+    {
         self.run_with_layer(tx, rx, &Plain).await
     }
 
@@ -231,7 +238,10 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
         tx: W,
         rx: R,
         layer: &L,
-    ) -> Result<Infallible, PortsTaken> {
+    ) -> Result<Infallible, PortsTaken>
+    where
+        S: ServiceSet,
+    {
         let port = match self.port.lock(Cell::take) {
             Some(port) => port,
             None => {

@@ -1,6 +1,6 @@
 //! Several aircraft: routing by destination, and relaying other aircraft's frames.
 //!
-//! PPRZ v2 frames carry a source and a destination ([`GROUND_ID`] 0, an aircraft id, or
+//! PPRZ v2 frames carry a source and a destination ([`GROUND_ID`](pprz_transports::GROUND_ID) 0, an aircraft id, or
 //! [`BROADCAST_ID`] 0xFF). An aircraft that one aircraft of the fleet cannot reach
 //! directly (out of radio range of the ground, in a street canyon) is reached *through*
 //! another one: aircraft 7 has a radio to the ground and a second radio to aircraft 8, and
@@ -14,11 +14,11 @@
 //! ```
 //!
 //! # Routes
-//! [`Routes`] is a static table given to the [`Downlink`](crate::Downlink) at start-up
-//! ([`with_routes`](crate::Downlink::with_routes)): destination id -> devices, a default
-//! route (normally to the ground) and the devices a broadcast goes out on. The
+//! [`Routes`](crate::Routes) is a static table given to the [`Downlink`](crate::Downlink)
+//! at start-up ([`with_routes`](crate::Downlink::with_routes)): destination id -> devices,
+//! a default route (normally to the ground) and the devices a broadcast goes out on. The
 //! application's messages follow it too: [`Downlink::send`](crate::Downlink::send) sends
-//! to the ground's route, [`Downlink::send_to`](crate::Downlink::send_to) to any
+//! to the ground's route, a send [`to`](crate::SendOptions::to) another aircraft to that
 //! aircraft's. Without a table, every device leads everywhere (one radio, or a radio and
 //! an SD-card log).
 //!
@@ -115,7 +115,7 @@ use crate::route::Targets;
 
 /// The relay of an aircraft: an [`Inbox`] in front of its datalink (or any inbox) that
 /// forwards frames for other aircraft and broadcast frames over the downlink's
-/// [`Routes`], and hands the datalink what is for us; see the
+/// [`Routes`](crate::Routes), and hands the datalink what is for us; see the
 /// [module documentation](self). Readers of every device deliver to it.
 ///
 /// `M` guards its counters (the mutex of the datalink).

@@ -9,7 +9,7 @@
 //!
 //! where `queued` counts the frames waiting in the device's queue plus the one its writer
 //! is writing, and `superseded` the state messages replaced, while waiting, by a newer
-//! instance of the same message ([`Downlink::send_latest`](crate::Downlink::send_latest)).
+//! instance of the same message ([`SendOptions::latest`](crate::SendOptions::latest)).
 //! Every message accepted for sending is therefore either sent or counted as dropped,
 //! evicted or superseded, by reason.
 
@@ -182,7 +182,7 @@ pub struct DeviceStats {
     /// Queued messages evicted by more important ones.
     pub evicted: EvictCounts,
     /// State messages replaced, while waiting, by a newer instance of the same message
-    /// (sent with [`send_latest`](crate::Downlink::send_latest)): not lost information,
+    /// (sent with [`SendOptions::latest`](crate::SendOptions::latest)): not lost information,
     /// so counted apart from the drops.
     pub superseded: u32,
     /// Frames waiting in the queue or being written now.

@@ -4,7 +4,7 @@
 //!
 //! A stalled device blocks only its own writer (and so only its own queue, which sheds
 //! by priority as it fills); a write error is counted as a
-//! [`DropReason::WriteError`](crate::DropReason::WriteError) drop and the writer goes on
+//! [`DropReason::WriteError`] drop and the writer goes on
 //! with the next frame. If the writer future is dropped in the middle of a write, that
 //! frame is counted the same way.
 //!
@@ -97,7 +97,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
 }
 
 /// The consumer side of one device's queue, handed out once per device by
-/// [`Downlink::ports`]: for the device's writer task ([`run_writer`](crate::run_writer)),
+/// [`Downlink::ports`]: for the device's writer task ([`run_writer`]),
 /// or for code that drains the queue itself. Not copyable, so a device has one writer,
 /// and a port has one frame out at a time: the per-level counters of a queue cannot be
 /// corrupted by a second consumer.
@@ -331,7 +331,7 @@ pub async fn run_writer<W: Write>(port: &mut Port<'_>, io: W) -> ! {
 /// [`run_writer`] for a device with a [`LinkLayer`]: each frame is sealed by `layer` when
 /// the writer takes it for the wire (so a frame counter follows the order on the wire,
 /// after priority reordering); a frame the layer refuses is not written and counts as a
-/// [`DropReason::Refused`](crate::DropReason::Refused) drop.
+/// [`DropReason::Refused`] drop.
 pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
     port: &mut Port<'_>,
     mut io: W,

@@ -272,7 +272,7 @@ enum Op {
     Abandon {
         device: u8,
     },
-    /// A state message (ATTITUDE, or DL_VALUE) sent with `send_latest`.
+    /// A state message (ATTITUDE, or DL_VALUE) sent with `SendOptions::latest`.
     Latest {
         attitude: bool,
     },

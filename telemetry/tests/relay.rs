@@ -36,9 +36,9 @@ use pprz_telemetry::pprz_transports::{
 };
 use pprz_telemetry::reader::{Datalink, Reader};
 use pprz_telemetry::registry::{Filter, Received};
-use pprz_telemetry::{Relay, Routes};
 use pprz_telemetry::services::Services;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, Targets, run_writer};
+use pprz_telemetry::{Relay, Routes};
 
 use common::frames::v2_frame;
 use common::sim::{byte_time_us, mock_time, run_with_mock_time};
@@ -320,7 +320,7 @@ fn ground_reaches_8_through_7() {
             theta: -0.5,
         };
         a8.downlink.send(&attitude).unwrap();
-        // And 8 to 7 directly (send_to a destination).
+        // And 8 to 7 directly (sent to a destination).
         a8.downlink
             .send_with(
                 &Block {

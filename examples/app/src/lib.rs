@@ -30,6 +30,7 @@ pub mod vehicle;
 use core::cell::{Cell, RefCell};
 use core::convert::Infallible;
 use core::fmt;
+use pprz_telemetry::SendOptions;
 
 use core::future::Future;
 
@@ -104,7 +105,7 @@ impl Out<'_> {
     /// saturated link carries the latest state. Counted as [`send`](Self::send) is.
     fn send_state<Msg: Message>(&self, msg: &Msg) {
         self.observe(msg);
-        let _ = self.downlink.send_latest(msg);
+        let _ = self.downlink.send_with(msg, SendOptions::new().latest());
     }
 
     /// Shows `msg` to the observer, if there is one.
@@ -218,13 +219,16 @@ pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
             ticker.next().await;
             let s = secure.status();
             // Refused before the session (counted), like all telemetry.
-            let _ = radio.send_latest(&SecureLinkStatus {
-                sts_stage: s.stage,
-                sts_error: s.error,
-                counter_err: s.counter_err,
-                decrypt_err: s.decrypt_err,
-                encrypt_err: s.encrypt_err,
-            });
+            let _ = radio.send_with(
+                &SecureLinkStatus {
+                    sts_stage: s.stage,
+                    sts_error: s.error,
+                    counter_err: s.counter_err,
+                    decrypt_err: s.decrypt_err,
+                    encrypt_err: s.encrypt_err,
+                },
+                SendOptions::new().latest(),
+            );
         }
     };
     let extra = async {

@@ -1,5 +1,5 @@
 //! The downlink: send a message to one or more devices, each with its own transport and
-//! priority queue, all frames in one shared [`FrameArena`]. Sending
+//! priority queue, all frames in one shared [`FrameArena`](crate::FrameArena). Sending
 //! never blocks: a message is encoded straight into arena memory and queued, or dropped
 //! and counted with a reason.
 //!
@@ -15,7 +15,7 @@
 //! messages of strictly lower priority (least important first, and among those the
 //! oldest) until it fits; if it still does not fit it is dropped. Equal or higher
 //! priorities are never evicted. Every eviction and drop is counted per device and
-//! reason ([`DeviceStats`]).
+//! reason ([`DeviceStats`](crate::DeviceStats)).
 //!
 //! # Set-up
 //! Everything is `const`, so the arena and the downlink are plain `static`s:

@@ -75,7 +75,7 @@ impl<Msg: Message> EncodeFields for Msg {
 }
 
 /// The downlink of an aircraft: `D` devices with queues of capacity `Q`, frames in a
-/// shared arena that lives for `'a`. See the [module documentation](self).
+/// shared arena that lives for `'a`. See the [module documentation](crate::downlink).
 pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     arena: &'a (dyn FrameAlloc + Sync),
     devices: [DeviceConfig; D],
@@ -221,7 +221,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     }
 
     /// What the transmit statuses of device `index` said (all zero for a device without
-    /// a [`DeliveryWindow`]); `None` if there is no such device.
+    /// a [`DeliveryWindow`](crate::DeliveryWindow)); `None` if there is no such device.
     pub fn delivery_stats(&self, index: usize) -> Option<DeliveryStats> {
         self.outstanding
             .get(index)
