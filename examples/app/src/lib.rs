@@ -92,7 +92,18 @@ struct Out<'d> {
     observer: Option<Observer>,
 }
 
-impl Out<'_> {
+impl<'d> Out<'d> {
+    /// Sends through `downlink`, showing messages to the observer of `config`.
+    fn new(downlink: Sender<'d>, config: &Config) -> Self {
+        #[cfg(not(feature = "observer"))]
+        let _ = config;
+        Self {
+            downlink,
+            #[cfg(feature = "observer")]
+            observer: config.observer,
+        }
+    }
+
     /// Sends `msg` to every device; a drop is counted by the downlink (per device,
     /// reason and priority level), so the result needs no handling here.
     fn send<Msg: Message>(&self, msg: &Msg) {
@@ -313,11 +324,7 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     layer: &L,
     extra: impl Future<Output = Infallible>,
 ) -> Result<Infallible, SetupError> {
-    let out = Out {
-        downlink: radio.sender(),
-        #[cfg(feature = "observer")]
-        observer: config.observer,
-    };
+    let out = Out::new(radio.sender(), &config);
     let vehicle: Mutex<M, RefCell<Vehicle>> = Mutex::new(RefCell::new(Vehicle::new()));
     let v = || vehicle.lock(|v| *v.borrow());
     let boot = Instant::now();
@@ -349,10 +356,8 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let alive = || out.send_state(&telemetry::alive());
     let version = || out.send_state(&telemetry::version());
     let attitude = || out.send_state(&telemetry::attitude(&v()));
-    let gps_int = || {
-        let tow = boot.elapsed().as_millis() as u32;
-        out.send_state(&telemetry::gps_int(&v(), tow));
-    };
+    let tow = || boot.elapsed().as_millis() as u32;
+    let gps_int = || out.send_state(&telemetry::gps_int(&v(), tow()));
     let fp = || out.send_state(&telemetry::rotorcraft_fp(&v()));
     let ins = || out.send_state(&telemetry::ins(&v()));
     let energy = || out.send_state(&telemetry::energy(&v()));
@@ -396,45 +401,56 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
         (ImuAccelRaw::NAME, id::<ImuAccelRaw>(), &accel),
         (ImuMagRaw::NAME, id::<ImuMagRaw>(), &mag),
     ];
+    register(&scheduler, periodic)?;
+
+    let reader = Reader::<R, PprzV2>::new(radio_rx, PprzV2::new(), radio);
+    let readers = readers.run(reader, layer, &datalink);
+    let flood = flood(&out, config.flood_bytes_per_s, &flood_on);
+    let app = select4(scheduler.run(), readers, fly(&vehicle), flood);
+    match select(app, extra).await {
+        Either::First(Either4::First(never)) => never,
+        Either::First(Either4::Second(n) | Either4::Third(n) | Either4::Fourth(n))
+        | Either::Second(n) => match n {},
+    }
+}
+
+/// Registers every periodic callback with `scheduler`; each must have a schedule.
+fn register<'c, const P: usize, const K: usize>(
+    scheduler: &Scheduler<'c, M, P, K>,
+    periodic: [(&'static str, (u8, u8), Callback<'c>); 14],
+) -> Result<(), SetupError> {
     for (name, id, callback) in periodic {
         if !scheduler.register(id, callback)?.is_scheduled() {
             return Err(SetupError::Unscheduled(name));
         }
     }
+    Ok(())
+}
 
-    let dynamics = async {
-        let mut ticker = Ticker::every(Duration::from_millis(20));
-        loop {
-            ticker.next().await;
-            vehicle.lock(|v| v.borrow_mut().step(0.02));
+/// The vehicle's dynamics, stepped every 20 ms.
+async fn fly(vehicle: &Mutex<M, RefCell<Vehicle>>) -> Infallible {
+    let mut ticker = Ticker::every(Duration::from_millis(20));
+    loop {
+        ticker.next().await;
+        vehicle.lock(|v| v.borrow_mut().step(0.02));
+    }
+}
+
+/// PAYLOAD frames of 120 bytes of fields at `bytes_per_s` (none if 0), while `on`.
+async fn flood(out: &Out<'_>, bytes_per_s: u32, on: &Mutex<M, Cell<bool>>) -> Infallible {
+    let bytes = [0xA5u8; 120];
+    let per_frame = bytes.len() as u32 + 1 + 8;
+    let rate = bytes_per_s.max(1);
+    let period_us = (u64::from(per_frame) * 1_000_000 / u64::from(rate)).max(100);
+    let mut ticker = Ticker::every(Duration::from_micros(period_us));
+    loop {
+        ticker.next().await;
+        if bytes_per_s > 0 && on.lock(Cell::get) {
+            let payload = Payload {
+                values: VarArray::new(&bytes),
+            };
+            out.send(&payload);
         }
-    };
-    let flood = async {
-        // PAYLOAD frames of 120 bytes of fields, as often as the configured rate needs.
-        let bytes = [0xA5u8; 120];
-        let per_frame = bytes.len() as u32 + 1 + 8;
-        let rate = config.flood_bytes_per_s.max(1);
-        let period_us = (u64::from(per_frame) * 1_000_000 / u64::from(rate)).max(100);
-        let mut ticker = Ticker::every(Duration::from_micros(period_us));
-        loop {
-            ticker.next().await;
-            if config.flood_bytes_per_s > 0 && flood_on.lock(Cell::get) {
-                let payload = Payload {
-                    values: VarArray::new(&bytes),
-                };
-                out.send(&payload);
-            }
-        }
-    };
-    let reader = Reader::<R, PprzV2>::new(radio_rx, PprzV2::new(), radio);
-    let readers = readers.run(reader, layer, &datalink);
-    let app = select4(scheduler.run(), readers, dynamics, flood);
-    match select(app, extra).await {
-        Either::First(Either4::First(never) | Either4::Third(never) | Either4::Fourth(never)) => {
-            never
-        }
-        Either::First(Either4::Second(never)) => match never {},
-        Either::Second(never) => match never {},
     }
 }
 

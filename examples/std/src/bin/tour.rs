@@ -83,6 +83,19 @@ fn encode_and_show<M: Message>(msg: &M) {
 }
 
 fn main() {
+    list_messages();
+    println!();
+    encode_examples();
+    println!();
+    frame_examples();
+    println!();
+    decode_noisy_stream(&noisy_stream());
+    println!();
+    corrupt_payload();
+}
+
+/// The message set, one line a message.
+fn list_messages() {
     println!("Default message set: {} messages", MESSAGES.len());
     println!(
         "{:<10} {:>3}  {:<20} {:>8}  fields",
@@ -98,7 +111,10 @@ fn main() {
             m.fields.len()
         );
     }
-    println!();
+}
+
+/// A few messages encoded and shown field by field.
+fn encode_examples() {
     encode_and_show(&telemetry::Gps {
         mode: 3,
         utm_east: 37_712_345,
@@ -130,8 +146,10 @@ fn main() {
         vsupply: 12.4,
         ..Default::default()
     });
+}
 
-    println!();
+/// Whole frames: the worked PPRZ v2 example, and a payload too long for XBee 802.15.4.
+fn frame_examples() {
     let alive = telemetry::Alive {
         md5sum: VarArray::new(&[0, 1, 2]),
     };
@@ -151,11 +169,14 @@ fn main() {
         Ok(len) => println!("PAYLOAD over XBee 802.15.4: {len} bytes"),
         Err(e) => println!("PAYLOAD of 121 field bytes over XBee 802.15.4 is refused: {e}"),
     }
+}
 
-    // A stream as a radio delivers it: frames mixed with noise, read in odd-sized chunks.
+/// A stream as a radio delivers it: frames mixed with noise.
+fn noisy_stream() -> Vec<u8> {
     // It starts with a false start byte announcing a 5-byte frame whose checksum fails.
     let mut stream = vec![0x00, 0x99, 0x05, 0x13, 0x37, 0x00];
     let t = PprzV2::new();
+    let mut buf = [0u8; MAX_FRAME_LEN];
     for msg in [
         telemetry::AnyMessage::from(telemetry::Attitude {
             phi: 0.1,
@@ -166,7 +187,9 @@ fn main() {
             index: 2,
             value: 0.75,
         }),
-        telemetry::AnyMessage::from(alive),
+        telemetry::AnyMessage::from(telemetry::Alive {
+            md5sum: VarArray::new(&[0, 1, 2]),
+        }),
     ] {
         let n = msg.encode(t.payload_area(&mut buf)).unwrap_or(0);
         let meta = TxMeta::new(MsgHeader::new(AC_ID, 0, 1, msg.id()));
@@ -175,7 +198,11 @@ fn main() {
             stream.extend_from_slice(&[0x42, 0x00]); // noise between frames
         }
     }
-    println!();
+    stream
+}
+
+/// Decodes `stream` read in odd-sized chunks.
+fn decode_noisy_stream(stream: &[u8]) {
     println!("Decoding {} noisy bytes in chunks of 5:", stream.len());
     let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
     for chunk in stream.chunks(5) {
@@ -198,8 +225,10 @@ fn main() {
         "  frames {}, dropped bytes {}, checksum errors {}, length errors {}",
         stats.frames, stats.dropped_bytes, stats.checksum_errors, stats.length_errors
     );
+}
 
-    println!();
+/// A corrupt payload is an error, never a panic.
+fn corrupt_payload() {
     println!("A corrupt payload is an error, never a panic:");
     let gps = MESSAGES.find(1, 8).map(|d| print_decoded(d, &[1, 2, 3]));
     if gps.is_none() {
