@@ -443,7 +443,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
                     ];
                     let sink = &mut uplink_sink;
                     if send(&mut monitor, sink, transport, ac_id, "SETTING", &values) {
-                        monitor.setting_value_sent_to(now(), ac_id, index, f64::from(value));
+                        monitor.setting_sent(Some(ac_id), now(), index, f64::from(value));
                     }
                 }
             }
@@ -478,7 +478,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
                 for &ac_id in &aircraft {
                     let sink = &mut uplink_sink;
                     if send(&mut monitor, sink, transport, ac_id, "PING", &[]) {
-                        monitor.ping_sent_to(now(), ac_id);
+                        monitor.ping_sent(Some(ac_id), now());
                     }
                 }
             }
