@@ -83,7 +83,8 @@ impl Monitor {
     }
 
     /// A PONG from `source` at `now`: it answers the oldest PING outstanding to
-    /// `source`, else the oldest one sent to no particular aircraft.
+    /// `source`, else the oldest one sent to no particular aircraft. A replay
+    /// ([`replaying`](Self::replaying)) sent no PING: the PONG is only a message.
     pub(super) fn pong(&mut self, now: f64, source: u8) {
         if self.replay {
             return;

@@ -14,17 +14,19 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+mod record;
+
 use clap::Parser;
 use pprz_ground::cli::Args;
 use pprz_ground::escape;
 use pprz_ground::input::{self, DEFAULT_CAPACITY, Drops, End, InputQueue, Overflow, Pop};
 use pprz_ground::monitor::{Decoded, IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
-use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_ground::viewer::{self, Viewer};
 use pprz_transports::AnyTransport;
+use record::{FileId, Recorder};
 
 /// Where uplink frames are written.
 enum UplinkSink {
