@@ -97,9 +97,9 @@ fuzz_target!(|data: &[u8]| {
         // Operations between chunks, drawn from the bytes just fed.
         let op = chunk[0];
         match (r >> 9) % 16 {
-            0 => monitor.ping_sent(now),
-            1 => monitor.setting_value_sent(now, op, f64::from(chunk[chunk.len() - 1]) * 0.25),
-            2 => monitor.get_setting_sent(now, op),
+            0 => monitor.ping_sent(None, now),
+            1 => monitor.setting_sent(None, now, op, f64::from(chunk[chunk.len() - 1]) * 0.25),
+            2 => monitor.get_setting_sent(None, now, op),
             3 => monitor.input_gap(
                 now,
                 Drops {

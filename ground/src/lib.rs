@@ -10,7 +10,6 @@
 //!   SETTING acknowledgements per aircraft.
 //! * [`ping`], [`settings`]: matching PONGs to PINGs and DL_VALUEs to SETTINGs.
 //! * [`input`]: the bounded queue between the reading threads and the decoder.
-//! * [`record`]: PPRZLOG recordings that never destroy an input nor lose data silently.
 //! * [`cli`]: the command line, with every value checked.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
 //! * [`secure`]: the ground's end of a secure PPRZ v2 link (`pprz-monitor --secure`).
@@ -42,7 +41,6 @@ pub mod input;
 pub mod json;
 pub mod monitor;
 pub mod ping;
-pub mod record;
 pub mod secure;
 pub mod set;
 pub mod settings;

@@ -156,3 +156,66 @@ fn bad_messages_xml_is_a_clear_error() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue: without `--messages` and no messages.xml here, the error read
+/// "error: error: messages.xml: cannot read file" on two lines.
+#[test]
+fn a_missing_messages_file_is_one_clear_line() {
+    let (ok, _, err) = monitor(&["--messages", "/nonexistent/messages.xml", "--stdin"]);
+    assert!(!ok);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with("error: /nonexistent/messages.xml: cannot read file")
+            && err.contains("with --messages"),
+        "{err}"
+    );
+    assert!(!err.contains("error: error:"), "{err}");
+}
+
+/// Issue: replaying a recording warned of every PONG in it ("PONG that answers no PING
+/// outstanding": the PINGs were sent by the station that recorded), and its first view
+/// showed `t=0.0s 2411480 B/s`.
+#[test]
+fn a_replay_has_no_false_pong_warning_nor_rate_over_no_time() {
+    let dir = std::env::temp_dir().join(format!("pprz-monitor-replay-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (input, log) = (dir.join("pongs.bin"), dir.join("pongs.log"));
+    let mut bytes = stream();
+    for _ in 0..3 {
+        let mut buf = [0u8; 16];
+        let meta = TxMeta::new(MsgHeader::new(7, 0, 1, 3)); // PONG to the ground
+        let n = PprzV2::new().encode(&meta, &[], &mut buf).unwrap();
+        bytes.extend_from_slice(&buf[..n]);
+    }
+    std::fs::write(&input, bytes).unwrap();
+    let (ok, _, err) = monitor(&[
+        "--messages",
+        MESSAGES,
+        "--file",
+        input.to_str().unwrap(),
+        "--lines",
+        "--record",
+        log.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, lines, err) = replay(&log);
+    assert!(ok, "{err}");
+    assert_eq!(lines.matches("telemetry PONG").count(), 3, "{lines}");
+    assert!(!err.contains("PONG that answers no PING"), "{err}");
+    assert!(!err.contains("unexpected pongs"), "{err}");
+    let log = log.to_str().unwrap();
+    let args = [
+        "--messages",
+        MESSAGES,
+        "--file",
+        log,
+        "--transport",
+        "pprzlog",
+    ];
+    let (ok, table, err) = monitor(&args);
+    assert!(ok, "{err}");
+    let first = table.split("\x1b[2J\x1b[H").nth(1).unwrap();
+    let status = first.lines().next().unwrap();
+    assert!(status.contains("s        - B/s  frames ok"), "{status}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -146,9 +146,14 @@ fn random_reference_frames_through_the_monitor() {
                 m.feed(now, chunk, &mut on_line);
             }
             match rng.below(40) {
-                0 => m.ping_sent(now),
-                1 => m.setting_value_sent(now, rng.next_u64() as u8, rng.below(1000) as f64 * 0.1),
-                2 => m.get_setting_sent(now, rng.next_u64() as u8),
+                0 => m.ping_sent(None, now),
+                1 => m.setting_sent(
+                    None,
+                    now,
+                    rng.next_u64() as u8,
+                    rng.below(1000) as f64 * 0.1,
+                ),
+                2 => m.get_setting_sent(None, now, rng.next_u64() as u8),
                 3 => m.input_gap(
                     now,
                     Drops {

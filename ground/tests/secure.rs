@@ -224,7 +224,7 @@ fn handshake_then_encrypted_telemetry_and_ping() {
     let sealed_ping = m.seal_uplink(&ping).unwrap();
     assert_eq!(sealed_ping[2], 0x55, "encrypted");
     assert_ne!(sealed_ping, ping);
-    m.ping_sent(t);
+    m.ping_sent(None, t);
     assert!(air.receive(&sealed_ping, 0).is_empty());
     assert_eq!(air.received, [ping]);
     let pong = air.seal(&plain(7, 0, 1, 3, &[])).unwrap();

@@ -278,12 +278,12 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
         // SETTING, again every second until acknowledged.
         if !received.is_empty() && pong_rtt.is_none() && now >= next_ping {
             serial.send(&ping, "send PING");
-            monitor.ping_sent(now);
+            monitor.ping_sent(None, now);
             next_ping = now + 1.0;
         }
         if pong_rtt.is_some() && ack.is_none() && now >= next_setting {
             serial.send(&setting, "send SETTING");
-            monitor.setting_value_sent(now, GAIN_INDEX, f64::from(GAIN));
+            monitor.setting_sent(None, now, GAIN_INDEX, f64::from(GAIN));
             setting_first_sent.get_or_insert(now);
             next_setting = now + 1.0;
         }
@@ -467,9 +467,9 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
             let sealed = monitor.seal_uplink(request).expect("a session seals");
             serial.send(&sealed, "send a request");
             if pong_rtt.is_none() {
-                monitor.ping_sent(now);
+                monitor.ping_sent(None, now);
             } else {
-                monitor.setting_value_sent(now, GAIN_INDEX, f64::from(GAIN));
+                monitor.setting_sent(None, now, GAIN_INDEX, f64::from(GAIN));
             }
             next_request = now + 1.0;
         }

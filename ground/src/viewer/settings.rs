@@ -109,12 +109,12 @@ impl SettingRequest {
     /// is matched to it.
     pub fn sent(&self, monitor: &mut Monitor, now: f64) {
         match *self {
-            Self::Get { ac_id, index } => monitor.get_setting_sent_to(now, ac_id, index),
+            Self::Get { ac_id, index } => monitor.get_setting_sent(Some(ac_id), now, index),
             Self::Set {
                 ac_id,
                 index,
                 value,
-            } => monitor.setting_value_sent_to(now, ac_id, index, value),
+            } => monitor.setting_sent(Some(ac_id), now, index, value),
         }
     }
 }

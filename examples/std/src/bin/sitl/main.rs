@@ -928,7 +928,7 @@ fn main() -> ExitCode {
     print!("{}", summary.text());
     if let Some(m) = &monitor {
         for ac in m.aircraft() {
-            if let Some(pings) = m.pings_of(ac) {
+            if let Some(pings) = m.aircraft_state(ac).map(|a| a.pings()) {
                 println!(
                     "  ground station, aircraft {ac}: PINGs sent {}, answered {}, lost {}",
                     pings.sent_count(),
@@ -1012,7 +1012,7 @@ fn run_ground(
                     && let Ok(frame) = monitor.seal_uplink(&frame)
                     && socket.send_to(&frame, args.uplink).is_ok()
                 {
-                    monitor.ping_sent_to(t, ac);
+                    monitor.ping_sent(Some(ac), t);
                     if secure {
                         record::uplink(ac, Ping::CLASS_ID, Ping::ID, Instant::now());
                     }
@@ -1028,7 +1028,7 @@ fn run_ground(
                     && let Ok(frame) = monitor.seal_uplink(&frame)
                     && socket.send_to(&frame, args.uplink).is_ok()
                 {
-                    monitor.setting_value_sent_to(t, ac, 2, 2.5);
+                    monitor.setting_sent(Some(ac), t, 2, 2.5);
                 }
             }
             setting_sent = true;

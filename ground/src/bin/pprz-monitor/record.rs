@@ -225,7 +225,8 @@ impl<W: Write> Recorder<W> {
         self.records
     }
 
-    /// Whether a write failed.
+    /// Whether a write failed (the run reads the error from the writes themselves).
+    #[cfg(test)]
     pub fn failed(&self) -> bool {
         self.error.is_some()
     }

@@ -14,17 +14,19 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+mod record;
+
 use clap::Parser;
 use pprz_ground::cli::Args;
 use pprz_ground::escape;
-use pprz_ground::input::{self, DEFAULT_CAPACITY, End, InputQueue, Overflow, Pop};
+use pprz_ground::input::{self, DEFAULT_CAPACITY, Drops, End, InputQueue, Overflow, Pop};
 use pprz_ground::monitor::{Decoded, IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
-use pprz_ground::record::{self, FileId, Recorder};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
 use pprz_ground::viewer::{self, Viewer};
 use pprz_transports::AnyTransport;
+use record::{FileId, Recorder};
 
 /// Where uplink frames are written.
 enum UplinkSink {
@@ -354,51 +356,24 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
-    let set = RuntimeSet::load(&args.messages)
-        .map_err(|e| format!("{e}\n(give the messages.xml of the aircraft with --messages)"))?;
+    let set = load_set(&args.messages)?;
     let transport: AnyTransport = args.transport.any();
-    let (source, mut uplink_sink, mut inputs) = open_input(args)?;
-    // The recording is opened (and emptied) only after checking it is no input.
-    let recorder = match &args.record {
-        Some(path) => {
-            let file = record::open_recording(path, &inputs).map_err(|e| e.to_string())?;
-            if let Ok(id) = FileId::of_file(path, &file) {
-                inputs.push((id, format!("the --record file {}", path.display())));
-            }
-            Some(Recorder::new(BufWriter::new(file), transport))
-        }
-        None => None,
-    };
+    let (source, uplink_sink, mut inputs) = open_input(args)?;
+    let recorder = open_recorder(args, &mut inputs, transport)?;
     let has_uplink = !matches!(uplink_sink, UplinkSink::None);
     let viewer = open_viewer(args, &inputs, has_uplink)?;
-    let queue = match source {
-        Source::Udp(socket) => {
-            let q = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
-            input::spawn_udp(socket, q.clone());
-            q
-        }
-        Source::Stream(reader, overflow) => {
-            let q = InputQueue::new(DEFAULT_CAPACITY, overflow);
-            input::spawn_stream(reader, q.clone());
-            q
-        }
-    };
+    let queue = start_reading(source);
+    let stop = stop_on_ctrl_c();
     let live = queue.overflow() == Overflow::DropOldest;
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
-            eprintln!("warning: Ctrl-C handler not installed: {e}");
-        }
-    }
-
-    let start = Instant::now();
-    let now = || start.elapsed().as_secs_f64();
     let mut monitor = Monitor::new(set, transport);
+    if !live {
+        // A file or standard input: a recording, whose PINGs another station sent.
+        monitor = monitor.replaying();
+    }
     if let Some(secure) = secure {
         monitor = monitor.with_secure(secure).map_err(|e| e.to_string())?;
     }
-    let mut out = Output {
+    let out = Output {
         lines: args.lines,
         stdout: BufWriter::new(std::io::stdout()),
         stdout_error: None,
@@ -410,204 +385,372 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         epoch_ns: viewer::unix_ns(),
         last_ns: 0,
     };
-    let aircraft = args.aircraft();
-    // The SETTINGs go at start, or once the secure session is up.
-    let mut settings_pending = true;
-    let mut secure_report = SecureReport::default();
-    let mut next_ping = args.ping.map(|_| 0.0);
-    let mut next_render = 0.0;
-    let mut next_flush = 0.0;
-    let mut next_drop_warning = 0.0;
-    let mut next_viewer = 1.0;
-    let mut input_error = None;
-    let mut last_data: Option<f64> = None;
-    let mut seen = (0, 0);
-    while !stop.load(Ordering::SeqCst) && !out.failed() {
-        let t = now();
+    let mut run = Run::new(args, monitor, out, uplink_sink, transport, live);
+    while !stop.load(Ordering::SeqCst) && !run.out.failed() {
+        let t = run.now();
         if args.duration.is_some_and(|d| t >= d) {
             break;
         }
-        monitor.tick(t);
-        send_secure(&mut monitor, &mut uplink_sink, t);
-        if args.lines {
-            secure_report.update(&monitor, t);
+        run.send_requests(t);
+        if !run.read_input(&queue) {
+            break;
         }
-        if settings_pending && monitor.uplink_ready() {
-            settings_pending = false;
-            for &ac_id in &aircraft {
-                for &(index, value) in &args.settings {
-                    let values = [
-                        ("index", f64::from(index)),
-                        ("ac_id", f64::from(ac_id)),
-                        ("value", f64::from(value)),
-                    ];
-                    let sink = &mut uplink_sink;
-                    if send(&mut monitor, sink, transport, ac_id, "SETTING", &values) {
-                        monitor.setting_value_sent_to(now(), ac_id, index, f64::from(value));
-                    }
+        run.refresh_output();
+    }
+    run.finish(queue)
+}
+
+/// Reads the message set; a failure is one line per problem, with the hint to give
+/// `--messages`.
+fn load_set(path: &Path) -> Result<RuntimeSet, String> {
+    RuntimeSet::load(path).map_err(|e| {
+        let problems: Vec<String> = e.diagnostics().iter().map(ToString::to_string).collect();
+        format!(
+            "{} (give the messages.xml of the aircraft with --messages)",
+            problems.join("\n")
+        )
+    })
+}
+
+/// Opens `--record` (and empties it) only after checking it is no input, which it
+/// becomes.
+fn open_recorder(
+    args: &Args,
+    inputs: &mut Inputs,
+    transport: AnyTransport,
+) -> Result<Option<Recorder<BufWriter<File>>>, String> {
+    let Some(path) = &args.record else {
+        return Ok(None);
+    };
+    let file = record::open_recording(path, inputs).map_err(|e| e.to_string())?;
+    if let Ok(id) = FileId::of_file(path, &file) {
+        inputs.push((id, format!("the --record file {}", path.display())));
+    }
+    Ok(Some(Recorder::new(BufWriter::new(file), transport)))
+}
+
+/// Starts the thread that reads `source` into a queue.
+fn start_reading(source: Source) -> InputQueue {
+    match source {
+        Source::Udp(socket) => {
+            let q = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
+            input::spawn_udp(socket, q.clone());
+            q
+        }
+        Source::Stream(reader, overflow) => {
+            let q = InputQueue::new(DEFAULT_CAPACITY, overflow);
+            input::spawn_stream(reader, q.clone());
+            q
+        }
+    }
+}
+
+/// A flag that Ctrl-C sets.
+fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
+        eprintln!("warning: Ctrl-C handler not installed: {e}");
+    }
+    stop
+}
+
+/// A run of the monitor: its state, its outputs, and when each periodic task is due.
+struct Run<'a> {
+    args: &'a Args,
+    monitor: Monitor,
+    out: Output,
+    uplink: UplinkSink,
+    transport: AnyTransport,
+    aircraft: Vec<u8>,
+    /// A live link (not a file or standard input).
+    live: bool,
+    start: Instant,
+    /// The SETTINGs go at start, or once the secure session is up.
+    settings_pending: bool,
+    secure_report: SecureReport,
+    next_ping: Option<f64>,
+    next_render: f64,
+    next_flush: f64,
+    next_drop_warning: f64,
+    next_viewer: f64,
+    input_error: Option<String>,
+    last_data: Option<f64>,
+    /// Events and notices already reported (`--lines`).
+    seen: (u64, u64),
+}
+
+impl<'a> Run<'a> {
+    fn new(
+        args: &'a Args,
+        monitor: Monitor,
+        out: Output,
+        uplink: UplinkSink,
+        transport: AnyTransport,
+        live: bool,
+    ) -> Self {
+        Self {
+            args,
+            monitor,
+            out,
+            uplink,
+            transport,
+            aircraft: args.aircraft(),
+            live,
+            start: Instant::now(),
+            settings_pending: true,
+            secure_report: SecureReport::default(),
+            next_ping: args.ping.map(|_| 0.0),
+            next_render: 0.0,
+            next_flush: 0.0,
+            next_drop_warning: 0.0,
+            next_viewer: 1.0,
+            input_error: None,
+            last_data: None,
+            seen: (0, 0),
+        }
+    }
+
+    /// Seconds since the start of the run.
+    fn now(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+
+    /// Sends what is due at `t`: the secure link's handshake, `--setting`, the settings
+    /// requested from the viewer, `--ping`.
+    fn send_requests(&mut self, t: f64) {
+        self.monitor.tick(t);
+        send_secure(&mut self.monitor, &mut self.uplink, t);
+        if self.args.lines {
+            self.secure_report.update(&self.monitor, t);
+        }
+        if self.settings_pending && self.monitor.uplink_ready() {
+            self.settings_pending = false;
+            self.send_settings();
+        }
+        self.send_viewer_requests(t);
+        self.send_pings(t);
+    }
+
+    /// Sends `--setting` to every aircraft.
+    fn send_settings(&mut self) {
+        for &ac_id in &self.aircraft {
+            for &(index, value) in &self.args.settings {
+                let values = [
+                    ("index", f64::from(index)),
+                    ("ac_id", f64::from(ac_id)),
+                    ("value", f64::from(value)),
+                ];
+                let (monitor, sink) = (&mut self.monitor, &mut self.uplink);
+                if send(monitor, sink, self.transport, ac_id, "SETTING", &values) {
+                    let now = self.start.elapsed().as_secs_f64();
+                    monitor.setting_sent(Some(ac_id), now, index, f64::from(value));
                 }
             }
         }
-        // Settings read and written from the viewer.
-        let requests = match out.viewer.as_mut() {
+    }
+
+    /// Sends the settings read and written from the viewer.
+    fn send_viewer_requests(&mut self, t: f64) {
+        let requests = match self.out.viewer.as_mut() {
             Some(v) => v.setting_requests(t),
             None => Vec::new(),
         };
         for request in requests {
-            if !monitor.uplink_ready() {
+            if !self.monitor.uplink_ready() {
                 continue; // answered "no answer" when it times out
             }
             let (name, values) = request.message();
-            let sink = &mut uplink_sink;
+            let (monitor, sink) = (&mut self.monitor, &mut self.uplink);
             if send(
-                &mut monitor,
+                monitor,
                 sink,
-                transport,
+                self.transport,
                 request.ac_id(),
                 name,
                 &values,
             ) {
-                request.sent(&mut monitor, now());
+                request.sent(monitor, self.start.elapsed().as_secs_f64());
             }
         }
-        if let (Some(period), Some(at)) = (args.ping, next_ping)
-            && t >= at
-        {
-            // On a secure link, no PING before the session is up.
-            if monitor.uplink_ready() {
-                for &ac_id in &aircraft {
-                    let sink = &mut uplink_sink;
-                    if send(&mut monitor, sink, transport, ac_id, "PING", &[]) {
-                        monitor.ping_sent_to(now(), ac_id);
-                    }
+    }
+
+    /// Sends a PING to every aircraft when one is due at `t`.
+    fn send_pings(&mut self, t: f64) {
+        let (Some(period), Some(at)) = (self.args.ping, self.next_ping) else {
+            return;
+        };
+        if t < at {
+            return;
+        }
+        // On a secure link, no PING before the session is up.
+        if self.monitor.uplink_ready() {
+            for &ac_id in &self.aircraft {
+                let (monitor, sink) = (&mut self.monitor, &mut self.uplink);
+                if send(monitor, sink, self.transport, ac_id, "PING", &[]) {
+                    monitor.ping_sent(Some(ac_id), self.start.elapsed().as_secs_f64());
                 }
             }
-            // After a stall, the next PING is one period from now, not a burst.
-            let next = at + period;
-            next_ping = Some(if next > t { next } else { t + period });
         }
+        // After a stall, the next PING is one period from now, not a burst.
+        let next = at + period;
+        self.next_ping = Some(if next > t { next } else { t + period });
+    }
+
+    /// Decodes what the input gives within 50 ms; `false` at its end.
+    fn read_input(&mut self, queue: &InputQueue) -> bool {
         match queue.pop(Duration::from_millis(50)) {
             Pop::Data {
                 bytes,
                 dropped_before,
             } => {
-                let t = now();
+                let t = self.now();
                 if !dropped_before.is_empty() {
-                    if args.lines && t >= next_drop_warning {
-                        let d = monitor.input_dropped();
-                        eprintln!(
-                            "warning: input overload at t={t:.1}s: dropped {} bytes in {} reads so far",
-                            d.bytes + dropped_before.bytes,
-                            d.reads + dropped_before.reads
-                        );
-                        next_drop_warning = t + 1.0;
-                    }
-                    monitor.input_gap(t, dropped_before, |m| out.message(t, m));
+                    self.warn_dropped(t, dropped_before);
+                    let out = &mut self.out;
+                    self.monitor
+                        .input_gap(t, dropped_before, |m| out.message(t, m));
                 }
-                monitor.feed(t, &bytes, |m| out.message(t, m));
-                last_data = Some(t);
+                let out = &mut self.out;
+                self.monitor.feed(t, &bytes, |m| out.message(t, m));
+                self.last_data = Some(t);
             }
             Pop::Idle => {
                 // A silent link: decode the frames held behind a false start.
-                let t = now();
-                if live && last_data.is_some_and(|at| t - at >= IDLE_FLUSH) {
-                    monitor.flush(t, |m| out.message(t, m));
-                    last_data = None;
+                let t = self.now();
+                if self.live && self.last_data.is_some_and(|at| t - at >= IDLE_FLUSH) {
+                    let out = &mut self.out;
+                    self.monitor.flush(t, |m| out.message(t, m));
+                    self.last_data = None;
                 }
             }
-            Pop::End(End::Eof) => break,
+            Pop::End(End::Eof) => return false,
             Pop::End(End::Error(e)) => {
-                input_error = Some(e);
-                break;
+                self.input_error = Some(e);
+                return false;
             }
         }
-        if args.lines {
-            report_new(&monitor, &mut seen);
-            secure_report.update(&monitor, now());
-        }
-        let t = now();
-        if args.lines && (live || t >= next_flush) {
-            out.flush_stdout();
-            next_flush = t + 0.1;
-        }
-        if !args.lines && t >= next_render {
-            out.screen(&monitor.render(t));
-            next_render = t + 0.5;
-        }
-        if t >= next_viewer {
-            out.viewer_tick(&monitor, t, live);
-            next_viewer = t + 1.0;
+        true
+    }
+
+    /// In `--lines` mode, warns of input dropped under overload (once a second).
+    fn warn_dropped(&mut self, t: f64, dropped: Drops) {
+        if self.args.lines && t >= self.next_drop_warning {
+            let d = self.monitor.input_dropped();
+            eprintln!(
+                "warning: input overload at t={t:.1}s: dropped {} bytes in {} reads so far",
+                d.bytes + dropped.bytes,
+                d.reads + dropped.reads
+            );
+            self.next_drop_warning = t + 1.0;
         }
     }
-    // Input read but not decoded (a run stopped by --duration or Ctrl-C, or by an
-    // error) counts as dropped too.
-    let t = now();
-    let lost = queue.close();
-    monitor.input_gap(t, lost, |m| out.message(t, m));
-    if !out.failed() {
-        monitor.flush(t, |m| out.message(t, m));
+
+    /// Reports events, flushes the lines, redraws the table, feeds the viewer, each
+    /// when due.
+    fn refresh_output(&mut self) {
+        if self.args.lines {
+            report_new(&self.monitor, &mut self.seen);
+            self.secure_report.update(&self.monitor, self.now());
+        }
+        let t = self.now();
+        if self.args.lines && (self.live || t >= self.next_flush) {
+            self.out.flush_stdout();
+            self.next_flush = t + 0.1;
+        }
+        if !self.args.lines && t >= self.next_render {
+            self.out.screen(&self.monitor.render(t));
+            self.next_render = t + 0.5;
+        }
+        if t >= self.next_viewer {
+            self.out.viewer_tick(&self.monitor, t, self.live);
+            self.next_viewer = t + 1.0;
+        }
     }
-    monitor.tick(t);
-    if args.lines {
-        report_new(&monitor, &mut seen);
-    } else {
-        out.screen(&monitor.render(t));
+
+    /// Ends the run: decodes what was read, writes the last view, closes the recordings
+    /// and prints the summary; the errors of the run, one a line.
+    fn finish(mut self, queue: InputQueue) -> Result<(), String> {
+        // Input read but not decoded (a run stopped by --duration or Ctrl-C, or by an
+        // error) counts as dropped too.
+        let t = self.now();
+        let lost = queue.close();
+        let out = &mut self.out;
+        self.monitor.input_gap(t, lost, |m| out.message(t, m));
+        if !self.out.failed() {
+            let out = &mut self.out;
+            self.monitor.flush(t, |m| out.message(t, m));
+        }
+        self.monitor.tick(t);
+        if self.args.lines {
+            report_new(&self.monitor, &mut self.seen);
+        } else {
+            self.out.screen(&self.monitor.render(t));
+        }
+        self.out.flush_stdout();
+        let mut errors = Vec::new();
+        if let Some(e) = self.input_error.take() {
+            errors.push(format!("input error: {e}"));
+        }
+        errors.extend(self.finish_recording());
+        errors.extend(self.finish_viewer(t));
+        match self.out.stdout_error.take() {
+            Some(e) if e.kind() == ErrorKind::BrokenPipe => {} // the reader has seen enough
+            Some(e) => errors.push(format!("cannot write the output: {e}")),
+            None => {}
+        }
+        eprintln!("{}", self.monitor.summary(t));
+        if errors.is_empty() {
+            Ok(())
+        } else {
+            Err(errors.join("\n"))
+        }
     }
-    out.flush_stdout();
-    let mut errors = Vec::new();
-    if let Some(e) = input_error {
-        errors.push(format!("input error: {e}"));
-    }
-    if let Some(r) = out.recorder.take() {
-        let records = r.records();
-        match r.finish() {
-            Ok(_) if out.record_error.is_none() => {
-                if let Some(path) = &args.record {
-                    eprintln!("recorded {records} frames to {}", path.display());
+
+    /// Closes `--record`; its error, if any.
+    fn finish_recording(&mut self) -> Option<String> {
+        let out = &mut self.out;
+        if let Some(r) = out.recorder.take() {
+            let records = r.records();
+            match r.finish() {
+                Ok(_) if out.record_error.is_none() => {
+                    if let Some(path) = &self.args.record {
+                        eprintln!("recorded {records} frames to {}", path.display());
+                    }
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    if out.record_error.is_none() {
+                        out.record_error = Some(out.record_failure(&e));
+                    }
                 }
             }
-            Ok(_) => {}
-            Err(e) => {
-                if out.record_error.is_none() {
-                    out.record_error = Some(out.record_failure(&e));
+        }
+        out.record_error.take()
+    }
+
+    /// Publishes the last statistics and closes `--mcap` and `--foxglove`; the error,
+    /// if any.
+    fn finish_viewer(&mut self, t: f64) -> Option<String> {
+        if self.out.viewer.is_some() {
+            self.out.viewer_tick(&self.monitor, t, self.live);
+        }
+        if let Some(v) = self.out.viewer.take() {
+            let c = v.counts();
+            eprintln!("{c}");
+            match v.finish() {
+                Ok(_) => {
+                    if let Some(path) = &self.args.mcap
+                        && self.out.viewer_error.is_none()
+                    {
+                        eprintln!("recorded {} messages to {}", c.messages, path.display());
+                    }
+                }
+                Err(e) => {
+                    self.out.viewer_error.get_or_insert(e.to_string());
                 }
             }
         }
-    }
-    if let Some(e) = out.record_error.take() {
-        errors.push(e);
-    }
-    if out.viewer.is_some() {
-        out.viewer_tick(&monitor, t, live);
-    }
-    if let Some(v) = out.viewer.take() {
-        let c = v.counts();
-        eprintln!("{c}");
-        match v.finish() {
-            Ok(_) => {
-                if let Some(path) = &args.mcap
-                    && out.viewer_error.is_none()
-                {
-                    eprintln!("recorded {} messages to {}", c.messages, path.display());
-                }
-            }
-            Err(e) => {
-                out.viewer_error.get_or_insert(e.to_string());
-            }
-        }
-    }
-    if let Some(e) = out.viewer_error.take() {
-        errors.push(e);
-    }
-    match out.stdout_error.take() {
-        Some(e) if e.kind() == ErrorKind::BrokenPipe => {} // the reader has seen enough
-        Some(e) => errors.push(format!("cannot write the output: {e}")),
-        None => {}
-    }
-    eprintln!("{}", monitor.summary(t));
-    if errors.is_empty() {
-        Ok(())
-    } else {
-        Err(errors.join("\n"))
+        self.out.viewer_error.take()
     }
 }

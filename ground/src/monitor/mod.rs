@@ -1,0 +1,185 @@
+//! The monitor's state: decodes a byte stream with a chosen transport and a run-time
+//! message set, keeps per-message statistics and the latest values, link statistics,
+//! round-trip times of PINGs and the acknowledgements of SETTINGs, and renders them.
+//!
+//! Time is passed in (seconds since the start of the run), so the state is testable and
+//! a replay reproduces the same output.
+//!
+//! # Several aircraft
+//!
+//! Every frame names its source (PPRZ v2 `source`, PPRZ v1 `sender_id`): the monitor keeps
+//! statistics per message for all aircraft together ([`Monitor::messages`]) and per
+//! aircraft ([`Monitor::aircraft`], [`Monitor::aircraft_state`], [`Aircraft`]). With one
+//! aircraft the live view is one table; with several it has a section per aircraft, and
+//! the events name the aircraft.
+//!
+//! Each request method ([`Monitor::ping_sent`], [`Monitor::setting_sent`],
+//! [`Monitor::get_setting_sent`]) takes an optional destination. A request to aircraft N
+//! is answered only by N: a PONG from N answers only a PING sent to N, a DL_VALUE from N
+//! only a request sent to N. A request to no particular aircraft (`None`) is for a single
+//! aircraft: a PONG or DL_VALUE from any aircraft answers it, when no request addressed
+//! to that aircraft is waiting. Only PONGs and DL_VALUEs addressed to the ground
+//! (destination 0, broadcast, or none with PPRZ v1) answer anything: one aircraft's
+//! answer to another, seen on a shared link, does not.
+//!
+//! # Modules
+//!
+//! The monitor is one type whose methods are kept by concept: decoding (`decode`), the
+//! state it updates (`state`), request tracking (`requests`), events and notices
+//! (`events`), and rendering (`render`).
+//!
+//! # Bounds
+//!
+//! Every piece of state is bounded, whatever arrives: one entry per message of the set
+//! (with its latest fields cut at [`format::MAX_FIELDS_LEN`]) for all aircraft and one per
+//! message and tracked aircraft, rates counted in fixed time buckets, at most
+//! [`MAX_EVENTS`] events and notices, at most [`crate::ping::MAX_OUTSTANDING`] PINGs and
+//! 256 requests outstanding per aircraft. Received frames make the monitor track at most
+//! [`MAX_AIRCRAFT`] aircraft: frames from further source ids are decoded, shown and
+//! counted with all aircraft and in [`Monitor::untracked_frames`], but get no table of
+//! their own (a flood of frames from every source id costs nothing more). Aircraft the
+//! ground addresses are tracked whatever the input. The worst case is
+//! `(MAX_AIRCRAFT + 1) * messages in the set` entries of at most about 4 KiB each (tens of
+//! MiB for the 367 messages of the full PPRZLINK set, every one sent by 32 aircraft with
+//! fields that print to the longest text; a few hundred bytes per entry in practice);
+//! [`retained_bytes`](Monitor::retained_bytes) estimates the total.
+//!
+//! Everything printed is escaped ([`escape`](crate::escape)): no line contains a
+//! control character.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use pprz_transports::{AnyTransport, Decoder};
+
+use crate::input::Drops;
+use crate::ping::PingTracker;
+use crate::secure::GroundSecure;
+use crate::set::RuntimeSet;
+use crate::settings::SettingTracker;
+
+mod decode;
+mod events;
+mod render;
+mod requests;
+mod state;
+#[cfg(test)]
+mod tests;
+
+pub use decode::Decoded;
+pub use events::{Event, Notice};
+pub use render::{describe_event, describe_notice};
+pub use state::{Aircraft, MessageStats};
+
+use events::Logged;
+use state::Rate;
+
+/// How long a window the rates are computed over, in seconds.
+pub const RATE_WINDOW: f64 = 5.0;
+
+/// The shortest time a rate is computed over, in seconds: before it has passed since
+/// the start of the run, no rate is shown (a few bytes in the first millisecond are no
+/// measure of a link).
+pub const MIN_RATE_INTERVAL: f64 = 1.0;
+
+/// Seconds of silence of a live link after which the decoder is flushed: a frame held
+/// behind a false start (which announced a longer frame) is decoded then, not when the
+/// next bytes arrive.
+pub const IDLE_FLUSH: f64 = 0.5;
+
+/// Events and notices kept for the live view (the latest ones).
+pub const MAX_EVENTS: usize = 8;
+
+/// Handshake frames waiting for [`Monitor::poll_secure`] (the latest ones).
+pub const MAX_SECURE_OUT: usize = 4;
+
+/// Aircraft (source ids) that received frames make the monitor track; frames from
+/// further source ids are counted ([`Monitor::untracked_frames`]), not tracked. Aircraft
+/// the ground addresses (PING, SETTING) are tracked beyond this bound.
+pub const MAX_AIRCRAFT: usize = 32;
+
+/// Seconds during which rejections of the same reason share one notice.
+const REJECT_COALESCE: f64 = 1.0;
+
+/// Time buckets of a rate.
+const BUCKETS: usize = 10;
+
+/// The decoding monitor.
+pub struct Monitor {
+    set: RuntimeSet,
+    decoder: Decoder<AnyTransport>,
+    /// All aircraft together.
+    messages: BTreeMap<(u8, u8), MessageStats>,
+    aircraft: BTreeMap<u8, Aircraft>,
+    untracked_frames: u64,
+    /// Bit `n` set: frames from source `n` were not tracked.
+    untracked_ids: [u64; 4],
+    bytes: u64,
+    byte_rate: Rate,
+    unknown: u64,
+    malformed: u64,
+    last_report: Option<String>,
+    last_rtt: Option<f64>,
+    /// PINGs and requests to no particular aircraft.
+    pings: PingTracker,
+    settings: SettingTracker,
+    events: VecDeque<Logged<Event>>,
+    notices: VecDeque<Logged<Notice>>,
+    input_dropped: Drops,
+    input_gaps: u64,
+    event_count: u64,
+    notice_count: u64,
+    secure: Option<GroundSecure>,
+    secure_out: VecDeque<Vec<u8>>,
+    /// Replaying a recording: this monitor sent no request, so PONGs answer none.
+    replay: bool,
+}
+
+impl Monitor {
+    /// A monitor decoding `transport` frames with the messages of `set`.
+    pub fn new(set: RuntimeSet, transport: AnyTransport) -> Self {
+        Self {
+            set,
+            decoder: Decoder::new(transport),
+            messages: BTreeMap::new(),
+            aircraft: BTreeMap::new(),
+            untracked_frames: 0,
+            untracked_ids: [0; 4],
+            bytes: 0,
+            byte_rate: Rate::default(),
+            unknown: 0,
+            malformed: 0,
+            last_report: None,
+            last_rtt: None,
+            pings: PingTracker::default(),
+            settings: SettingTracker::default(),
+            events: VecDeque::new(),
+            notices: VecDeque::new(),
+            input_dropped: Drops::default(),
+            input_gaps: 0,
+            event_count: 0,
+            notice_count: 0,
+            secure: None,
+            secure_out: VecDeque::new(),
+            replay: false,
+        }
+    }
+
+    /// The same monitor with other PING and request trackers (other bounds and
+    /// timeouts): these track the PINGs and requests to no particular aircraft, and the
+    /// trackers of each aircraft get the same bounds and timeouts (call it before
+    /// feeding the monitor or sending anything).
+    pub fn with_trackers(mut self, pings: PingTracker, settings: SettingTracker) -> Self {
+        self.pings = pings;
+        self.settings = settings;
+        self
+    }
+
+    /// The same monitor replaying a recording: the requests in the recording were sent
+    /// by another ground station, so a PONG measures no round trip and is not noted as
+    /// answering no PING ([`Notice::UnexpectedPong`]); the PONGs are decoded and counted
+    /// as any message. DL_VALUEs are shown as values reported by the aircraft.
+    pub fn replaying(mut self) -> Self {
+        self.replay = true;
+        self
+    }
+}

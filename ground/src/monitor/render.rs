@@ -1,0 +1,348 @@
+//! Rendering: the live view, the summary at the end of a run, and the text of events
+//! and notices.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use super::state::{Aircraft, MessageStats};
+use super::{Event, MAX_AIRCRAFT, Monitor, Notice};
+use crate::format;
+use crate::ping::PingTracker;
+use crate::settings::{Answer, Expired, SettingTracker};
+
+impl Monitor {
+    /// An event as a line of the live view: [`describe_event`], after `aircraft N: `
+    /// when [`several_aircraft`](Self::several_aircraft) and the event is about one.
+    pub fn event_line(&self, aircraft: Option<u8>, event: &Event) -> String {
+        self.about(aircraft) + &describe_event(event)
+    }
+
+    /// A notice as a line of the live view, named after its aircraft as
+    /// [`event_line`](Self::event_line) does.
+    pub fn notice_line(&self, aircraft: Option<u8>, notice: &Notice) -> String {
+        self.about(aircraft) + &describe_notice(notice)
+    }
+
+    /// `aircraft N: ` with several aircraft, or nothing.
+    fn about(&self, aircraft: Option<u8>) -> String {
+        match aircraft {
+            Some(id) if self.several_aircraft() => format!("aircraft {id}: "),
+            _ => String::new(),
+        }
+    }
+
+    /// The status line: time, byte rate and every counter of lost or rejected input.
+    fn status(&self, now: f64) -> String {
+        let st = self.decoder.stats();
+        format!(
+            "t={now:7.1}s  {:>7} B/s  frames ok {}  checksum errors {}  length errors {}  dropped bytes {}  unknown {}  malformed {}  input dropped {} B in {} reads",
+            rate_text(self.byte_rate(now), 0),
+            st.frames,
+            st.checksum_errors,
+            st.length_errors,
+            st.dropped_bytes,
+            self.unknown,
+            self.malformed,
+            self.input_dropped.bytes,
+            self.input_dropped.reads,
+        )
+    }
+
+    /// PING and SETTING statistics of the requests to no particular aircraft and, with
+    /// a single aircraft, of those addressed to it, when there were any.
+    fn uplink_status(&self) -> Vec<String> {
+        let mut out = uplink_lines(&self.pings, &self.settings);
+        if !self.several_aircraft()
+            && let Some(a) = self.aircraft.values().next()
+        {
+            out.extend(uplink_lines(&a.pings, &a.settings));
+        }
+        out
+    }
+
+    /// The aircraft tracked, and the frames of those not tracked, with several
+    /// aircraft.
+    fn fleet_line(&self) -> Option<String> {
+        if !self.several_aircraft() {
+            return None;
+        }
+        let ids: Vec<String> = self.aircraft.keys().map(u8::to_string).collect();
+        let mut s = format!("aircraft: {}", ids.join(", "));
+        if self.untracked_frames > 0 {
+            let _ = write!(
+                s,
+                "  not tracked (more than {MAX_AIRCRAFT} aircraft): {} frames from {} aircraft",
+                self.untracked_frames,
+                self.untracked_aircraft()
+            );
+        }
+        Some(s)
+    }
+
+    /// The secure link's status lines, if the monitor has one.
+    pub fn secure_lines(&self) -> Vec<String> {
+        self.secure_status()
+            .map(|s| s.lines().to_vec())
+            .unwrap_or_default()
+    }
+
+    /// The live view: the status, a table of messages, the latest events and notices.
+    /// With [`several_aircraft`](Self::several_aircraft), a line listing them, then a
+    /// section per aircraft (`aircraft N: frames ...`, its PINGs and SETTINGs, its link
+    /// report, its table), and the events and notices name their aircraft.
+    pub fn render(&self, now: f64) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "{}", self.status(now));
+        for line in self.secure_lines() {
+            let _ = writeln!(s, "{line}");
+        }
+        for line in self.uplink_status() {
+            let _ = writeln!(s, "{line}");
+        }
+        match self.fleet_line() {
+            None => {
+                if let Some(report) = &self.last_report {
+                    let _ = writeln!(s, "aircraft link report: {report}");
+                }
+                table(&mut s, &self.messages, now);
+            }
+            Some(fleet) => {
+                let _ = writeln!(s, "{fleet}");
+                for a in self.aircraft.values() {
+                    let _ = writeln!(s, "{}", aircraft_head(a));
+                    for line in uplink_lines(&a.pings, &a.settings) {
+                        let _ = writeln!(s, "{line}");
+                    }
+                    if let Some(report) = &a.last_report {
+                        let _ = writeln!(s, "aircraft link report: {report}");
+                    }
+                    table(&mut s, &a.messages, now);
+                }
+            }
+        }
+        for (t, ac, e) in self.events_with_aircraft() {
+            let _ = writeln!(s, "[{t:7.1}s] {}", self.event_line(ac, e));
+        }
+        for (t, ac, n) in self.notices_with_aircraft() {
+            let _ = writeln!(s, "[{t:7.1}s] {}", self.notice_line(ac, n));
+        }
+        s
+    }
+
+    /// Messages received per priority level (all aircraft), as a short table.
+    pub fn priority_summary(&self) -> String {
+        priority_line(&self.per_priority())
+    }
+
+    /// The summary of aircraft `ac_id`: `aircraft N: frames F  unknown U  malformed M`,
+    /// then, indented, its messages per priority level and its PING and SETTING
+    /// statistics; `None` when the aircraft is not tracked.
+    pub fn aircraft_summary(&self, ac_id: u8) -> Option<String> {
+        let a = self.aircraft.get(&ac_id)?;
+        let mut s = aircraft_head(a);
+        let levels = priority_line(&a.per_priority());
+        for line in std::iter::once(levels).chain(uplink_lines(&a.pings, &a.settings)) {
+            let _ = write!(s, "\n  {line}");
+        }
+        Some(s)
+    }
+
+    /// The summary at the end of a run: the status line (with the input dropped under
+    /// overload), PING and SETTING statistics, and messages per priority level; with
+    /// [`several_aircraft`](Self::several_aircraft), then the aircraft and the
+    /// [`aircraft_summary`](Self::aircraft_summary) of each.
+    pub fn summary(&self, now: f64) -> String {
+        let mut s = self.status(now);
+        for line in self.secure_lines().into_iter().chain(self.uplink_status()) {
+            s.push('\n');
+            s.push_str(&line);
+        }
+        s.push('\n');
+        s.push_str(&self.priority_summary());
+        if let Some(fleet) = self.fleet_line() {
+            s.push('\n');
+            s.push_str(&fleet);
+            for id in self.aircraft.keys() {
+                if let Some(a) = self.aircraft_summary(*id) {
+                    s.push('\n');
+                    s.push_str(&a);
+                }
+            }
+        }
+        s
+    }
+}
+
+/// `received per priority level:  2: 10  1: 230`.
+fn priority_line(levels: &BTreeMap<std::cmp::Reverse<u8>, u64>) -> String {
+    let mut s = String::from("received per priority level:");
+    for (p, n) in levels {
+        let _ = write!(s, "  {}: {n}", p.0);
+    }
+    s
+}
+
+/// The first line of an aircraft's section or summary.
+fn aircraft_head(a: &Aircraft) -> String {
+    format!(
+        "aircraft {}: frames {}  unknown {}  malformed {}",
+        a.id, a.frames, a.unknown, a.malformed
+    )
+}
+
+/// The table of `messages` of the live view, with its header.
+fn table(s: &mut String, messages: &BTreeMap<(u8, u8), MessageStats>, now: f64) {
+    let _ = writeln!(
+        s,
+        "{:<10} {:<20} {:>4} {:>7} {:>7}  last values",
+        "class", "message", "prio", "count", "rate/s"
+    );
+    for m in messages.values() {
+        let mut last = m.last.clone();
+        format::truncate(&mut last, 110);
+        let _ = writeln!(
+            s,
+            "{:<10} {:<20} {:>4} {:>7} {:>7}  {last}",
+            m.class,
+            m.name,
+            m.priority,
+            m.count,
+            rate_text(m.rate(now), 1)
+        );
+    }
+}
+
+/// PING and SETTING statistics of a pair of trackers, when there were any.
+fn uplink_lines(pings: &PingTracker, settings: &SettingTracker) -> Vec<String> {
+    let mut out = Vec::new();
+    let p = pings;
+    if p.sent_count() > 0 || p.unexpected() > 0 {
+        let mut s = format!(
+            "pings: sent {}  answered {}  lost {}  outstanding {}  unexpected pongs {}",
+            p.sent_count(),
+            p.answered(),
+            p.lost(),
+            p.outstanding(),
+            p.unexpected()
+        );
+        if let Some(rtt) = p.last_rtt() {
+            let _ = write!(s, "  last round trip {:.1} ms", rtt * 1e3);
+        }
+        out.push(s);
+    }
+    let st = settings;
+    if st.acknowledged() + st.not_applied() + st.unanswered() > 0 || st.pending() > 0 {
+        out.push(format!(
+            "settings: acknowledged {}  not applied {}  unanswered {}  pending {}",
+            st.acknowledged(),
+            st.not_applied(),
+            st.unanswered(),
+            st.pending()
+        ));
+        for p in st.pending_requests() {
+            out.push(match p {
+                Expired {
+                    index,
+                    requested: Some(requested),
+                    reported: Some(reported),
+                } => format!(
+                    "  pending: SETTING index={index} to {}: not applied so far, the aircraft reports {}",
+                    number(requested),
+                    number(reported)
+                ),
+                Expired {
+                    index,
+                    requested: Some(requested),
+                    reported: None,
+                } => format!(
+                    "  pending: SETTING index={index} to {}: no answer yet",
+                    number(requested)
+                ),
+                Expired { index, .. } => {
+                    format!("  pending: request for setting index={index}: no answer yet")
+                }
+            });
+        }
+    }
+    out
+}
+
+/// A rate with `decimals` decimals, or `-` when there is none yet.
+fn rate_text(rate: Option<f64>, decimals: usize) -> String {
+    rate.map_or_else(|| "-".to_owned(), |r| format!("{r:.decimals$}"))
+}
+
+/// A value read from the wire: a value that is exactly a `float` is written as the
+/// `float` (`0.1`, not `0.10000000149011612`).
+fn number(v: f64) -> String {
+    let single = v as f32;
+    if f64::from(single) == v {
+        single.to_string()
+    } else {
+        v.to_string()
+    }
+}
+
+/// An event as a line of the live view.
+pub fn describe_event(e: &Event) -> String {
+    match e {
+        Event::Pong { rtt } => format!("PONG: round trip {:.1} ms", rtt * 1e3),
+        Event::DlValue {
+            index,
+            value,
+            answer,
+        } => {
+            let head = format!("DL_VALUE index={index} value={}", number(*value));
+            match answer {
+                Answer::Unsolicited => head,
+                Answer::Acknowledged { after } => {
+                    format!("{head}: SETTING acknowledged after {:.1} ms", after * 1e3)
+                }
+                Answer::NotApplied { requested, after } => format!(
+                    "{head}: SETTING to {} not applied ({:.1} ms after it was sent)",
+                    number(*requested),
+                    after * 1e3
+                ),
+                Answer::Answered { after } => {
+                    format!("{head}: answer after {:.1} ms", after * 1e3)
+                }
+            }
+        }
+        Event::SecureSession { completed } => {
+            format!("secure session established (handshake {completed})")
+        }
+    }
+}
+
+/// A notice as a line of the live view.
+pub fn describe_notice(n: &Notice) -> String {
+    match n {
+        Notice::PingsLost { count } => format!("{count} PING(s) lost: no PONG in time"),
+        Notice::UnexpectedPong => "PONG that answers no PING outstanding".into(),
+        Notice::RequestExpired(Expired {
+            index,
+            requested: Some(requested),
+            reported: Some(reported),
+        }) => format!(
+            "SETTING index={index} to {} not applied: the aircraft still reports {}",
+            number(*requested),
+            number(*reported)
+        ),
+        Notice::RequestExpired(Expired {
+            index,
+            requested: Some(requested),
+            reported: None,
+        }) => format!("SETTING index={index} to {}: no answer", number(*requested)),
+        Notice::RequestExpired(Expired { index, .. }) => {
+            format!("request for setting index={index}: no answer")
+        }
+        Notice::InputDropped(d) => format!(
+            "input overload: dropped {} bytes in {} reads",
+            d.bytes, d.reads
+        ),
+        Notice::SecureRejected { reason, count } => {
+            format!("{count} frame(s) rejected by the secure link: {reason}")
+        }
+        Notice::HandshakeRefused(e) => format!("key exchange from the aircraft refused: {e}"),
+    }
+}
