@@ -177,18 +177,6 @@ fn field_doc(f: &FieldDef) -> String {
     d
 }
 
-/// Name of the enum generated for a field's `values`, if the field gets one.
-pub(crate) fn values_enum(m: &MessageDef, f: &FieldDef) -> Option<String> {
-    match f.ty {
-        FieldType::Scalar(b) if b.is_integer() && !f.values.is_empty() => Some(format!(
-            "{}{}",
-            names::camel_case(&m.name),
-            names::camel_case(&f.name)
-        )),
-        _ => None,
-    }
-}
-
 /// Unique variant names for a list of labels.
 fn variants(labels: &[String]) -> Vec<String> {
     let mut used = HashSet::new();
@@ -473,11 +461,51 @@ fn emit_class(out: &mut String, class: &Class, opts: &Options) {
     out!(out, "}}\n");
 }
 
+/// One message of a class: its struct, `Default` where it cannot be derived, `Message`
+/// (descriptor and encoder), `Decode`, and the accessors of its enumerated fields.
 fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options) {
-    let ty = names::camel_case(&m.name);
-    let life = has_lifetime(m);
-    let l = lt(life);
-    let priority = m.priority.unwrap_or(opts.default_priority);
+    let item = MessageItem {
+        class,
+        m,
+        ty: names::camel_case(&m.name),
+        l: lt(has_lifetime(m)),
+        priority: m.priority.unwrap_or(opts.default_priority),
+    };
+    emit_struct(out, &item);
+    emit_default(out, &item);
+    emit_message_impl(out, &item);
+    emit_decode(out, &item);
+    emit_value_accessors(out, &item);
+}
+
+/// What the items of one message are written from.
+struct MessageItem<'a> {
+    class: &'a Class,
+    m: &'a MessageDef,
+    /// The Rust type name.
+    ty: String,
+    /// `<'a>` if the type borrows from the payload, else empty.
+    l: &'static str,
+    /// The message's own priority, or the set's default.
+    priority: u8,
+}
+
+/// Whether `Default` can be derived: no array longer than 32 elements.
+fn derivable_default(m: &MessageDef) -> bool {
+    m.fields
+        .iter()
+        .all(|f| !matches!(f.ty, FieldType::Array(_, n) if n > 32))
+}
+
+/// The message's doc comment and its struct, one public field per `<field>`.
+fn emit_struct(out: &mut String, item: &MessageItem) {
+    let MessageItem {
+        class,
+        m,
+        ty,
+        l,
+        priority,
+    } = item;
     let mut d = m
         .description
         .clone()
@@ -496,11 +524,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         }
     );
     doc(out, "    ", &d);
-    let derivable_default = m
-        .fields
-        .iter()
-        .all(|f| !matches!(f.ty, FieldType::Array(_, n) if n > 32));
-    if derivable_default {
+    if derivable_default(m) {
         out!(out, "    #[derive(Debug, Clone, Copy, PartialEq, Default)]");
     } else {
         out!(out, "    #[derive(Debug, Clone, Copy, PartialEq)]");
@@ -520,23 +544,38 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         }
         out!(out, "    }}\n");
     }
-    if !derivable_default {
-        out!(out, "    impl{l} {DEFAULT} for {ty}{l} {{");
-        out!(out, "        fn default() -> Self {{");
-        out!(out, "            Self {{");
-        for f in &m.fields {
-            let v = match f.ty {
-                FieldType::Array(_, n) => format!("[{DEFAULT}::default(); {n}]"),
-                FieldType::Scalar(_) | FieldType::Vector(_) => format!("{DEFAULT}::default()"),
-            };
-            out!(out, "                {}: {v},", names::snake_case(&f.name));
-        }
-        out!(out, "            }}");
-        out!(out, "        }}");
-        out!(out, "    }}\n");
-    }
+}
 
-    // Message
+/// `Default` written out, for a message whose arrays are too long to derive it.
+fn emit_default(out: &mut String, item: &MessageItem) {
+    let MessageItem { m, ty, l, .. } = item;
+    if derivable_default(m) {
+        return;
+    }
+    out!(out, "    impl{l} {DEFAULT} for {ty}{l} {{");
+    out!(out, "        fn default() -> Self {{");
+    out!(out, "            Self {{");
+    for f in &m.fields {
+        let v = match f.ty {
+            FieldType::Array(_, n) => format!("[{DEFAULT}::default(); {n}]"),
+            FieldType::Scalar(_) | FieldType::Vector(_) => format!("{DEFAULT}::default()"),
+        };
+        out!(out, "                {}: {v},", names::snake_case(&f.name));
+    }
+    out!(out, "            }}");
+    out!(out, "        }}");
+    out!(out, "    }}\n");
+}
+
+/// `impl Message`: the constants, the descriptor, the encoder.
+fn emit_message_impl(out: &mut String, item: &MessageItem) {
+    let MessageItem {
+        class,
+        m,
+        ty,
+        l,
+        priority,
+    } = item;
     let min = m.min_len();
     let max = m.max_len();
     out!(out, "    impl{l} __rt::Message for {ty}{l} {{");
@@ -546,6 +585,12 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "        const PRIORITY: u8 = {priority};");
     out!(out, "        const MIN_LEN: usize = {min};");
     out!(out, "        const MAX_LEN: usize = {max};");
+    emit_descriptor(out, class, m, *priority);
+    emit_encode(out, m);
+}
+
+/// The `DESCRIPTOR` constant of `impl Message`.
+fn emit_descriptor(out: &mut String, class: &Class, m: &MessageDef, priority: u8) {
     out!(
         out,
         "        const DESCRIPTOR: __rt::MessageDescriptor<'static> = __rt::MessageDescriptor {{"
@@ -594,7 +639,10 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     }
     out!(out, "            ],");
     out!(out, "        }};\n");
+}
 
+/// `encoded_len` and `encode` of `impl Message`, and the end of the impl.
+fn emit_encode(out: &mut String, m: &MessageDef) {
     let var_terms: Vec<String> = m
         .fields
         .iter()
@@ -637,8 +685,12 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "            {OK}(w.finish())");
     out!(out, "        }}");
     out!(out, "    }}\n");
+}
 
-    // Decode
+/// `impl Decode`: a reader over the payload, one read per field.
+fn emit_decode(out: &mut String, item: &MessageItem) {
+    let MessageItem { m, ty, l, .. } = item;
+    let min = m.min_len();
     out!(out, "    impl<'a> __rt::Decode<'a> for {ty}{l} {{");
     out!(out, "        #[inline]");
     out!(
@@ -680,12 +732,15 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "            {OK}(msg)");
     out!(out, "        }}");
     out!(out, "    }}\n");
+}
 
-    // Typed accessors for enumerated fields.
+/// Typed accessors for enumerated fields (`mode_value()` -> `Option<values::GpsMode>`).
+fn emit_value_accessors(out: &mut String, item: &MessageItem) {
+    let MessageItem { m, ty, l, .. } = item;
     let enums: Vec<(&FieldDef, String)> = m
         .fields
         .iter()
-        .filter_map(|f| values_enum(m, f).map(|e| (f, e)))
+        .filter_map(|f| f.values_enum(&m.name).map(|e| (f, e)))
         .collect();
     if !enums.is_empty() {
         out!(out, "    impl{l} {ty}{l} {{");
@@ -944,7 +999,7 @@ fn emit_values(out: &mut String, class: &Class) {
         .flat_map(|m| {
             m.fields
                 .iter()
-                .filter_map(move |f| values_enum(m, f).map(|e| (m, f, e)))
+                .filter_map(move |f| f.values_enum(&m.name).map(|e| (m, f, e)))
         })
         .collect();
     if enums.is_empty() {
