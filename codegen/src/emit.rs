@@ -992,6 +992,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     }
 }
 
+/// A class's `values` module: an enum per enumerated field.
 fn emit_values(out: &mut String, class: &Class) {
     let enums: Vec<(&MessageDef, &FieldDef, String)> = class
         .messages
@@ -1012,84 +1013,94 @@ fn emit_values(out: &mut String, class: &Class) {
     out!(out, "    pub mod values {{");
     // Enum names are unique within a class (checked by the model).
     for (m, f, e) in enums {
-        let FieldType::Scalar(base) = f.ty else {
-            continue;
-        };
-        let repr = base.rust_name();
-        let vs = variants(&f.values);
-        out!(
-            out,
-            "        /// Values of field `{}` of `{}`.",
-            f.name,
-            m.name
-        );
-        out!(
-            out,
-            "        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]"
-        );
-        out!(out, "        #[repr({repr})]");
-        out!(out, "        pub enum {e} {{");
-        for (i, (v, label)) in vs.iter().zip(&f.values).enumerate() {
-            out!(out, "            /// `{label}`");
-            out!(out, "            {v} = {i},");
-        }
-        out!(out, "        }}\n");
-        out!(out, "        impl {e} {{");
-        out!(
-            out,
-            "            /// Labels by raw value, as in `messages.xml`."
-        );
-        out!(
-            out,
-            "            pub const LABELS: &'static [&'static str] = &[{}];",
-            f.values
-                .iter()
-                .map(|v| format!("{v:?}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-        out!(out, "            /// The value for a raw field value.");
-        out!(
-            out,
-            "            pub const fn from_raw(raw: {repr}) -> {OPTION}<Self> {{"
-        );
-        out!(out, "                match raw {{");
-        for (i, v) in vs.iter().enumerate() {
-            out!(out, "                    {i} => {SOME}(Self::{v}),");
-        }
-        out!(out, "                    _ => {NONE},");
-        out!(out, "                }}");
-        out!(out, "            }}");
-        out!(out, "            /// The raw field value.");
-        out!(out, "            pub const fn raw(self) -> {repr} {{");
-        out!(out, "                self as {repr}");
-        out!(out, "            }}");
-        out!(out, "            /// The label, as in `messages.xml`.");
-        out!(
-            out,
-            "            pub const fn label(self) -> &'static str {{"
-        );
-        out!(out, "                match self {{");
-        for (v, label) in vs.iter().zip(&f.values) {
-            out!(out, "                    Self::{v} => {label:?},");
-        }
-        out!(out, "                }}");
-        out!(out, "            }}");
-        out!(out, "        }}\n");
-        out!(out, "        impl {TRY_FROM}<{repr}> for {e} {{");
-        out!(out, "            type Error = {repr};");
-        out!(
-            out,
-            "            fn try_from(raw: {repr}) -> {RESULT}<Self, {repr}> {{"
-        );
-        out!(out, "                Self::from_raw(raw).ok_or(raw)");
-        out!(out, "            }}");
-        out!(out, "        }}\n");
-        out!(out, "        impl {FROM}<{e}> for {repr} {{");
-        out!(out, "            fn from(v: {e}) -> {repr} {{");
-        out!(out, "                v.raw()");
-        out!(out, "            }}");
-        out!(out, "        }}\n");
+        emit_value_enum(out, m, f, &e);
     }
     out!(out, "    }}");
+}
+
+/// The enum `e` of field `f`'s `values` and its conversions from and to the raw value.
+fn emit_value_enum(out: &mut String, m: &MessageDef, f: &FieldDef, e: &str) {
+    let FieldType::Scalar(base) = f.ty else {
+        return;
+    };
+    let repr = base.rust_name();
+    let vs = variants(&f.values);
+    out!(
+        out,
+        "        /// Values of field `{}` of `{}`.",
+        f.name,
+        m.name
+    );
+    out!(
+        out,
+        "        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]"
+    );
+    out!(out, "        #[repr({repr})]");
+    out!(out, "        pub enum {e} {{");
+    for (i, (v, label)) in vs.iter().zip(&f.values).enumerate() {
+        out!(out, "            /// `{label}`");
+        out!(out, "            {v} = {i},");
+    }
+    out!(out, "        }}\n");
+    emit_value_enum_impls(out, f, e, repr, &vs);
+}
+
+/// `LABELS`, `from_raw`, `raw`, `label`, `TryFrom` and `From` of value enum `e`.
+fn emit_value_enum_impls(out: &mut String, f: &FieldDef, e: &str, repr: &str, vs: &[String]) {
+    out!(out, "        impl {e} {{");
+    out!(
+        out,
+        "            /// Labels by raw value, as in `messages.xml`."
+    );
+    out!(
+        out,
+        "            pub const LABELS: &'static [&'static str] = &[{}];",
+        f.values
+            .iter()
+            .map(|v| format!("{v:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    out!(out, "            /// The value for a raw field value.");
+    out!(
+        out,
+        "            pub const fn from_raw(raw: {repr}) -> {OPTION}<Self> {{"
+    );
+    out!(out, "                match raw {{");
+    for (i, v) in vs.iter().enumerate() {
+        out!(out, "                    {i} => {SOME}(Self::{v}),");
+    }
+    out!(out, "                    _ => {NONE},");
+    out!(out, "                }}");
+    out!(out, "            }}");
+    out!(out, "            /// The raw field value.");
+    out!(out, "            pub const fn raw(self) -> {repr} {{");
+    out!(out, "                self as {repr}");
+    out!(out, "            }}");
+    out!(out, "            /// The label, as in `messages.xml`.");
+    out!(
+        out,
+        "            pub const fn label(self) -> &'static str {{"
+    );
+    out!(out, "                match self {{");
+    for (v, label) in vs.iter().zip(&f.values) {
+        out!(out, "                    Self::{v} => {label:?},");
+    }
+    out!(out, "                }}");
+    out!(out, "            }}");
+    out!(out, "        }}\n");
+    out!(out, "        impl {TRY_FROM}<{repr}> for {e} {{");
+    out!(out, "            type Error = {repr};");
+    out!(
+        out,
+        "            fn try_from(raw: {repr}) -> {RESULT}<Self, {repr}> {{"
+    );
+    out!(out, "                Self::from_raw(raw).ok_or(raw)");
+    out!(out, "            }}");
+    out!(out, "        }}\n");
+    out!(out, "        impl {FROM}<{e}> for {repr} {{");
+    out!(out, "            fn from(v: {e}) -> {repr} {{");
+    out!(out, "                v.raw()");
+    out!(out, "            }}");
+    out!(out, "        }}\n");
 }
