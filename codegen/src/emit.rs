@@ -16,6 +16,10 @@
 //! }
 //! ```
 //!
+//! Each item at the top level (and so each class module) carries `#[allow(dead_code)]`:
+//! a binary crate that includes the code in a private module uses only some messages, and
+//! must still compile without a warning (see [`ALLOW_DEAD_CODE`]).
+//!
 //! # Why text, not `quote` + `prettyplease`
 //!
 //! The code is written as text (`writeln!` into a `String`), already laid out, rather
@@ -51,6 +55,12 @@ use pprz_messages::{BaseType, FieldType};
 use crate::model::{Class, FieldDef, MessageDef, Protocol};
 use crate::names;
 use crate::roles::{self, RoleMessage, Roles, SetRole};
+
+/// The attribute on each item at the top level of the generated code (a class module's
+/// covers what the module holds). A binary crate that includes the code uses only some of
+/// its messages, and rustc reports the public items of a private module that the crate
+/// does not use as `dead_code`: the code compiles without a warning in any crate.
+pub(crate) const ALLOW_DEAD_CODE: &str = "#[allow(dead_code)]";
 
 /// Paths of the standard items the generated code uses, from `::core` so that no item
 /// of the generated code (a message type named `Result`, `Option`, `Some`, `Default`...)
@@ -239,6 +249,7 @@ fn emit_message_table(out: &mut String, protocol: &Protocol, opts: &Options) {
         "/// Every message of this set ({} messages), sorted by (class id, message id).",
         all.len()
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(
         out,
         "pub static MESSAGES: {rt}::MessageSet<'static> = {rt}::MessageSet::new(&["
@@ -324,6 +335,7 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
                 ),
             ],
             from_impls: false,
+            allow_dead_code: true,
         },
     );
 }
@@ -367,6 +379,7 @@ fn emit_roles(out: &mut String, protocol: &Protocol, opts: &Options) {
         );
     }
     doc(out, "", &d);
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(
         out,
         "#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]"
@@ -447,6 +460,7 @@ fn emit_class(out: &mut String, class: &Class, opts: &Options) {
         class.name,
         class.id
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub mod {module} {{");
     out!(out, "    use {} as __rt;\n", opts.runtime);
     out!(out, "    /// Id of this class.");
@@ -838,6 +852,7 @@ fn emit_class_any(out: &mut String, class: &Class) {
                 ),
             ],
             from_impls: true,
+            allow_dead_code: false,
         },
     );
 }
@@ -900,6 +915,9 @@ struct AnyEnum<'f> {
     methods: Vec<AnyMethod<'f>>,
     /// Whether to emit `From<message>` for each variant.
     from_impls: bool,
+    /// Whether the enum and its inherent impl carry [`ALLOW_DEAD_CODE`] (at the top
+    /// level; inside a class module, the module's attribute covers them).
+    allow_dead_code: bool,
 }
 
 /// An `AnyMessage` enum, its `decode`, its methods and, if asked, its `From` impls.
@@ -917,7 +935,13 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
             }
         }
     };
+    let allow = if e.allow_dead_code {
+        format!("{i}{ALLOW_DEAD_CODE}\n")
+    } else {
+        String::new()
+    };
     out!(out, "{i}/// {}", e.doc);
+    out.push_str(&allow);
     out!(out, "{i}#[derive(Debug, Clone, Copy, PartialEq)]");
     for attr in e.attrs {
         out!(out, "{i}{attr}");
@@ -931,6 +955,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
 
     let d = &e.dispatch;
     let input = if life { "&'a [u8]" } else { "&[u8]" };
+    out.push_str(&allow);
     out!(out, "{i}impl{l} AnyMessage{l} {{");
     docs(
         out,

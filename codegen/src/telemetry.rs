@@ -41,6 +41,7 @@ use std::path::Path;
 
 use roxmltree::Node;
 
+use crate::emit::ALLOW_DEAD_CODE;
 use crate::error::{Diagnostic, Error, ErrorKind};
 use crate::model::{Class, Protocol};
 use crate::names;
@@ -514,11 +515,13 @@ pub(crate) fn emit(s: &Schedule, runtime: &str) -> String {
 /// `FREQUENCY_HZ` and `PROCESSES`.
 fn emit_constants(out: &mut String, s: &Schedule) {
     out!(out, "/// Tick frequency of [`SCHEDULE`], in Hz.");
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub const FREQUENCY_HZ: u32 = {};\n", s.frequency_hz);
     out!(
         out,
         "/// Number of processes of [`SCHEDULE`] (the `P` parameter of a scheduler that runs it)."
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub const PROCESSES: usize = {};\n", s.processes.len());
 }
 
@@ -567,6 +570,7 @@ fn emit_table_doc(out: &mut String, s: &Schedule) {
 /// The `SCHEDULE` static: per process, per mode, its periodic messages.
 fn emit_table(out: &mut String, s: &Schedule, rt: &str) {
     emit_table_doc(out, s);
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(
         out,
         "pub static SCHEDULE: {rt}::Schedule<'static> = {rt}::Schedule {{"
@@ -640,6 +644,7 @@ fn emit_process_module(out: &mut String, index: usize, p: &ScheduledProcess) {
         "/// Process `{}` of [`SCHEDULE`]: its index and the indices of its modes (values of its mode setting).",
         p.name
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub mod {} {{", names::module_name(&p.name));
     out!(
         out,
