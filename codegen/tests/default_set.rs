@@ -1,4 +1,4 @@
-//! The project's default message set (`default/messages.xml`) against the PPRZLINK
+//! The project's default message set (the root `messages.xml`) against the PPRZLINK
 //! reference: every message it shares with the reference is wire-identical (same class,
 //! id, field order and types), the messages a flight stack needs to talk to Paparazzi
 //! ground tools are there, and its generated `Set` fills every role of
@@ -10,7 +10,7 @@ use pprz_codegen::{Generator, Protocol};
 use pprz_test_support::reference;
 
 fn default_file() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../default/messages.xml")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../messages.xml")
 }
 
 fn default_set() -> Protocol {

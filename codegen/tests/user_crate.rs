@@ -39,11 +39,11 @@ fn main() {
 
 #[test]
 fn generated_code_in_a_binary_using_some_messages_has_no_warning() {
-    let generator = Generator::new(repo_file("default/messages.xml"));
+    let generator = Generator::new(repo_file("messages.xml"));
     let messages = generator.generate().unwrap();
     let periodic = generator
         .clone()
-        .telemetry(repo_file("default/telemetry.xml"))
+        .telemetry(repo_file("telemetry.xml"))
         .generate_telemetry()
         .unwrap()
         .code;

@@ -235,7 +235,7 @@ fn requests(set: &RuntimeSet) -> (Vec<u8>, Vec<u8>) {
 fn default_set() -> RuntimeSet {
     RuntimeSet::load(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../default/messages.xml"
+        "/../../messages.xml"
     ))
     .expect("messages.xml loads")
 }
