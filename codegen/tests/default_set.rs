@@ -103,3 +103,25 @@ fn wire_identical_to_the_reference() {
         "every default message comes from the reference"
     );
 }
+
+/// `pprz-default` builds from the root files through links in its package: a link
+/// replaced by a copy would make a second default set to edit.
+#[test]
+fn the_default_crate_reads_the_root_files() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for name in ["messages.xml", "telemetry.xml"] {
+        let link = root.join("default").join(name);
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink(),
+            "default/{name} is not a link"
+        );
+        assert_eq!(
+            std::fs::canonicalize(&link).unwrap(),
+            std::fs::canonicalize(root.join(name)).unwrap(),
+            "default/{name} does not lead to the root {name}"
+        );
+    }
+}
