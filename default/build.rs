@@ -1,6 +1,10 @@
-//! Generates the default message set (`messages.xml`, in this package) into
-//! `pprz_default::messages`, and its periodic telemetry schedule (`telemetry.xml`, resolved
-//! against that message set) into `pprz_default::periodic`.
+//! Generates the default message set (`messages.xml`) into `pprz_default::messages`, and
+//! its periodic telemetry schedule (`telemetry.xml`, resolved against that message set)
+//! into `pprz_default::periodic`.
+//!
+//! Both files are the repository's top-level ones, read through the links in this package
+//! (`messages.xml -> ../messages.xml`): the build reads nothing outside its package, and
+//! `cargo package` copies the files the links point to into the published crate.
 
 use std::path::Path;
 

@@ -16,6 +16,10 @@
 //! }
 //! ```
 //!
+//! Each item at the top level (and so each class module) carries `#[allow(dead_code)]`:
+//! a binary crate that includes the code in a private module uses only some messages, and
+//! must still compile without a warning (see [`ALLOW_DEAD_CODE`]).
+//!
 //! # Why text, not `quote` + `prettyplease`
 //!
 //! The code is written as text (`writeln!` into a `String`), already laid out, rather
@@ -51,6 +55,12 @@ use pprz_messages::{BaseType, FieldType};
 use crate::model::{Class, FieldDef, MessageDef, Protocol};
 use crate::names;
 use crate::roles::{self, RoleMessage, Roles, SetRole};
+
+/// The attribute on each item at the top level of the generated code (a class module's
+/// covers what the module holds). A binary crate that includes the code uses only some of
+/// its messages, and rustc reports the public items of a private module that the crate
+/// does not use as `dead_code`: the code compiles without a warning in any crate.
+pub(crate) const ALLOW_DEAD_CODE: &str = "#[allow(dead_code)]";
 
 /// Paths of the standard items the generated code uses, from `::core` so that no item
 /// of the generated code (a message type named `Result`, `Option`, `Some`, `Default`...)
@@ -177,18 +187,6 @@ fn field_doc(f: &FieldDef) -> String {
     d
 }
 
-/// Name of the enum generated for a field's `values`, if the field gets one.
-pub(crate) fn values_enum(m: &MessageDef, f: &FieldDef) -> Option<String> {
-    match f.ty {
-        FieldType::Scalar(b) if b.is_integer() && !f.values.is_empty() => Some(format!(
-            "{}{}",
-            names::camel_case(&m.name),
-            names::camel_case(&f.name)
-        )),
-        _ => None,
-    }
-}
-
 /// Unique variant names for a list of labels.
 fn variants(labels: &[String]) -> Vec<String> {
     let mut used = HashSet::new();
@@ -251,6 +249,7 @@ fn emit_message_table(out: &mut String, protocol: &Protocol, opts: &Options) {
         "/// Every message of this set ({} messages), sorted by (class id, message id).",
         all.len()
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(
         out,
         "pub static MESSAGES: {rt}::MessageSet<'static> = {rt}::MessageSet::new(&["
@@ -336,6 +335,7 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
                 ),
             ],
             from_impls: false,
+            allow_dead_code: true,
         },
     );
 }
@@ -379,6 +379,7 @@ fn emit_roles(out: &mut String, protocol: &Protocol, opts: &Options) {
         );
     }
     doc(out, "", &d);
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(
         out,
         "#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]"
@@ -459,6 +460,7 @@ fn emit_class(out: &mut String, class: &Class, opts: &Options) {
         class.name,
         class.id
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub mod {module} {{");
     out!(out, "    use {} as __rt;\n", opts.runtime);
     out!(out, "    /// Id of this class.");
@@ -473,11 +475,51 @@ fn emit_class(out: &mut String, class: &Class, opts: &Options) {
     out!(out, "}}\n");
 }
 
+/// One message of a class: its struct, `Default` where it cannot be derived, `Message`
+/// (descriptor and encoder), `Decode`, and the accessors of its enumerated fields.
 fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options) {
-    let ty = names::camel_case(&m.name);
-    let life = has_lifetime(m);
-    let l = lt(life);
-    let priority = m.priority.unwrap_or(opts.default_priority);
+    let item = MessageItem {
+        class,
+        m,
+        ty: names::camel_case(&m.name),
+        l: lt(has_lifetime(m)),
+        priority: m.priority.unwrap_or(opts.default_priority),
+    };
+    emit_struct(out, &item);
+    emit_default(out, &item);
+    emit_message_impl(out, &item);
+    emit_decode(out, &item);
+    emit_value_accessors(out, &item);
+}
+
+/// What the items of one message are written from.
+struct MessageItem<'a> {
+    class: &'a Class,
+    m: &'a MessageDef,
+    /// The Rust type name.
+    ty: String,
+    /// `<'a>` if the type borrows from the payload, else empty.
+    l: &'static str,
+    /// The message's own priority, or the set's default.
+    priority: u8,
+}
+
+/// Whether `Default` can be derived: no array longer than 32 elements.
+fn derivable_default(m: &MessageDef) -> bool {
+    m.fields
+        .iter()
+        .all(|f| !matches!(f.ty, FieldType::Array(_, n) if n > 32))
+}
+
+/// The message's doc comment and its struct, one public field per `<field>`.
+fn emit_struct(out: &mut String, item: &MessageItem) {
+    let MessageItem {
+        class,
+        m,
+        ty,
+        l,
+        priority,
+    } = item;
     let mut d = m
         .description
         .clone()
@@ -496,11 +538,7 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         }
     );
     doc(out, "    ", &d);
-    let derivable_default = m
-        .fields
-        .iter()
-        .all(|f| !matches!(f.ty, FieldType::Array(_, n) if n > 32));
-    if derivable_default {
+    if derivable_default(m) {
         out!(out, "    #[derive(Debug, Clone, Copy, PartialEq, Default)]");
     } else {
         out!(out, "    #[derive(Debug, Clone, Copy, PartialEq)]");
@@ -520,23 +558,38 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
         }
         out!(out, "    }}\n");
     }
-    if !derivable_default {
-        out!(out, "    impl{l} {DEFAULT} for {ty}{l} {{");
-        out!(out, "        fn default() -> Self {{");
-        out!(out, "            Self {{");
-        for f in &m.fields {
-            let v = match f.ty {
-                FieldType::Array(_, n) => format!("[{DEFAULT}::default(); {n}]"),
-                FieldType::Scalar(_) | FieldType::Vector(_) => format!("{DEFAULT}::default()"),
-            };
-            out!(out, "                {}: {v},", names::snake_case(&f.name));
-        }
-        out!(out, "            }}");
-        out!(out, "        }}");
-        out!(out, "    }}\n");
-    }
+}
 
-    // Message
+/// `Default` written out, for a message whose arrays are too long to derive it.
+fn emit_default(out: &mut String, item: &MessageItem) {
+    let MessageItem { m, ty, l, .. } = item;
+    if derivable_default(m) {
+        return;
+    }
+    out!(out, "    impl{l} {DEFAULT} for {ty}{l} {{");
+    out!(out, "        fn default() -> Self {{");
+    out!(out, "            Self {{");
+    for f in &m.fields {
+        let v = match f.ty {
+            FieldType::Array(_, n) => format!("[{DEFAULT}::default(); {n}]"),
+            FieldType::Scalar(_) | FieldType::Vector(_) => format!("{DEFAULT}::default()"),
+        };
+        out!(out, "                {}: {v},", names::snake_case(&f.name));
+    }
+    out!(out, "            }}");
+    out!(out, "        }}");
+    out!(out, "    }}\n");
+}
+
+/// `impl Message`: the constants, the descriptor, the encoder.
+fn emit_message_impl(out: &mut String, item: &MessageItem) {
+    let MessageItem {
+        class,
+        m,
+        ty,
+        l,
+        priority,
+    } = item;
     let min = m.min_len();
     let max = m.max_len();
     out!(out, "    impl{l} __rt::Message for {ty}{l} {{");
@@ -546,6 +599,12 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "        const PRIORITY: u8 = {priority};");
     out!(out, "        const MIN_LEN: usize = {min};");
     out!(out, "        const MAX_LEN: usize = {max};");
+    emit_descriptor(out, class, m, *priority);
+    emit_encode(out, m);
+}
+
+/// The `DESCRIPTOR` constant of `impl Message`.
+fn emit_descriptor(out: &mut String, class: &Class, m: &MessageDef, priority: u8) {
     out!(
         out,
         "        const DESCRIPTOR: __rt::MessageDescriptor<'static> = __rt::MessageDescriptor {{"
@@ -594,7 +653,10 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     }
     out!(out, "            ],");
     out!(out, "        }};\n");
+}
 
+/// `encoded_len` and `encode` of `impl Message`, and the end of the impl.
+fn emit_encode(out: &mut String, m: &MessageDef) {
     let var_terms: Vec<String> = m
         .fields
         .iter()
@@ -637,8 +699,12 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "            {OK}(w.finish())");
     out!(out, "        }}");
     out!(out, "    }}\n");
+}
 
-    // Decode
+/// `impl Decode`: a reader over the payload, one read per field.
+fn emit_decode(out: &mut String, item: &MessageItem) {
+    let MessageItem { m, ty, l, .. } = item;
+    let min = m.min_len();
     out!(out, "    impl<'a> __rt::Decode<'a> for {ty}{l} {{");
     out!(out, "        #[inline]");
     out!(
@@ -680,12 +746,15 @@ fn emit_message(out: &mut String, class: &Class, m: &MessageDef, opts: &Options)
     out!(out, "            {OK}(msg)");
     out!(out, "        }}");
     out!(out, "    }}\n");
+}
 
-    // Typed accessors for enumerated fields.
+/// Typed accessors for enumerated fields (`mode_value()` -> `Option<values::GpsMode>`).
+fn emit_value_accessors(out: &mut String, item: &MessageItem) {
+    let MessageItem { m, ty, l, .. } = item;
     let enums: Vec<(&FieldDef, String)> = m
         .fields
         .iter()
-        .filter_map(|f| values_enum(m, f).map(|e| (f, e)))
+        .filter_map(|f| f.values_enum(&m.name).map(|e| (f, e)))
         .collect();
     if !enums.is_empty() {
         out!(out, "    impl{l} {ty}{l} {{");
@@ -783,6 +852,7 @@ fn emit_class_any(out: &mut String, class: &Class) {
                 ),
             ],
             from_impls: true,
+            allow_dead_code: false,
         },
     );
 }
@@ -845,6 +915,9 @@ struct AnyEnum<'f> {
     methods: Vec<AnyMethod<'f>>,
     /// Whether to emit `From<message>` for each variant.
     from_impls: bool,
+    /// Whether the enum and its inherent impl carry [`ALLOW_DEAD_CODE`] (at the top
+    /// level; inside a class module, the module's attribute covers them).
+    allow_dead_code: bool,
 }
 
 /// An `AnyMessage` enum, its `decode`, its methods and, if asked, its `From` impls.
@@ -862,7 +935,13 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
             }
         }
     };
+    let allow = if e.allow_dead_code {
+        format!("{i}{ALLOW_DEAD_CODE}\n")
+    } else {
+        String::new()
+    };
     out!(out, "{i}/// {}", e.doc);
+    out.push_str(&allow);
     out!(out, "{i}#[derive(Debug, Clone, Copy, PartialEq)]");
     for attr in e.attrs {
         out!(out, "{i}{attr}");
@@ -876,6 +955,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
 
     let d = &e.dispatch;
     let input = if life { "&'a [u8]" } else { "&[u8]" };
+    out.push_str(&allow);
     out!(out, "{i}impl{l} AnyMessage{l} {{");
     docs(
         out,
@@ -937,6 +1017,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     }
 }
 
+/// A class's `values` module: an enum per enumerated field.
 fn emit_values(out: &mut String, class: &Class) {
     let enums: Vec<(&MessageDef, &FieldDef, String)> = class
         .messages
@@ -944,7 +1025,7 @@ fn emit_values(out: &mut String, class: &Class) {
         .flat_map(|m| {
             m.fields
                 .iter()
-                .filter_map(move |f| values_enum(m, f).map(|e| (m, f, e)))
+                .filter_map(move |f| f.values_enum(&m.name).map(|e| (m, f, e)))
         })
         .collect();
     if enums.is_empty() {
@@ -957,84 +1038,94 @@ fn emit_values(out: &mut String, class: &Class) {
     out!(out, "    pub mod values {{");
     // Enum names are unique within a class (checked by the model).
     for (m, f, e) in enums {
-        let FieldType::Scalar(base) = f.ty else {
-            continue;
-        };
-        let repr = base.rust_name();
-        let vs = variants(&f.values);
-        out!(
-            out,
-            "        /// Values of field `{}` of `{}`.",
-            f.name,
-            m.name
-        );
-        out!(
-            out,
-            "        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]"
-        );
-        out!(out, "        #[repr({repr})]");
-        out!(out, "        pub enum {e} {{");
-        for (i, (v, label)) in vs.iter().zip(&f.values).enumerate() {
-            out!(out, "            /// `{label}`");
-            out!(out, "            {v} = {i},");
-        }
-        out!(out, "        }}\n");
-        out!(out, "        impl {e} {{");
-        out!(
-            out,
-            "            /// Labels by raw value, as in `messages.xml`."
-        );
-        out!(
-            out,
-            "            pub const LABELS: &'static [&'static str] = &[{}];",
-            f.values
-                .iter()
-                .map(|v| format!("{v:?}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-        out!(out, "            /// The value for a raw field value.");
-        out!(
-            out,
-            "            pub const fn from_raw(raw: {repr}) -> {OPTION}<Self> {{"
-        );
-        out!(out, "                match raw {{");
-        for (i, v) in vs.iter().enumerate() {
-            out!(out, "                    {i} => {SOME}(Self::{v}),");
-        }
-        out!(out, "                    _ => {NONE},");
-        out!(out, "                }}");
-        out!(out, "            }}");
-        out!(out, "            /// The raw field value.");
-        out!(out, "            pub const fn raw(self) -> {repr} {{");
-        out!(out, "                self as {repr}");
-        out!(out, "            }}");
-        out!(out, "            /// The label, as in `messages.xml`.");
-        out!(
-            out,
-            "            pub const fn label(self) -> &'static str {{"
-        );
-        out!(out, "                match self {{");
-        for (v, label) in vs.iter().zip(&f.values) {
-            out!(out, "                    Self::{v} => {label:?},");
-        }
-        out!(out, "                }}");
-        out!(out, "            }}");
-        out!(out, "        }}\n");
-        out!(out, "        impl {TRY_FROM}<{repr}> for {e} {{");
-        out!(out, "            type Error = {repr};");
-        out!(
-            out,
-            "            fn try_from(raw: {repr}) -> {RESULT}<Self, {repr}> {{"
-        );
-        out!(out, "                Self::from_raw(raw).ok_or(raw)");
-        out!(out, "            }}");
-        out!(out, "        }}\n");
-        out!(out, "        impl {FROM}<{e}> for {repr} {{");
-        out!(out, "            fn from(v: {e}) -> {repr} {{");
-        out!(out, "                v.raw()");
-        out!(out, "            }}");
-        out!(out, "        }}\n");
+        emit_value_enum(out, m, f, &e);
     }
     out!(out, "    }}");
+}
+
+/// The enum `e` of field `f`'s `values` and its conversions from and to the raw value.
+fn emit_value_enum(out: &mut String, m: &MessageDef, f: &FieldDef, e: &str) {
+    let FieldType::Scalar(base) = f.ty else {
+        return;
+    };
+    let repr = base.rust_name();
+    let vs = variants(&f.values);
+    out!(
+        out,
+        "        /// Values of field `{}` of `{}`.",
+        f.name,
+        m.name
+    );
+    out!(
+        out,
+        "        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]"
+    );
+    out!(out, "        #[repr({repr})]");
+    out!(out, "        pub enum {e} {{");
+    for (i, (v, label)) in vs.iter().zip(&f.values).enumerate() {
+        out!(out, "            /// `{label}`");
+        out!(out, "            {v} = {i},");
+    }
+    out!(out, "        }}\n");
+    emit_value_enum_impls(out, f, e, repr, &vs);
+}
+
+/// `LABELS`, `from_raw`, `raw`, `label`, `TryFrom` and `From` of value enum `e`.
+fn emit_value_enum_impls(out: &mut String, f: &FieldDef, e: &str, repr: &str, vs: &[String]) {
+    out!(out, "        impl {e} {{");
+    out!(
+        out,
+        "            /// Labels by raw value, as in `messages.xml`."
+    );
+    out!(
+        out,
+        "            pub const LABELS: &'static [&'static str] = &[{}];",
+        f.values
+            .iter()
+            .map(|v| format!("{v:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    out!(out, "            /// The value for a raw field value.");
+    out!(
+        out,
+        "            pub const fn from_raw(raw: {repr}) -> {OPTION}<Self> {{"
+    );
+    out!(out, "                match raw {{");
+    for (i, v) in vs.iter().enumerate() {
+        out!(out, "                    {i} => {SOME}(Self::{v}),");
+    }
+    out!(out, "                    _ => {NONE},");
+    out!(out, "                }}");
+    out!(out, "            }}");
+    out!(out, "            /// The raw field value.");
+    out!(out, "            pub const fn raw(self) -> {repr} {{");
+    out!(out, "                self as {repr}");
+    out!(out, "            }}");
+    out!(out, "            /// The label, as in `messages.xml`.");
+    out!(
+        out,
+        "            pub const fn label(self) -> &'static str {{"
+    );
+    out!(out, "                match self {{");
+    for (v, label) in vs.iter().zip(&f.values) {
+        out!(out, "                    Self::{v} => {label:?},");
+    }
+    out!(out, "                }}");
+    out!(out, "            }}");
+    out!(out, "        }}\n");
+    out!(out, "        impl {TRY_FROM}<{repr}> for {e} {{");
+    out!(out, "            type Error = {repr};");
+    out!(
+        out,
+        "            fn try_from(raw: {repr}) -> {RESULT}<Self, {repr}> {{"
+    );
+    out!(out, "                Self::from_raw(raw).ok_or(raw)");
+    out!(out, "            }}");
+    out!(out, "        }}\n");
+    out!(out, "        impl {FROM}<{e}> for {repr} {{");
+    out!(out, "            fn from(v: {e}) -> {repr} {{");
+    out!(out, "                v.raw()");
+    out!(out, "            }}");
+    out!(out, "        }}\n");
 }

@@ -163,37 +163,13 @@ impl fmt::Display for ErrorKind {
         match self {
             Self::Io(e) => write!(f, "cannot read file: {e}"),
             Self::Write(e) => write!(f, "cannot write output file: {e}"),
-            Self::InputTooLarge { size, max } => write!(
-                f,
-                "input of {size} bytes is too large: at most {max} bytes are read"
-            ),
-            Self::TooManyNodes { max } => write!(
-                f,
-                "too many XML nodes: at most {max} elements, text runs and comments are read"
-            ),
-            Self::TooManyAttributes { max } => {
-                write!(
-                    f,
-                    "too many attributes: at most {max} per element are accepted"
-                )
-            }
-            Self::NestedEntity { name, referenced } => write!(
-                f,
-                "entity `{name}` refers to entity `{referenced}`: nested entities are refused"
-            ),
-            Self::TooManyEntities { max } => {
-                write!(
-                    f,
-                    "too many entity declarations: at most {max} are accepted"
-                )
-            }
-            Self::TooManyEntityReferences { max } => {
-                write!(f, "too many entity references: at most {max} are accepted")
-            }
-            Self::EntityExpansionTooLarge { max } => write!(
-                f,
-                "entity references expand to more than {max} bytes: refused"
-            ),
+            Self::InputTooLarge { .. }
+            | Self::TooManyNodes { .. }
+            | Self::TooManyAttributes { .. }
+            | Self::NestedEntity { .. }
+            | Self::TooManyEntities { .. }
+            | Self::TooManyEntityReferences { .. }
+            | Self::EntityExpansionTooLarge { .. } => self.fmt_limit(f),
             Self::Xml(e) => write!(f, "malformed XML: {e}"),
             Self::UnexpectedElement { found, expected } => {
                 write!(f, "unexpected element <{found}>, expected {expected}")
@@ -258,6 +234,47 @@ impl fmt::Display for ErrorKind {
             ),
             Self::UnknownSelection(n) => write!(f, "selected `{n}` does not exist in the input"),
             Self::Telemetry(e) => f.write_str(e),
+        }
+    }
+}
+
+impl ErrorKind {
+    /// The text of a kind that reports an input beyond one of the [`crate::limits`];
+    /// the other kinds are written by `Display::fmt`.
+    fn fmt_limit(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::InputTooLarge { size, max } => write!(
+                f,
+                "input of {size} bytes is too large: at most {max} bytes are read"
+            ),
+            Self::TooManyNodes { max } => write!(
+                f,
+                "too many XML nodes: at most {max} elements, text runs and comments are read"
+            ),
+            Self::TooManyAttributes { max } => {
+                write!(
+                    f,
+                    "too many attributes: at most {max} per element are accepted"
+                )
+            }
+            Self::NestedEntity { name, referenced } => write!(
+                f,
+                "entity `{name}` refers to entity `{referenced}`: nested entities are refused"
+            ),
+            Self::TooManyEntities { max } => {
+                write!(
+                    f,
+                    "too many entity declarations: at most {max} are accepted"
+                )
+            }
+            Self::TooManyEntityReferences { max } => {
+                write!(f, "too many entity references: at most {max} are accepted")
+            }
+            Self::EntityExpansionTooLarge { max } => write!(
+                f,
+                "entity references expand to more than {max} bytes: refused"
+            ),
+            _ => Ok(()),
         }
     }
 }

@@ -147,6 +147,17 @@ impl FieldDef {
     pub fn value_labels(&self) -> Vec<&str> {
         self.values.iter().map(String::as_str).collect()
     }
+
+    /// Name of the enum generated for this field's `values` in message `message`, if the
+    /// field gets one: an integer scalar with labels.
+    pub(crate) fn values_enum(&self, message: &str) -> Option<String> {
+        match self.ty {
+            FieldType::Scalar(b) if b.is_integer() && !self.values.is_empty() => {
+                Some(names::values_enum(message, &self.name))
+            }
+            _ => None,
+        }
+    }
 }
 
 impl Protocol {
@@ -421,7 +432,7 @@ fn parse_class(p: &mut xml::Parser<'_, '_>, node: Node<'_, '_>) -> Option<Class>
         let type_name = names::camel_case(&m.name);
         seen.check(p, child, &ctx, "Rust type name of message", type_name, line);
         for f in &m.fields {
-            if let Some(e) = crate::emit::values_enum(&m, f) {
+            if let Some(e) = f.values_enum(&m.name) {
                 let fctx = Ctx {
                     message: Some(m.name.clone()),
                     field: Some(f.name.clone()),

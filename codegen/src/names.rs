@@ -139,6 +139,12 @@ pub fn variant_name(label: &str) -> Option<String> {
     }
 }
 
+/// Name of the enum generated for a field's `values`: the message's type name followed by
+/// the field's (`GPS`, `mode` -> `GpsMode`).
+pub fn values_enum(message: &str, field: &str) -> String {
+    format!("{}{}", camel_case(message), camel_case(field))
+}
+
 fn escape_keyword(ident: String) -> String {
     if KEYWORDS.contains(&ident.as_str()) || ident.is_empty() {
         ident + "_"

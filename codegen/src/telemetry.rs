@@ -41,8 +41,9 @@ use std::path::Path;
 
 use roxmltree::Node;
 
+use crate::emit::ALLOW_DEAD_CODE;
 use crate::error::{Diagnostic, Error, ErrorKind};
-use crate::model::Protocol;
+use crate::model::{Class, Protocol};
 use crate::names;
 use crate::xml::{self, Ctx, Seen};
 
@@ -233,6 +234,54 @@ impl TelemetryConfig {
         protocol: &Protocol,
         options: &ScheduleOptions,
     ) -> Result<Schedule, Error> {
+        let class = self.checked_class(protocol, options)?;
+        let freq = f64::from(options.frequency_hz);
+        let stagger = match ticks(options.stagger_s, freq) {
+            0 if options.stagger_s > 0.0 => 1,
+            t => u32::try_from(t).unwrap_or(u32::MAX),
+        };
+        let mut r = Resolver {
+            file: &self.file,
+            messages_file: &protocol.file,
+            class,
+            options,
+            freq,
+            errors: Vec::new(),
+            warnings: Vec::new(),
+        };
+        let mut processes = Vec::new();
+        for process in &self.processes {
+            let mut modes = Vec::new();
+            for mode in &process.modes {
+                modes.push(r.mode(process, mode, stagger));
+            }
+            processes.push(ScheduledProcess {
+                name: process.name.clone(),
+                modes,
+            });
+        }
+        if !r.errors.is_empty() {
+            return Err(Error::new(r.errors));
+        }
+        Ok(Schedule {
+            file: self.file.clone(),
+            messages_file: protocol.file.clone(),
+            class: class.name.clone(),
+            frequency_hz: options.frequency_hz,
+            stagger_ticks: stagger,
+            processes,
+            warnings: r.warnings,
+        })
+    }
+
+    /// The class periodic messages are looked up in, once the options are checked: a
+    /// tick frequency of at least 1 Hz, a finite stagger interval >= 0, a class present
+    /// in `protocol`.
+    fn checked_class<'p>(
+        &self,
+        protocol: &'p Protocol,
+        options: &ScheduleOptions,
+    ) -> Result<&'p Class, Error> {
         let file = &self.file;
         if options.frequency_hz == 0 {
             return Err(Error::single(
@@ -240,7 +289,6 @@ impl TelemetryConfig {
                 ErrorKind::Telemetry("the tick frequency must be at least 1 Hz".into()),
             ));
         }
-        let freq = f64::from(options.frequency_hz);
         if !(options.stagger_s.is_finite() && options.stagger_s >= 0.0) {
             return Err(Error::single(
                 file,
@@ -250,111 +298,128 @@ impl TelemetryConfig {
                 )),
             ));
         }
-        let Some(class) = protocol.class(&options.class) else {
-            return Err(Error::single(
+        protocol.class(&options.class).ok_or_else(|| {
+            Error::single(
                 file,
                 ErrorKind::Telemetry(format!(
                     "class `{}` (where periodic messages are looked up) is not in `{}`",
                     options.class, protocol.file
                 )),
-            ));
-        };
-        let stagger = match ticks(options.stagger_s, freq) {
-            0 if options.stagger_s > 0.0 => 1,
-            t => u32::try_from(t).unwrap_or(u32::MAX),
-        };
-        let mut errors = Vec::new();
-        let mut warnings = Vec::new();
-        let mut processes = Vec::new();
-        for process in &self.processes {
-            let mut modes = Vec::new();
-            for mode in &process.modes {
-                let mut messages = Vec::new();
-                for m in &mode.messages {
-                    let diag = |kind| Diagnostic {
-                        file: file.clone(),
-                        line: m.line,
-                        column: m.column,
-                        message: Some(m.name.clone()),
-                        field: None,
-                        kind,
-                    };
-                    let Some(def) = class.messages.iter().find(|d| d.name == m.name) else {
-                        let missing = format!(
-                            "not in class `{}` of `{}` (mode `{}`, process `{}`)",
-                            class.name, protocol.file, mode.name, process.name
-                        );
-                        if options.skip_unknown {
-                            warnings.push(diag(ErrorKind::Telemetry(format!(
-                                "{missing}; left out of the schedule"
-                            ))));
-                        } else {
-                            errors.push(diag(ErrorKind::Telemetry(format!(
-                                "{missing}; `skip_unknown_telemetry(true)` (CLI: `--skip-unknown-telemetry`) leaves such messages out with a warning"
-                            ))));
-                        }
-                        continue;
-                    };
-                    let raw = ticks(m.period, freq);
-                    let Ok(period_ticks) = u32::try_from(raw.max(1)) else {
-                        errors.push(diag(ErrorKind::Telemetry(format!(
-                            "period {} s is {raw} ticks at {} Hz, more than the {} a schedule holds",
-                            m.period,
-                            options.frequency_hz,
-                            u32::MAX
-                        ))));
-                        continue;
-                    };
-                    if raw == 0 {
-                        warnings.push(diag(ErrorKind::Telemetry(format!(
-                            "period {} s is shorter than one tick at {} Hz ({:.3} ms): sent on every tick",
-                            m.period,
-                            options.frequency_hz,
-                            1000.0 / freq
-                        ))));
-                    }
-                    let phase_ticks = m.phase.map(|ph| {
-                        // < period_ticks after the modulo, so it fits a u32.
-                        u32::try_from(ticks(ph, freq) % u64::from(period_ticks)).unwrap_or(0)
-                    });
-                    messages.push((
-                        ScheduledMessage {
-                            name: m.name.clone(),
-                            line: m.line,
-                            class_id: class.id,
-                            msg_id: def.id,
-                            period_s: m.period,
-                            phase_s: m.phase,
-                            period_ticks,
-                            phase_ticks: phase_ticks.unwrap_or(0),
-                        },
-                        phase_ticks.is_some(),
-                    ));
-                }
-                stagger_phases(&mut messages, stagger);
-                modes.push(ScheduledMode {
-                    name: mode.name.clone(),
-                    key_press: mode.key_press.clone(),
-                    messages: messages.into_iter().map(|(m, _)| m).collect(),
-                });
-            }
-            processes.push(ScheduledProcess {
-                name: process.name.clone(),
-                modes,
-            });
-        }
-        if !errors.is_empty() {
-            return Err(Error::new(errors));
-        }
-        Ok(Schedule {
-            file: file.clone(),
-            messages_file: protocol.file.clone(),
-            class: class.name.clone(),
-            frequency_hz: options.frequency_hz,
-            stagger_ticks: stagger,
-            processes,
-            warnings,
+            )
         })
+    }
+}
+
+/// Resolving a configuration's messages against a class: what it reads, and the errors
+/// and warnings it collects.
+struct Resolver<'a> {
+    /// The telemetry configuration's file.
+    file: &'a str,
+    /// The `messages.xml` the class comes from.
+    messages_file: &'a str,
+    class: &'a Class,
+    options: &'a ScheduleOptions,
+    /// The tick frequency, in Hz.
+    freq: f64,
+    errors: Vec<Diagnostic>,
+    warnings: Vec<Diagnostic>,
+}
+
+impl Resolver<'_> {
+    /// A mode's messages, those whose phase is not given staggered by `stagger` ticks.
+    fn mode(&mut self, process: &ProcessDef, mode: &ModeDef, stagger: u32) -> ScheduledMode {
+        let mut messages = Vec::new();
+        for m in &mode.messages {
+            if let Some(resolved) = self.message(process, mode, m) {
+                messages.push(resolved);
+            }
+        }
+        stagger_phases(&mut messages, stagger);
+        ScheduledMode {
+            name: mode.name.clone(),
+            key_press: mode.key_press.clone(),
+            messages: messages.into_iter().map(|(m, _)| m).collect(),
+        }
+    }
+
+    /// A periodic message in ticks, and whether its phase was given; `None` (with an
+    /// error or a warning) for a message absent from the class or a period too long.
+    fn message(
+        &mut self,
+        process: &ProcessDef,
+        mode: &ModeDef,
+        m: &PeriodicDef,
+    ) -> Option<(ScheduledMessage, bool)> {
+        let (class, options, freq) = (self.class, self.options, self.freq);
+        let Some(def) = class.messages.iter().find(|d| d.name == m.name) else {
+            let missing = format!(
+                "not in class `{}` of `{}` (mode `{}`, process `{}`)",
+                class.name, self.messages_file, mode.name, process.name
+            );
+            if options.skip_unknown {
+                let d = self.diag(m, format!("{missing}; left out of the schedule"));
+                self.warnings.push(d);
+            } else {
+                let d = self.diag(m, format!(
+                    "{missing}; `skip_unknown_telemetry(true)` (CLI: `--skip-unknown-telemetry`) leaves such messages out with a warning"
+                ));
+                self.errors.push(d);
+            }
+            return None;
+        };
+        let raw = ticks(m.period, freq);
+        let Ok(period_ticks) = u32::try_from(raw.max(1)) else {
+            let d = self.diag(
+                m,
+                format!(
+                    "period {} s is {raw} ticks at {} Hz, more than the {} a schedule holds",
+                    m.period,
+                    options.frequency_hz,
+                    u32::MAX
+                ),
+            );
+            self.errors.push(d);
+            return None;
+        };
+        if raw == 0 {
+            let d = self.diag(
+                m,
+                format!(
+                    "period {} s is shorter than one tick at {} Hz ({:.3} ms): sent on every tick",
+                    m.period,
+                    options.frequency_hz,
+                    1000.0 / freq
+                ),
+            );
+            self.warnings.push(d);
+        }
+        let phase_ticks = m.phase.map(|ph| {
+            // < period_ticks after the modulo, so it fits a u32.
+            u32::try_from(ticks(ph, freq) % u64::from(period_ticks)).unwrap_or(0)
+        });
+        let resolved = ScheduledMessage {
+            name: m.name.clone(),
+            line: m.line,
+            class_id: class.id,
+            msg_id: def.id,
+            period_s: m.period,
+            phase_s: m.phase,
+            period_ticks,
+            phase_ticks: phase_ticks.unwrap_or(0),
+        };
+        Some((resolved, phase_ticks.is_some()))
+    }
+
+    /// A diagnostic about periodic message `m`.
+    fn diag(&self, m: &PeriodicDef, text: String) -> Diagnostic {
+        Diagnostic {
+            file: self.file.to_owned(),
+            line: m.line,
+            column: m.column,
+            message: Some(m.name.clone()),
+            field: None,
+            kind: ErrorKind::Telemetry(text),
+        }
     }
 }
 
@@ -439,13 +504,29 @@ pub(crate) fn emit(s: &Schedule, runtime: &str) -> String {
         s.class,
         s.messages_file
     );
+    emit_constants(&mut out, s);
+    emit_table(&mut out, s, &rt);
+    for (index, p) in s.processes.iter().enumerate() {
+        emit_process_module(&mut out, index, p);
+    }
+    out
+}
+
+/// `FREQUENCY_HZ` and `PROCESSES`.
+fn emit_constants(out: &mut String, s: &Schedule) {
     out!(out, "/// Tick frequency of [`SCHEDULE`], in Hz.");
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub const FREQUENCY_HZ: u32 = {};\n", s.frequency_hz);
     out!(
         out,
         "/// Number of processes of [`SCHEDULE`] (the `P` parameter of a scheduler that runs it)."
     );
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(out, "pub const PROCESSES: usize = {};\n", s.processes.len());
+}
+
+/// The doc comment of `SCHEDULE`: its frequency, processes and modes.
+fn emit_table_doc(out: &mut String, s: &Schedule) {
     let summary = s
         .processes
         .iter()
@@ -484,6 +565,12 @@ pub(crate) fn emit(s: &Schedule, runtime: &str) -> String {
         "/// are staggered ({} ticks apart, never equal for equal periods while possible).",
         s.stagger_ticks
     );
+}
+
+/// The `SCHEDULE` static: per process, per mode, its periodic messages.
+fn emit_table(out: &mut String, s: &Schedule, rt: &str) {
+    emit_table_doc(out, s);
+    out!(out, "{ALLOW_DEAD_CODE}");
     out!(
         out,
         "pub static SCHEDULE: {rt}::Schedule<'static> = {rt}::Schedule {{"
@@ -495,93 +582,100 @@ pub(crate) fn emit(s: &Schedule, runtime: &str) -> String {
         out!(out, "            name: {:?},", p.name);
         out!(out, "            modes: &[");
         for m in &p.modes {
-            out!(out, "                {rt}::Mode {{");
-            out!(out, "                    name: {:?},", m.name);
-            match &m.key_press {
-                Some(k) => {
-                    out!(
-                        out,
-                        "                    key_press: ::core::option::Option::Some({k:?}),"
-                    );
-                }
-                None => {
-                    out!(
-                        out,
-                        "                    key_press: ::core::option::Option::None,"
-                    );
-                }
-            }
-            out!(out, "                    messages: &[");
-            for msg in &m.messages {
-                let phase = match msg.phase_s {
-                    Some(ph) => format!("phase {} s", secs(ph)),
-                    None => "automatic phase".to_owned(),
-                };
-                out!(
-                    out,
-                    "                        // {}: every {} s, {phase}",
-                    msg.name,
-                    secs(msg.period_s)
-                );
-                out!(
-                    out,
-                    "                        {rt}::Periodic {{ name: {:?}, class_id: {}, msg_id: {}, period_ticks: {}, phase_ticks: {}, period_s: {:?} }},",
-                    msg.name,
-                    msg.class_id,
-                    msg.msg_id,
-                    msg.period_ticks,
-                    msg.phase_ticks,
-                    msg.period_s as f32
-                );
-            }
-            out!(out, "                    ],");
-            out!(out, "                }},");
+            emit_mode(out, rt, m);
         }
         out!(out, "            ],");
         out!(out, "        }},");
     }
     out!(out, "    ],");
     out!(out, "}};");
-    for (index, p) in s.processes.iter().enumerate() {
-        out!(out, "");
-        out!(
-            out,
-            "/// Process `{}` of [`SCHEDULE`]: its index and the indices of its modes (values of its mode setting).",
-            p.name
-        );
-        out!(out, "pub mod {} {{", names::module_name(&p.name));
-        out!(
-            out,
-            "    /// Index of process `{}` in [`SCHEDULE`](super::SCHEDULE).",
-            p.name
-        );
-        out!(out, "    pub const PROCESS: usize = {index};");
-        for (i, m) in p.modes.iter().enumerate() {
-            let key = m
-                .key_press
-                .as_ref()
-                .map(|k| format!(" (key `{k}`)"))
-                .unwrap_or_default();
-            let list = if m.messages.is_empty() {
-                "no messages".to_owned()
-            } else {
-                m.messages
-                    .iter()
-                    .map(|msg| format!("{} every {} s", msg.name, secs(msg.period_s)))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            };
-            let text = if i == 0 {
-                format!("Mode `{}`{key}, active at start-up: {list}.", m.name)
-            } else {
-                format!("Mode `{}`{key}: {list}.", m.name)
-            };
-            out!(out, "    #[doc = {:?}]", format!(" {text}"));
-            out!(out, "    pub const {}: usize = {i};", mode_const(&m.name));
+}
+
+/// One mode of the `SCHEDULE` table.
+fn emit_mode(out: &mut String, rt: &str, m: &ScheduledMode) {
+    out!(out, "                {rt}::Mode {{");
+    out!(out, "                    name: {:?},", m.name);
+    match &m.key_press {
+        Some(k) => {
+            out!(
+                out,
+                "                    key_press: ::core::option::Option::Some({k:?}),"
+            );
         }
-        out!(out, "}}");
+        None => {
+            out!(
+                out,
+                "                    key_press: ::core::option::Option::None,"
+            );
+        }
     }
-    out
+    out!(out, "                    messages: &[");
+    for msg in &m.messages {
+        let phase = match msg.phase_s {
+            Some(ph) => format!("phase {} s", secs(ph)),
+            None => "automatic phase".to_owned(),
+        };
+        out!(
+            out,
+            "                        // {}: every {} s, {phase}",
+            msg.name,
+            secs(msg.period_s)
+        );
+        out!(
+            out,
+            "                        {rt}::Periodic {{ name: {:?}, class_id: {}, msg_id: {}, period_ticks: {}, phase_ticks: {}, period_s: {:?} }},",
+            msg.name,
+            msg.class_id,
+            msg.msg_id,
+            msg.period_ticks,
+            msg.phase_ticks,
+            msg.period_s as f32
+        );
+    }
+    out!(out, "                    ],");
+    out!(out, "                }},");
+}
+
+/// The module of process `p` (number `index`): its index and the indices of its modes.
+fn emit_process_module(out: &mut String, index: usize, p: &ScheduledProcess) {
+    out!(out, "");
+    out!(
+        out,
+        "/// Process `{}` of [`SCHEDULE`]: its index and the indices of its modes (values of its mode setting).",
+        p.name
+    );
+    out!(out, "{ALLOW_DEAD_CODE}");
+    out!(out, "pub mod {} {{", names::module_name(&p.name));
+    out!(
+        out,
+        "    /// Index of process `{}` in [`SCHEDULE`](super::SCHEDULE).",
+        p.name
+    );
+    out!(out, "    pub const PROCESS: usize = {index};");
+    for (i, m) in p.modes.iter().enumerate() {
+        let key = m
+            .key_press
+            .as_ref()
+            .map(|k| format!(" (key `{k}`)"))
+            .unwrap_or_default();
+        let list = if m.messages.is_empty() {
+            "no messages".to_owned()
+        } else {
+            m.messages
+                .iter()
+                .map(|msg| format!("{} every {} s", msg.name, secs(msg.period_s)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let text = if i == 0 {
+            format!("Mode `{}`{key}, active at start-up: {list}.", m.name)
+        } else {
+            format!("Mode `{}`{key}: {list}.", m.name)
+        };
+        out!(out, "    #[doc = {:?}]", format!(" {text}"));
+        out!(out, "    pub const {}: usize = {i};", mode_const(&m.name));
+    }
+    out!(out, "}}");
 }
 
 /// The `<telemetry>` root of a telemetry configuration: its processes.

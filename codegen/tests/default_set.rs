@@ -1,4 +1,4 @@
-//! The project's default message set (`default/messages.xml`) against the PPRZLINK
+//! The project's default message set (the root `messages.xml`) against the PPRZLINK
 //! reference: every message it shares with the reference is wire-identical (same class,
 //! id, field order and types), the messages a flight stack needs to talk to Paparazzi
 //! ground tools are there, and its generated `Set` fills every role of
@@ -10,7 +10,7 @@ use pprz_codegen::{Generator, Protocol};
 use pprz_test_support::reference;
 
 fn default_file() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../default/messages.xml")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../messages.xml")
 }
 
 fn default_set() -> Protocol {
@@ -102,4 +102,26 @@ fn wire_identical_to_the_reference() {
         ours.message_count(),
         "every default message comes from the reference"
     );
+}
+
+/// `pprz-default` builds from the root files through links in its package: a link
+/// replaced by a copy would make a second default set to edit.
+#[test]
+fn the_default_crate_reads_the_root_files() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for name in ["messages.xml", "telemetry.xml"] {
+        let link = root.join("default").join(name);
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink(),
+            "default/{name} is not a link"
+        );
+        assert_eq!(
+            std::fs::canonicalize(&link).unwrap(),
+            std::fs::canonicalize(root.join(name)).unwrap(),
+            "default/{name} does not lead to the root {name}"
+        );
+    }
 }

@@ -2,10 +2,12 @@
 //! make code that compiles (checked by building it in a scratch crate), the others are
 //! refused with their line.
 
+mod scratch;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use pprz_codegen::{ErrorKind, Generator};
+use scratch::ScratchCrate;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -83,50 +85,16 @@ fn hostile_names_generate_code_that_compiles() {
         assert!(code.contains(item), "missing `{item}`");
     }
 
-    // A scratch crate that includes the code, outside the workspace, depending on the
-    // runtime crate by path.
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile-names");
-    let src = dir.join("src");
-    std::fs::create_dir_all(&src).unwrap();
-    let runtime = Path::new(env!("CARGO_MANIFEST_DIR")).join("../messages");
-    std::fs::write(
-        dir.join("Cargo.toml"),
-        format!(
-            "[package]\nname = \"hostile-names\"\nversion = \"0.0.0\"\nedition = \"2024\"\npublish = false\n\n\
-             [dependencies]\npprz-messages = {{ path = {:?} }}\n\n[workspace]\n",
-            runtime.display().to_string()
-        ),
-    )
-    .unwrap();
-    // The workspace's lock file: the same dependency versions, nothing to fetch.
-    let lock = Path::new(env!("CARGO_MANIFEST_DIR")).join("../Cargo.lock");
-    if lock.is_file() {
-        std::fs::copy(lock, dir.join("Cargo.lock")).unwrap();
-    }
-    std::fs::write(src.join("generated.rs"), &code).unwrap();
-    std::fs::write(
-        src.join("lib.rs"),
-        format!(
-            "#![no_std]\n#![deny(warnings)]\n\n/// The generated code.\n#[allow(missing_docs)]\npub mod generated {{\n{SHADOWS}\ninclude!(\"generated.rs\");\n}}\n{USES}"
-        ),
-    )
-    .unwrap();
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .args(["check", "--offline", "--quiet", "--manifest-path"])
-        .arg(dir.join("Cargo.toml"))
-        .arg("--target-dir")
-        .arg(dir.join("target"))
-        .env_remove("CARGO_TARGET_DIR")
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .output()
-        .expect("cargo runs");
-    assert!(
-        out.status.success(),
-        "the generated code does not compile:\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let lib = format!(
+        "#![no_std]\n#![deny(warnings)]\n\n/// The generated code.\n#[allow(missing_docs)]\npub mod generated {{\n{SHADOWS}\ninclude!(\"generated.rs\");\n}}\n{USES}"
     );
+    let result = ScratchCrate::new("hostile-names")
+        .write("generated.rs", &code)
+        .write("lib.rs", &lib)
+        .check();
+    if let Err(stderr) = result {
+        panic!("the generated code does not compile:\n{stderr}");
+    }
 }
 
 #[test]

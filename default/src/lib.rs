@@ -5,8 +5,8 @@
 
 pub use pprz_messages;
 
-/// The default message set, generated at build time from this crate's `messages.xml`
-/// (classes `telemetry` = 1 and `datalink` = 2).
+/// The default message set, generated at build time from the repository's top-level
+/// `messages.xml` (classes `telemetry` = 1 and `datalink` = 2).
 ///
 /// [`Set`](messages::Set) names the set for the runtime: it fills the roles of
 /// `pprz_messages::roles` (the datalink services' PING/PONG/SETTING/GET_SETTING/DL_VALUE and
@@ -15,9 +15,9 @@ pub mod messages {
     include!(concat!(env!("OUT_DIR"), "/messages.rs"));
 }
 
-/// The default periodic telemetry schedule, generated at build time from this crate's
-/// `telemetry.xml`, resolved against [`messages`]: [`SCHEDULE`](periodic::SCHEDULE) for a
-/// scheduler, and per process a module with its index and mode indices
+/// The default periodic telemetry schedule, generated at build time from the repository's
+/// top-level `telemetry.xml`, resolved against [`messages`]: [`SCHEDULE`](periodic::SCHEDULE)
+/// for a scheduler, and per process a module with its index and mode indices
 /// (`periodic::main::PROCESS`, `periodic::main::MODE_DEFAULT`, ...).
 pub mod periodic {
     include!(concat!(env!("OUT_DIR"), "/periodic.rs"));

@@ -13,7 +13,7 @@ use pprz_ground::monitor::{Decoded, Monitor};
 use pprz_ground::set::RuntimeSet;
 use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
 
-const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml");
+const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml");
 
 /// An ALIVE frame numbered `n` (its md5sum holds `n`).
 fn alive(n: u16) -> Vec<u8> {

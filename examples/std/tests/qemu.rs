@@ -233,11 +233,8 @@ fn requests(set: &RuntimeSet) -> (Vec<u8>, Vec<u8>) {
 
 /// The project's default message set, as the ground tools load it.
 fn default_set() -> RuntimeSet {
-    RuntimeSet::load(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../default/messages.xml"
-    ))
-    .expect("messages.xml loads")
+    RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../../messages.xml"))
+        .expect("messages.xml loads")
 }
 
 /// One received message: its id and, for GPS_INT, the guest time it was sent at.

@@ -6,7 +6,7 @@ use std::process::{Command, Output, Stdio};
 use pprz_default::messages::telemetry::Gps;
 
 /// The project's default message set.
-pub const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml");
+pub const MESSAGES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml");
 
 /// The `pprz-monitor` binary, with no standard input.
 pub fn monitor() -> Command {
