@@ -159,7 +159,7 @@ struct Args {
     #[arg(long, value_name = "ADDR")]
     foxglove: Option<SocketAddr>,
     /// The messages.xml the monitor decodes with.
-    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../../default/messages.xml"))]
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../default/messages.xml"))]
     messages: PathBuf,
 }
 
