@@ -4,6 +4,7 @@
 //! with `--summary-json`, written as JSON (the schema is in the README's SITL section;
 //! the field names below are the JSON's).
 
+use pprz_example_app::AC_ID;
 use serde::Serialize;
 
 /// Everything the summary shows.
@@ -402,7 +403,7 @@ impl Summary {
         let p = &self.ping;
         let _ = write!(
             s,
-            "  PINGs: sent {}, answered {}, lost {}",
+            "  PINGs up the radio to aircraft {AC_ID}: sent {}, answered {}, lost {}",
             p.sent, p.answered, p.lost
         );
         if p.rtt_p50_ms.is_some() {

@@ -473,7 +473,7 @@ fn xbee_transmit_statuses_over_a_flooded_link() {
 /// The published test key set.
 const TEST_KEYS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../secure/keys/INSECURE-TEST-ONLY.keys"
+    "/../secure/keys/INSECURE-TEST-ONLY.keys"
 );
 
 /// `--secure`: the in-process ground completes the handshake with the aircraft, the
