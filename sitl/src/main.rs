@@ -1,4 +1,5 @@
-//! The simulated aircraft (SITL) with a live ground monitor: the project's main example.
+//! `sitl`: a simulated aircraft and its ground station, over a simulated radio; the
+//! project's main command.
 //!
 //! The aircraft runs the real stack on the Embassy std executor: the example application
 //! (`pprz-example-app`: simulated rotorcraft, periodic telemetry, datalink services)
@@ -19,6 +20,12 @@
 //! follow wall-clock time (`--speed` runs it faster), so the same binary is also
 //! reproducible in tests. Ages and round trips in the summary are measured on that
 //! clock ([`record`]).
+//!
+//! The modules follow a run: [`options`] (the command line) and [`radio`] (the radio
+//! they describe, checked as a whole); [`aircraft`] (the application, its downlink and
+//! tasks) with [`clock`] and [`fleet`] (a second aircraft behind the first); [`bridge`]
+//! (the radio's ground end on UDP); [`ground`] (the ground station in this process,
+//! with [`keys`] for `--secure`); [`record`], [`report`] and [`summary`] (the figures).
 
 mod aircraft;
 mod bridge;
@@ -97,9 +104,10 @@ fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
     let json = JsonFile::create(args).map_err(Failure::sitl)?;
     let keys = load_keys(args)?;
     // The ground listens for telemetry before the aircraft starts.
-    let station = match args.headless {
-        true => None,
-        false => Some(Station::open(args).map_err(Failure::new)?),
+    let station = if args.headless {
+        None
+    } else {
+        Some(Station::open(args).map_err(Failure::new)?)
     };
     let udp =
         HostDevice::udp_bind(args.uplink, args.ground, HostConfig::default()).map_err(|e| {
