@@ -47,7 +47,7 @@ fn same_values(message: &Value, line: &str) -> bool {
 
 #[test]
 fn a_foxglove_client_receives_the_values_the_monitor_prints() {
-    let who = "pprz-example-std a_foxglove_client_receives_the_values_the_monitor_prints";
+    let who = "pprz-sitl a_foxglove_client_receives_the_values_the_monitor_prints";
     let Some(client) = pprz_test_support::viewer_tools::node_client(who) else {
         return;
     };

@@ -473,7 +473,7 @@ fn xbee_transmit_statuses_over_a_flooded_link() {
 /// The published test key set.
 const TEST_KEYS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../secure/keys/INSECURE-TEST-ONLY.keys"
+    "/../secure/keys/INSECURE-TEST-ONLY.keys"
 );
 
 /// `--secure`: the in-process ground completes the handshake with the aircraft, the
@@ -612,4 +612,114 @@ fn a_fleet_of_two_relays_through_the_first() {
         "{out}"
     );
     assert!(out.contains("relay 7 -> ground: forwarded"), "{out}");
+}
+
+/// The number that follows `label` in `out`.
+fn number_after(out: &str, label: &str) -> u64 {
+    out.split(label)
+        .nth(1)
+        .and_then(|rest| rest.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no number after {label:?}:\n{out}"))
+}
+
+/// A usage error names the command as it is run (`sitl`), not its package, whether
+/// clap finds it (an unknown option) or the radio's checks do (options that contradict
+/// each other).
+#[test]
+fn usage_errors_name_the_command() {
+    for args in [&["--bogus"][..], &["--pacing-budget", "5"]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+            .args(args)
+            .output()
+            .expect("sitl starts");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("Usage: sitl [OPTIONS]"),
+            "{args:?}: {stderr}"
+        );
+        assert!(!stderr.contains("pprz-"), "{args:?}: {stderr}");
+    }
+}
+
+/// `--help` says what the command is before its options.
+#[test]
+fn help_says_what_the_command_is() {
+    let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+        .arg("--help")
+        .output()
+        .expect("sitl starts");
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{help}");
+    assert!(
+        help.starts_with("A simulated aircraft and its ground station, over a simulated radio."),
+        "{help}"
+    );
+    assert!(help.contains("\nUsage: sitl [OPTIONS]\n"), "{help}");
+}
+
+/// The live table's byte rate is what the radio carried: an overloaded 57600 baud radio
+/// carries 5760 B/s, and no view of the table (the first one included, taken before the
+/// first bytes arrived over a meaningful time) shows more.
+#[test]
+fn the_live_tables_byte_rate_is_at_most_the_radios() {
+    let (ground, uplink) = free_ports();
+    let (ground, uplink) = (format!("127.0.0.1:{ground}"), format!("127.0.0.1:{uplink}"));
+    let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+        .args(["--duration", "3", "--speed", "3", "--overload"])
+        .args(["--ground", &ground, "--uplink", &uplink])
+        .output()
+        .expect("the simulation runs");
+    let out = String::from_utf8_lossy(&out.stdout).into_owned();
+    // `t=    1.5s     5412 B/s  frames ok ...`, once per view.
+    let rates: Vec<(f64, f64)> = out
+        .split("t=")
+        .skip(1)
+        .filter_map(|rest| {
+            let (t, rest) = rest.split_once("s ")?;
+            let (rate, _) = rest.split_once(" B/s")?;
+            Some((t.trim().parse().ok()?, rate.trim().parse().ok()?))
+        })
+        .collect();
+    assert!(rates.len() >= 2, "{out}");
+    for (t, rate) in rates {
+        assert!(
+            rate <= 5760.0 * 1.1,
+            "t={t} s: {rate} B/s over a 5760 B/s radio:\n{out}"
+        );
+    }
+}
+
+/// A PING flood is more than the radio's uplink carries: the ground's count of PINGs sent
+/// (on UDP) and the radio's count of those that went up differ, and the summary says
+/// where each of the others went.
+#[test]
+fn a_ping_flood_accounts_for_every_ping_the_ground_sent() {
+    let out = run_sitl(&["--ping-rate", "1000"]);
+    let sent = number_after(&out, "ground station, aircraft 7: PINGs sent ");
+    let up = number_after(&out, "PINGs up the radio to aircraft 7: sent ");
+    assert!(up < sent, "{out}");
+    let missing = sent - up;
+    let head =
+        format!("of the {sent} PINGs the ground sent, {up} went up the radio: {missing} did not");
+    let line = out
+        .lines()
+        .find(|l| l.contains(&head))
+        .unwrap_or_else(|| panic!("no line accounts for the PINGs that did not go up:\n{out}"));
+    let count = |label: &str| {
+        line.split(", ")
+            .find(|part| part.contains(label))
+            .and_then(|part| {
+                part.split(|c: char| !c.is_ascii_digit())
+                    .find(|n| !n.is_empty())
+                    .and_then(|n| n.parse::<u64>().ok())
+            })
+            .unwrap_or(0)
+    };
+    assert_eq!(
+        count("dropped at the radio's ground end") + count("still on their way"),
+        missing,
+        "{line}"
+    );
 }

@@ -4,6 +4,7 @@
 //! with `--summary-json`, written as JSON (the schema is in the README's SITL section;
 //! the field names below are the JSON's).
 
+use pprz_example_app::AC_ID;
 use serde::Serialize;
 
 /// Everything the summary shows.
@@ -300,9 +301,20 @@ fn percent(fraction: f64) -> String {
 impl Summary {
     /// The summary as text, for the terminal.
     pub fn text(&self) -> String {
+        let mut s = String::new();
+        self.radio_text(&mut s);
+        self.levels_text(&mut s);
+        self.counters_text(&mut s);
+        if let Some(fleet) = &self.fleet {
+            fleet.text(&mut s);
+        }
+        s
+    }
+
+    /// The radio's line.
+    fn radio_text(&self, s: &mut String) {
         use std::fmt::Write as _;
         let c = &self.config;
-        let mut s = String::new();
         let pacing = match c.pacing_budget_bytes {
             Some(budget) => format!("on (budget {budget} B)"),
             None => "off".to_owned(),
@@ -324,6 +336,11 @@ impl Summary {
             pacing,
             self.simulated_s,
         );
+    }
+
+    /// The table per priority level, with its legend.
+    fn levels_text(&self, s: &mut String) {
+        use std::fmt::Write as _;
         let _ = writeln!(s, "Priority shedding on the radio:");
         let _ = writeln!(
             s,
@@ -355,6 +372,12 @@ impl Summary {
             s,
             "  (high: acknowledgements PONG/DL_VALUE; normal: flight status; low: payload and debug;\n   superseded: state samples replaced, while waiting, by a newer sample; received: decoded at\n   the ground end of the radio; age: submission to arrival on the simulated clock, for the\n   messages matched to their submission: a lower bound for constant ones and the flood)"
         );
+    }
+
+    /// The counters of the downlink, the secure link, the modem, the XBee transmit
+    /// statuses and the PINGs through the radio.
+    fn counters_text(&self, s: &mut String) {
+        use std::fmt::Write as _;
         let d = &self.downlink;
         let _ = writeln!(
             s,
@@ -402,7 +425,7 @@ impl Summary {
         let p = &self.ping;
         let _ = write!(
             s,
-            "  PINGs: sent {}, answered {}, lost {}",
+            "  PINGs up the radio to aircraft {AC_ID}: sent {}, answered {}, lost {}",
             p.sent, p.answered, p.lost
         );
         if p.rtt_p50_ms.is_some() {
@@ -414,10 +437,6 @@ impl Summary {
             );
         }
         let _ = writeln!(s);
-        if let Some(fleet) = &self.fleet {
-            fleet.text(&mut s);
-        }
-        s
     }
 
     /// The summary as pretty-printed JSON.

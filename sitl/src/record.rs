@@ -28,7 +28,7 @@ use pprz_ground::ping::PingTracker;
 use pprz_messages::Message;
 use pprz_telemetry::pprz_messages::priority;
 
-use crate::SECOND_AC_ID;
+use crate::fleet::SECOND_AC_ID;
 
 /// Seconds (simulated) a submission is remembered for matching.
 pub const HORIZON_S: u64 = 120;

@@ -1,0 +1,182 @@
+//! `sitl`: a simulated aircraft and its ground station, over a simulated radio; the
+//! project's main command.
+//!
+//! The aircraft runs the real stack on the Embassy std executor: the example application
+//! (`pprz-example-app`: simulated rotorcraft, periodic telemetry, datalink services)
+//! sends through the downlink over a simulated radio (`pprz-devices` `SimLink`: a UART
+//! at `--baud`, a modem with a buffer of `--modem-buffer` bytes that stops the UART when
+//! full (`--flow-control cts`) or drops bytes (`none`), and an air rate of
+//! `--air-rate`), speaking PPRZ v2 or XBee 802.15.4 API with transmit statuses
+//! (`--transport`); `--pacing on` makes the radio device pace its writes to the air
+//! rate. The ground end of the radio is bridged to UDP like Paparazzi's link agent
+//! (telemetry to port 4242, uplink from port 4243, PPRZ v2 on UDP whatever the radio
+//! speaks), so Paparazzi ground tools or `pprz-monitor` can listen. With the monitor
+//! view on (the default), this process also is the ground: it decodes the UDP
+//! telemetry live, PINGs the aircraft every second and changes a SETTING, and at the
+//! end prints, per priority level, what was sent, shed, received and how old it was
+//! (`--summary-json` writes the same figures as JSON).
+//!
+//! Time: the aircraft runs on embassy-time's mock clock, advanced by a pacer thread to
+//! follow wall-clock time (`--speed` runs it faster), so the same binary is also
+//! reproducible in tests. Ages and round trips in the summary are measured on that
+//! clock ([`record`]).
+//!
+//! The modules follow a run: [`options`] (the command line) and [`radio`] (the radio
+//! they describe, checked as a whole); [`aircraft`] (the application, its downlink and
+//! tasks) with [`clock`] and [`fleet`] (a second aircraft behind the first); [`bridge`]
+//! (the radio's ground end on UDP); [`ground`] (the ground station in this process,
+//! with [`keys`] for `--secure`); [`record`], [`report`] and [`summary`] (the figures).
+
+mod aircraft;
+mod bridge;
+mod clock;
+mod fleet;
+mod ground;
+mod keys;
+mod options;
+mod radio;
+mod record;
+mod report;
+mod summary;
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant as StdInstant;
+
+use clap::error::ErrorKind;
+use clap::{CommandFactory, Parser};
+use pprz_devices::host::{HostConfig, HostDevice};
+use pprz_example_app::AC_ID;
+use pprz_ground::monitor::Monitor;
+use pprz_secure::Responder;
+
+use crate::aircraft::Aircraft;
+use crate::ground::Station;
+use crate::keys::SitlKeys;
+use crate::options::Args;
+use crate::radio::RadioPlan;
+use crate::report::JsonFile;
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let plan = plan_or_exit(&args);
+    match run(&args, &plan) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(failure) => {
+            eprintln!("{}", failure.message);
+            ExitCode::from(failure.code)
+        }
+    }
+}
+
+/// Why a run failed: the message for standard error and the exit code.
+struct Failure {
+    message: String,
+    code: u8,
+}
+
+impl Failure {
+    /// A failure with exit code 1.
+    fn new(message: String) -> Self {
+        Self { message, code: 1 }
+    }
+
+    /// A failure with exit code 1, its message prefixed with the command's name.
+    fn sitl(message: impl std::fmt::Display) -> Self {
+        Self::new(format!("sitl: {message}"))
+    }
+}
+
+/// The radio the options describe, or exit with a usage error naming the options.
+fn plan_or_exit(args: &Args) -> RadioPlan {
+    match RadioPlan::new(args) {
+        Ok(plan) => plan,
+        Err(message) => Args::command()
+            .error(ErrorKind::ArgumentConflict, message)
+            .exit(),
+    }
+}
+
+/// The run: what can fail is opened first, then the aircraft start, the ground runs
+/// until the end, and the summary is printed.
+fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
+    let json = JsonFile::create(args).map_err(Failure::sitl)?;
+    let keys = load_keys(args)?;
+    // The ground listens for telemetry before the aircraft starts.
+    let station = if args.headless {
+        None
+    } else {
+        Some(Station::open(args).map_err(Failure::new)?)
+    };
+    let udp =
+        HostDevice::udp_bind(args.uplink, args.ground, HostConfig::default()).map_err(|e| {
+            Failure::new(format!(
+                "cannot bind the aircraft's uplink port {}: {e}",
+                args.uplink
+            ))
+        })?;
+    let (responder, ground_keys) = match keys {
+        Some(k) => (Some(Responder::new(AC_ID, k.aircraft)), k.ground),
+        None => (None, None),
+    };
+    let aircraft = aircraft::start(args, plan, responder, udp).map_err(Failure::sitl)?;
+    let stop = stop_on_ctrl_c();
+    let start = StdInstant::now();
+    let monitor = match station {
+        Some(station) => Some(run_ground(
+            args,
+            station,
+            ground_keys,
+            &aircraft,
+            &stop,
+            start,
+        )?),
+        None => {
+            ground::wait_headless(args, &stop, start);
+            None
+        }
+    };
+    let now = start.elapsed().as_secs_f64() * args.speed;
+    let summary = report::print(args, plan, &aircraft, monitor.as_ref(), now);
+    match json {
+        Some(file) => file.write(&summary).map_err(Failure::sitl),
+        None => Ok(()),
+    }
+}
+
+/// The keys of `--secure`, if given (exit code 2 when they cannot be read).
+fn load_keys(args: &Args) -> Result<Option<SitlKeys>, Failure> {
+    let Some(path) = &args.secure else {
+        return Ok(None);
+    };
+    keys::load(path, args.headless)
+        .map(Some)
+        .map_err(|e| Failure {
+            message: format!("sitl: --secure {}: {e}", path.display()),
+            code: 2,
+        })
+}
+
+/// A flag that Ctrl-C sets.
+fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+    stop
+}
+
+/// The ground station in this process, from `start` to the end of the run.
+fn run_ground(
+    args: &Args,
+    station: Station,
+    keys: Option<pprz_secure::GroundKeys>,
+    aircraft: &Aircraft,
+    stop: &AtomicBool,
+    start: StdInstant,
+) -> Result<Monitor, Failure> {
+    let ground = station.start(args, keys).map_err(Failure::sitl)?;
+    let side =
+        |ac: u8| fleet::aircraft_levels(ac, aircraft.downlink, aircraft.second.map(|(_, d)| d));
+    Ok(ground.run(&side, stop, start))
+}

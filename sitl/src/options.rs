@@ -1,0 +1,222 @@
+//! The command line: the options, each checked alone as it is parsed (the radio they
+//! describe together is checked in [`crate::radio::RadioPlan::new`]).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use clap::{Parser, ValueEnum};
+use pprz_ground::cli;
+use pprz_telemetry::delivery::MAX_IN_MODEM;
+use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2, XBee24};
+
+/// A simulated aircraft and its ground station, over a simulated radio.
+///
+/// The aircraft runs the Paparazzi telemetry stack on the host and talks through a
+/// simulated radio modem. The ground end of the radio is bridged to UDP (telemetry to
+/// `--ground`, uplink from `--uplink`), so Paparazzi's ground tools or `pprz-monitor` can
+/// listen. Without `--headless`, this process also is the ground: it shows the live
+/// telemetry, PINGs the aircraft, changes a setting, and ends with a summary per
+/// priority level.
+#[derive(Debug, Parser)]
+#[command(name = "sitl", version)]
+pub struct Args {
+    /// Stop after this many (simulated) seconds, more than 0 and at most a year; Ctrl-C
+    /// stops too.
+    #[arg(long, default_value_t = 20.0, value_parser = cli::parse_duration)]
+    pub duration: f64,
+    /// Flood the radio with low-priority payload at 10x its capacity (the slower of the
+    /// UART and the air).
+    #[arg(long)]
+    pub overload: bool,
+    /// Simulated seconds per wall-clock second (0.01 to 100).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed)]
+    pub speed: f64,
+    /// Baud rate (8N1) of the UART between the autopilot and its radio modem, 300 to
+    /// 4000000: the UART carries `baud / 10` bytes per second.
+    #[arg(long, default_value_t = 57_600, value_parser = parse_radio_baud)]
+    pub baud: u32,
+    /// The radio modem's buffer, in bytes (1 to 8192; XBee: at least one whole frame,
+    /// 109 bytes) [default: 64, XBee: 202].
+    #[arg(long, value_name = "BYTES", value_parser = parse_modem_buffer)]
+    pub modem_buffer: Option<usize>,
+    /// What the modem does when its buffer is full: `cts` stops the UART (hardware flow
+    /// control), `none` drops the bytes that arrive.
+    #[arg(long, value_enum, default_value_t = FlowControl::Cts)]
+    pub flow_control: FlowControl,
+    /// The modem's over-the-air throughput, bytes per second (10 to 1000000)
+    /// [default: baud / 10; XBee 802.15.4: 31250].
+    #[arg(long, value_name = "BYTES_PER_S", value_parser = parse_air_rate)]
+    pub air_rate: Option<u32>,
+    /// `on`: the radio device paces its writes to the air rate, keeping at most the
+    /// pacing budget in the modem, so frames wait (and are shed) in the priority queue.
+    #[arg(long, value_enum, default_value_t = OnOff::Off)]
+    pub pacing: OnOff,
+    /// The pacing budget, in bytes (1 to the modem buffer; needs `--pacing on`)
+    /// [default: half the modem buffer, at most 192].
+    #[arg(long, value_name = "BYTES", value_parser = parse_modem_buffer)]
+    pub pacing_budget: Option<usize>,
+    /// What the radio speaks: PPRZ v2 through a transparent modem, or XBee 802.15.4 API
+    /// frames with transmit statuses.
+    #[arg(long, value_enum, default_value_t = TransportArg::Pprz2)]
+    pub transport: TransportArg,
+    /// XBee: frames awaiting their transmit status at most, 1 to 8 (needs `--transport
+    /// xbee`) [default: 1].
+    #[arg(long, value_name = "K", value_parser = parse_in_modem)]
+    pub in_modem: Option<u8>,
+    /// Also write the end summary as JSON to this file (schema in the README).
+    #[arg(long, value_name = "PATH")]
+    pub summary_json: Option<PathBuf>,
+    /// PINGs the ground sends per (simulated) second, 0.1 to 10000: above the aircraft's
+    /// reply limit (20/s) the extra PONGs are refused and counted, and telemetry flows on.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_ping_rate)]
+    pub ping_rate: f64,
+    /// Where the ground listens for telemetry (Paparazzi's link uses port 4242).
+    #[arg(long, default_value = "127.0.0.1:4242")]
+    pub ground: SocketAddr,
+    /// Where the aircraft's radio bridge listens for uplink frames (port 4243).
+    #[arg(long, default_value = "127.0.0.1:4243")]
+    pub uplink: SocketAddr,
+    /// No monitor: only the aircraft, for Paparazzi's ground tools or `pprz-monitor`.
+    #[arg(long)]
+    pub headless: bool,
+    /// One line per received message instead of the live table.
+    #[arg(long)]
+    pub lines: bool,
+    /// Secure the radio with Paparazzi's secure PPRZ link, keys from this key file (see
+    /// pprz-secure's keygen; `secure/keys/INSECURE-TEST-ONLY.keys` for a try): the
+    /// aircraft sends nothing but its key exchange until a ground completes the
+    /// handshake; the in-process ground uses the same file (with `--headless`, an
+    /// external ground such as `pprz-monitor --secure` does the handshake over UDP).
+    /// PPRZ v2 only.
+    #[arg(long, value_name = "KEYFILE")]
+    pub secure: Option<PathBuf>,
+    /// Aircraft in the simulation, 1 or 2. With 2, aircraft 8 flies beside aircraft 7,
+    /// out of the ground's reach: a second simulated radio (the same as the first) joins
+    /// 7 and 8, and 7 relays between its two radios (PPRZ v2 only). The ground sees both
+    /// aircraft on the same UDP port and PINGs both.
+    #[arg(long, default_value_t = 1, value_parser = parse_fleet)]
+    pub fleet: u8,
+    /// Serve the ground's decoded telemetry to Foxglove or Lichtblick over the Foxglove
+    /// WebSocket protocol at this address (e.g. `127.0.0.1:8765`; port 0: any free port,
+    /// printed), with the aircraft's own per-level figures on `/ac/<id>/link`. Needs the
+    /// in-process ground (not `--headless`).
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<SocketAddr>,
+    /// The messages.xml the monitor decodes with.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))]
+    pub messages: PathBuf,
+}
+
+/// `--flow-control`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FlowControl {
+    /// Hardware flow control: the modem stops the UART while its buffer is full.
+    Cts,
+    /// None: the modem drops the bytes that arrive while its buffer is full.
+    None,
+}
+
+/// `--pacing`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OnOff {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
+}
+
+/// `--transport`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TransportArg {
+    /// PPRZ v2 frames through a transparent modem.
+    Pprz2,
+    /// XBee 802.15.4 API frames (TX16/RX16) with transmit statuses.
+    Xbee,
+}
+
+impl TransportArg {
+    /// The name in the summary: `pprz2` or `xbee`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Pprz2 => "pprz2",
+            Self::Xbee => "xbee",
+        }
+    }
+
+    /// The transport it names.
+    pub fn any(self) -> AnyTransport {
+        match self {
+            Self::Pprz2 => PprzV2::new().into(),
+            Self::Xbee => XBee24::new().into(),
+        }
+    }
+}
+
+/// A finite number within `min..=max`, for the options below.
+fn number_in(s: &str, min: f64, max: f64) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number"))?;
+    if !(min..=max).contains(&v) {
+        // NaN is in no range.
+        return Err(format!("`{s}` is out of range: {min} to {max}"));
+    }
+    Ok(v)
+}
+
+/// A whole number within `min..=max`.
+fn integer_in(s: &str, min: u64, max: u64) -> Result<u64, String> {
+    let v: u64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a whole number"))?;
+    if !(min..=max).contains(&v) {
+        return Err(format!("`{s}` is out of range: {min} to {max}"));
+    }
+    Ok(v)
+}
+
+/// `--speed`: faster than 100x, the pacer's time steps outrun the simulated radio and the
+/// executor (nothing would be sent); 0 would never end.
+fn parse_speed(s: &str) -> Result<f64, String> {
+    number_in(s, 0.01, 100.0)
+}
+
+/// `--fleet`: one or two aircraft.
+fn parse_fleet(s: &str) -> Result<u8, String> {
+    integer_in(s, 1, 2).map(|n| n as u8)
+}
+
+/// `--ping-rate`: at most 10 kHz (a flood), at least one PING every 10 s.
+fn parse_ping_rate(s: &str) -> Result<f64, String> {
+    number_in(s, 0.1, 10_000.0)
+}
+
+/// `--baud`: the simulated UART carries `baud / 10` bytes per second.
+fn parse_radio_baud(s: &str) -> Result<u32, String> {
+    let baud = cli::parse_baud(s)?;
+    if !(300..=4_000_000).contains(&baud) {
+        return Err(format!("{baud} is out of range: 300 to 4000000"));
+    }
+    Ok(baud)
+}
+
+/// Largest `--modem-buffer`: well inside the simulated link's receive ring
+/// ([`RADIO_RING`](crate::radio::RADIO_RING)), which also holds the bytes on the air and those not yet read.
+pub const MAX_MODEM_BUFFER: usize = 8192;
+
+/// `--modem-buffer` and `--pacing-budget`: 1 to [`MAX_MODEM_BUFFER`] bytes.
+fn parse_modem_buffer(s: &str) -> Result<usize, String> {
+    integer_in(s, 1, MAX_MODEM_BUFFER as u64).map(|v| v as usize)
+}
+
+/// `--air-rate`: 10 B/s (below any real radio) to 1 MB/s (above any UART's rate).
+fn parse_air_rate(s: &str) -> Result<u32, String> {
+    integer_in(s, 10, 1_000_000).map(|v| v as u32)
+}
+
+/// `--in-modem`: 1 to the telemetry crate's [`MAX_IN_MODEM`].
+fn parse_in_modem(s: &str) -> Result<u8, String> {
+    integer_in(s, 1, MAX_IN_MODEM as u64).map(|v| v as u8)
+}

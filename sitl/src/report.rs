@@ -1,0 +1,309 @@
+//! The end of a run: the figures collected into a [`Summary`], printed after the last
+//! view of the ground, and written as JSON with `--summary-json`.
+
+use std::fs::File;
+use std::io::Write as _;
+use std::path::PathBuf;
+
+use embassy_time::Instant;
+use pprz_default::messages::MESSAGES;
+use pprz_devices::sim::Direction;
+use pprz_ground::monitor::Monitor;
+use pprz_telemetry::DeviceStats;
+use pprz_telemetry::pprz_messages::priority;
+
+use crate::aircraft::{Aircraft, SECURE};
+use crate::bridge;
+use crate::fleet;
+use crate::options::{Args, FlowControl};
+use crate::radio::RadioPlan;
+use crate::record;
+use crate::summary::{
+    DeliveryFigures, DownlinkFigures, Level, Levels, MessageFigures, ModemFigures, PingFigures,
+    RunConfig, SecureFigures, Summary,
+};
+
+/// The file of `--summary-json`, created before the run (a bad path fails before the
+/// run, not after it).
+pub struct JsonFile {
+    path: PathBuf,
+    file: File,
+}
+
+impl JsonFile {
+    /// Creates the file of `--summary-json`, if given; fails with the message to print.
+    pub fn create(args: &Args) -> Result<Option<Self>, String> {
+        let Some(path) = &args.summary_json else {
+            return Ok(None);
+        };
+        match File::create(path) {
+            Ok(file) => Ok(Some(Self {
+                path: path.clone(),
+                file,
+            })),
+            Err(e) => Err(cannot_write(path, &e)),
+        }
+    }
+
+    /// Writes `summary`; fails with the message to print.
+    pub fn write(mut self, summary: &Summary) -> Result<(), String> {
+        self.file
+            .write_all(summary.json().as_bytes())
+            .map_err(|e| cannot_write(&self.path, &e))
+    }
+}
+
+/// The message of a summary file that cannot be written.
+fn cannot_write(path: &std::path::Path, e: &std::io::Error) -> String {
+    format!("cannot write the summary to {}: {e}", path.display())
+}
+
+/// Prints the end of the run: the ground's last view (live table), the summary, and the
+/// ground station's own view of its PINGs and of the secure link. Returns the summary.
+pub fn print(
+    args: &Args,
+    plan: &RadioPlan,
+    aircraft: &Aircraft,
+    monitor: Option<&Monitor>,
+    now: f64,
+) -> Summary {
+    if let Some(m) = monitor
+        && !args.lines
+    {
+        print!("\x1b[2J\x1b[H{}", m.render(now));
+    }
+    let summary = collect_summary(args, plan, aircraft);
+    print!("{}", summary.text());
+    if let Some(m) = monitor {
+        ground_lines(m, &summary);
+    }
+    summary
+}
+
+/// The ground station's lines of the summary: its PINGs per aircraft, and its end of the
+/// secure link.
+fn ground_lines(m: &Monitor, summary: &Summary) {
+    let mut sent = 0;
+    for ac in m.aircraft() {
+        if let Some(pings) = m.aircraft_state(ac).map(|a| a.pings()) {
+            sent += pings.sent_count();
+            println!(
+                "  ground station, aircraft {ac}: PINGs sent {}, answered {}, lost {}",
+                pings.sent_count(),
+                pings.answered(),
+                pings.lost()
+            );
+        }
+    }
+    if let Some(line) = pings_not_up(
+        sent,
+        radio_pings(summary),
+        bridge::uplink_datagrams_dropped(),
+    ) {
+        println!("{line}");
+    }
+    for line in m.secure_lines() {
+        println!("  ground station {line}");
+    }
+}
+
+/// The PINGs that went up the radio, to every aircraft.
+fn radio_pings(summary: &Summary) -> u64 {
+    match &summary.fleet {
+        Some(fleet) => fleet.aircraft.iter().map(|a| a.ping.sent).sum(),
+        None => summary.ping.sent,
+    }
+}
+
+/// Why the ground sent `sent` PINGs (counted as it sends them on UDP) and `up` went up
+/// the radio (counted at the radio's ground end), when the two differ: the radio's
+/// ground end dropped `dropped` uplink datagrams (its UDP input full: the radio's uplink
+/// carries less than a flood of PINGs), and the others were still on their way.
+fn pings_not_up(sent: u64, up: u64, dropped: u64) -> Option<String> {
+    let missing = sent.checked_sub(up).filter(|&n| n > 0)?;
+    let dropped = dropped.min(missing);
+    let waiting = missing - dropped;
+    let mut line =
+        format!("  of the {sent} PINGs the ground sent, {up} went up the radio: {missing} did not");
+    if dropped > 0 {
+        line.push_str(&format!(
+            ", {dropped} dropped at the radio's ground end (its UDP input was full: the radio's uplink carries fewer)"
+        ));
+    }
+    if waiting > 0 {
+        line.push_str(&format!(", {waiting} still on their way at the end"));
+    }
+    Some(line)
+}
+
+/// The figures of the run so far.
+pub fn collect_summary(args: &Args, plan: &RadioPlan, aircraft: &Aircraft) -> Summary {
+    let elapsed_us = Instant::now().as_micros();
+    let fleet = aircraft
+        .second
+        .map(|(_, downlink_8)| fleet::fleet_figures(aircraft.downlink, downlink_8));
+    let stats: DeviceStats = aircraft.downlink.stats(0).unwrap_or_default();
+    // Copied out of the record before anything else is locked.
+    let (received, ping, messages) = recorded();
+    let level = |i: usize| {
+        let s = stats.levels[i];
+        let r = &received[i];
+        Level {
+            submitted: s.submitted,
+            sent: s.sent,
+            shed: s.lost,
+            superseded: s.superseded,
+            received: r.received,
+            aged: r.aged,
+            age_p50_ms: r.p50,
+            age_p99_ms: r.p99,
+            ambiguous: r.ambiguous,
+        }
+    };
+    let delivery = plan.xbee().then(|| {
+        let d = aircraft.radio_device.delivery_stats();
+        DeliveryFigures {
+            delivered: d.delivered,
+            failed: d.failed,
+            timeouts: d.timeouts,
+            unexpected: d.unexpected,
+        }
+    });
+    Summary {
+        schema: 1,
+        config: run_config(args, plan),
+        simulated_s: elapsed_us as f64 / 1e6,
+        levels: Levels {
+            high: level(0),
+            normal: level(1),
+            low: level(2),
+        },
+        downlink: downlink_figures(&stats),
+        modem: modem_figures(aircraft, elapsed_us),
+        delivery,
+        ping,
+        messages,
+        secure: plan.secure.then(secure_figures),
+        fleet,
+    }
+}
+
+/// What reached the ground at one priority level, from the record.
+struct Received {
+    received: u64,
+    aged: u64,
+    p50: Option<f64>,
+    p99: Option<f64>,
+    ambiguous: u64,
+}
+
+/// From the record: what reached the ground per level, the PINGs through the radio and
+/// the figures of each message type.
+fn recorded() -> ([Received; 3], PingFigures, Vec<MessageFigures>) {
+    let record = record::lock();
+    let level = |i: usize| {
+        let r = &record.levels[i];
+        Received {
+            received: r.received,
+            aged: r.ages.count(),
+            p50: r.ages.percentile_ms(50.0),
+            p99: r.ages.percentile_ms(99.0),
+            ambiguous: r.ambiguous,
+        }
+    };
+    let messages = record
+        .types
+        .iter()
+        .filter_map(|(&(class, id), t)| {
+            let desc = MESSAGES.find(class, id)?;
+            Some(MessageFigures {
+                class: desc.class_name,
+                name: desc.name,
+                level: priority::LEVEL_NAMES[priority::level(desc.priority)],
+                submitted: t.submitted,
+                received: t.received,
+                max_gap_ms: (t.received > 1).then(|| t.max_gap_us as f64 / 1000.0),
+            })
+        })
+        .collect::<Vec<_>>();
+    let ping = PingFigures {
+        sent: record.pings.sent_count(),
+        answered: record.pings.answered(),
+        lost: record.pings.lost(),
+        rtt_p50_ms: record.rtt.percentile_ms(50.0),
+        rtt_p99_ms: record.rtt.percentile_ms(99.0),
+    };
+    ([level(0), level(1), level(2)], ping, messages)
+}
+
+/// The options of the run and the radio they describe.
+fn run_config(args: &Args, plan: &RadioPlan) -> RunConfig {
+    RunConfig {
+        transport: plan.transport.name(),
+        baud: args.baud,
+        serial_rate_bytes_per_s: plan.serial_rate,
+        air_rate_bytes_per_s: plan.air_rate,
+        modem_buffer_bytes: plan.modem_buffer,
+        flow_control: match args.flow_control {
+            FlowControl::Cts => "cts",
+            FlowControl::None => "none",
+        },
+        pacing: plan.pacing.is_some(),
+        pacing_budget_bytes: plan.pacing.map(|p| p.modem_budget),
+        in_modem: plan.window.map(|w| w.in_modem),
+        overload: args.overload,
+        flood_bytes_per_s: plan.flood_bytes_per_s,
+        speed: args.speed,
+        duration_s: args.duration,
+    }
+}
+
+/// The radio device's totals in the downlink.
+fn downlink_figures(stats: &DeviceStats) -> DownlinkFigures {
+    DownlinkFigures {
+        sent: stats.sent,
+        dropped: stats.dropped.total(),
+        queue_full: stats.dropped.queue_full,
+        arena_full: stats.dropped.arena_full,
+        too_large: stats.dropped.too_large,
+        rate_limited: stats.dropped.rate_limited,
+        refused: stats.dropped.refused,
+        evicted: stats.evicted.total(),
+        superseded: stats.superseded,
+        queued: stats.queued,
+    }
+}
+
+/// The aircraft's radio modem (aircraft to ground), `elapsed_us` into the run.
+fn modem_figures(aircraft: &Aircraft, elapsed_us: u64) -> ModemFigures {
+    let sim = aircraft.radio.stats(Direction::AToB);
+    let fraction = |busy_us: u64| {
+        if elapsed_us == 0 {
+            0.0
+        } else {
+            busy_us as f64 / elapsed_us as f64
+        }
+    };
+    ModemFigures {
+        dropped_bytes: sim.dropped_bytes,
+        frames_dropped: sim.frames_dropped,
+        overrun_bytes: sim.overrun_bytes,
+        uart_busy: fraction(sim.serial_busy_us),
+        air_busy: fraction(sim.air_busy_us),
+    }
+}
+
+/// The aircraft's end of the secure link.
+fn secure_figures() -> SecureFigures {
+    let k = SECURE.stats().secure;
+    SecureFigures {
+        session: k.session,
+        handshakes_started: k.handshake.started,
+        handshakes_completed: k.handshake.completed,
+        handshakes_refused: k.handshake.refused(),
+        encrypted: k.channel.encrypted,
+        decrypted: k.channel.decrypted,
+        rejected: k.channel.rejected(),
+        counter_space_left: k.counter_space_left,
+    }
+}
