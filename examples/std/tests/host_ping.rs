@@ -100,7 +100,11 @@ fn the_aircraft_answers_a_ping_over_loopback_tcp() {
     ground.write_all(&uplink(&Ping)).unwrap();
     let (source, destination) = wait_for::<Pong>(&mut ground);
     assert!(start.elapsed() < StdDuration::from_secs(60));
-    assert_eq!((source, destination), (AC_ID, Some(0)), "PONG from 7 to the ground");
+    assert_eq!(
+        (source, destination),
+        (AC_ID, Some(0)),
+        "PONG from 7 to the ground"
+    );
     let stats = LINK.stats();
     assert_eq!(stats.uplink.received, 1, "{stats:?}");
     assert_eq!(stats.services.pings, 1, "{stats:?}");
