@@ -347,6 +347,29 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         }
     }
 
+    /// The modem has no room for a frame of `bytes` API bytes complete at `at`: it is
+    /// dropped whole, and answered with a status if the modem says so.
+    fn drop_frame(
+        &self,
+        direction: Direction,
+        d: &mut Dir<N>,
+        x: &XBeeModem,
+        frame_id: u8,
+        bytes: u32,
+        at: u128,
+    ) {
+        d.stats.frames_dropped = d.stats.frames_dropped.wrapping_add(1);
+        d.stats.dropped_bytes = d.stats.dropped_bytes.wrapping_add(bytes);
+        if x.purge_status && frame_id != 0 {
+            let status = match x.variant {
+                XBeeVariant::XBee24 => xbee::STATUS_PURGED,
+                XBeeVariant::XBee868 => xbee::DELIVERY_NO_BUFFERS,
+            };
+            let due = self.timing.ticks_ceil(at);
+            self.status(direction, d, x, frame_id, 0, status, due);
+        }
+    }
+
     /// A valid transmit request of `bytes` API bytes is complete at `at`.
     pub(super) fn send_frame(
         &self,
@@ -361,15 +384,7 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         d.prune(at, t.ack_wait);
         let occupied: u128 = d.frames_iter().map(|f| u128::from(f.weight)).sum();
         if occupied + u128::from(bytes) > self.buffer(Some(x)) || d.frames_len == MODEM_FRAMES {
-            d.stats.frames_dropped = d.stats.frames_dropped.wrapping_add(1);
-            d.stats.dropped_bytes = d.stats.dropped_bytes.wrapping_add(bytes);
-            if x.purge_status && req.frame_id != 0 {
-                let status = match x.variant {
-                    XBeeVariant::XBee24 => xbee::STATUS_PURGED,
-                    XBeeVariant::XBee868 => xbee::DELIVERY_NO_BUFFERS,
-                };
-                self.status(direction, d, x, req.frame_id, 0, status, t.ticks_ceil(at));
-            }
+            self.drop_frame(direction, d, x, req.frame_id, bytes, at);
             return;
         }
         let rf_len = d.parser.length - req.rf_start;
