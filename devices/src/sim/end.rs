@@ -9,6 +9,17 @@ use embedded_io_async::{ErrorType, Read, Write};
 use super::SimStats;
 use super::link::{Direction, SimLink};
 
+impl<M: RawMutex, const N: usize> SimLink<M, N> {
+    /// The two endpoints, A and B. Take them once: each direction wakes one reader and
+    /// one writer.
+    pub fn endpoints(&self) -> (SimEnd<'_, M, N>, SimEnd<'_, M, N>) {
+        (
+            SimEnd::new(self, Direction::AToB, Direction::BToA),
+            SimEnd::new(self, Direction::BToA, Direction::AToB),
+        )
+    }
+}
+
 /// One endpoint of a [`SimLink`]: reads what the other endpoint writes and the other
 /// way round. [`split`](Self::split) it to give the halves to a reader and a writer task.
 pub struct SimEnd<'a, M: RawMutex, const N: usize> {
@@ -19,7 +30,7 @@ pub struct SimEnd<'a, M: RawMutex, const N: usize> {
 }
 
 impl<'a, M: RawMutex, const N: usize> SimEnd<'a, M, N> {
-    pub(super) fn new(link: &'a SimLink<M, N>, tx: Direction, rx: Direction) -> Self {
+    fn new(link: &'a SimLink<M, N>, tx: Direction, rx: Direction) -> Self {
         Self {
             rx: SimRx {
                 link,

@@ -10,9 +10,9 @@ use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_time::{Instant, Timer};
 
 use super::dir::Dir;
-use super::end::SimEnd;
 use super::modem::{MODEM_FRAMES, rx_frame_len};
 use super::timing::Timing;
+use super::transmit::{Modem, Status};
 use super::{Overflow, SimConfig, SimStats, XBeeModem};
 
 /// A direction of a [`SimLink`].
@@ -93,15 +93,6 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         &self.config
     }
 
-    /// The two endpoints, A and B. Take them once: each direction wakes one reader and
-    /// one writer.
-    pub fn endpoints(&self) -> (SimEnd<'_, M, N>, SimEnd<'_, M, N>) {
-        (
-            SimEnd::new(self, Direction::AToB, Direction::BToA),
-            SimEnd::new(self, Direction::BToA, Direction::AToB),
-        )
-    }
-
     /// Counters of one direction, busy times up to now.
     pub fn stats(&self, direction: Direction) -> SimStats {
         let t = &self.timing;
@@ -170,6 +161,15 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         let now = Self::now_units(t);
         let modem = self.modem(direction);
         let wait = self.config.overflow == Overflow::Wait;
+        let api = modem.map(|x| Modem {
+            x,
+            timing: t,
+            buffer: self.buffer(Some(x)),
+            source: match direction {
+                Direction::AToB => x.address_a,
+                Direction::BToA => x.address_b,
+            },
+        });
         self.with(direction, |d| {
             if cursor.fresh {
                 d.uart_end = d.uart_end.max(now);
@@ -207,8 +207,12 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
                 d.uart_busy += t.uart_byte;
                 d.stats.bytes_written = d.stats.bytes_written.wrapping_add(1);
                 cursor.done += 1;
-                match modem {
-                    Some(x) => self.api_byte(direction, d, x, byte, end),
+                match &api {
+                    Some(m) => {
+                        if let Some(status) = d.api_byte(m, byte, end) {
+                            self.queue_status(direction, d, &status);
+                        }
+                    }
                     None => self.transparent_byte(d, byte, end),
                 }
             }
@@ -281,6 +285,24 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
         let byte = d.corrupt(byte, t.ber);
         d.insert(&[byte], due);
         d.stats.bytes_sent = d.stats.bytes_sent.wrapping_add(1);
+    }
+
+    /// Queues a transmit status for the writer of `direction` (its own reader, on the
+    /// other direction's ring).
+    fn queue_status(&self, direction: Direction, d: &mut Dir<N>, status: &Status) {
+        let stored = self.with(direction.other(), |o| {
+            let stored = o.insert(status.bytes(), status.due);
+            if stored {
+                o.rx_waker.wake();
+            }
+            stored
+        });
+        let s = &mut d.stats;
+        if stored {
+            s.statuses = s.statuses.wrapping_add(1);
+        } else {
+            s.statuses_lost = s.statuses_lost.wrapping_add(1);
+        }
     }
 
     pub(super) fn pop(&self, direction: Direction, buf: &mut [u8]) -> Step {

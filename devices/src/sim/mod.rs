@@ -181,10 +181,10 @@ mod link;
 mod modem;
 mod stats;
 mod timing;
+mod transmit;
 pub mod xbee;
 
-pub use config::{Overflow, SimConfig};
+pub use config::{Overflow, SimConfig, XBeeModem, XBeeVariant};
 pub use end::{SimEnd, SimRx, SimTx};
 pub use link::{Direction, SimLink};
-pub use modem::{XBeeModem, XBeeVariant};
 pub use stats::SimStats;
