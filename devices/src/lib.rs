@@ -9,6 +9,7 @@ extern crate std;
 pub mod counted;
 #[cfg(feature = "std")]
 pub mod host;
+pub mod rng;
 #[cfg(feature = "sdlog")]
 pub mod sdlog;
 #[cfg(feature = "sim")]

@@ -19,6 +19,7 @@
 //!   (a whole-stream scan taking a valid status or frame at each offset, else
 //!   skipping one byte) finds.
 
+use pprz_test_support::chunked::{feed_in_chunks, ChunkFeed};
 use pprz_transports::{
     xbee, AnyTransport, Control, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, PprzLog,
     TxStatus, MAX_FRAME_LEN, TX_STATUS_CAPACITY,
@@ -112,51 +113,79 @@ impl Found {
     }
 }
 
+/// A decoding run of [`decode`] for the chunked-feed harness.
+struct Run<const N: usize> {
+    t: AnyTransport,
+    d: Decoder<AnyTransport, N>,
+    borrowed: bool,
+    out: Vec<Vec<u8>>,
+    statuses: Vec<TxStatus>,
+}
+
+impl<const N: usize> Run<N> {
+    /// Takes the statuses waiting in the decoder, checking each.
+    fn take(&mut self) {
+        while let Some(s) = self.d.take_tx_status() {
+            check_status(&self.t, &s);
+            self.statuses.push(s);
+        }
+    }
+}
+
+impl<const N: usize> ChunkFeed for Run<N> {
+    fn feed(&mut self, input: &mut &[u8]) -> bool {
+        let frame = if self.borrowed {
+            self.d.feed_borrowed(input)
+        } else {
+            self.d.feed(input)
+        };
+        let Some(f) = frame else { return false };
+        check_frame(&self.t, &f);
+        self.out.push(f.raw().to_vec());
+        self.take();
+        true
+    }
+
+    fn chunk_done(&mut self) {
+        check_stats(&self.d);
+        self.take();
+    }
+
+    fn flush(&mut self) -> bool {
+        let Some(f) = self.d.flush() else {
+            return false;
+        };
+        check_frame(&self.t, &f);
+        self.out.push(f.raw().to_vec());
+        self.take();
+        true
+    }
+}
+
 /// Decodes `stream` in chunks drawn from `seed` (0: one chunk), with `feed` or, when
 /// `borrowed`, with the zero-copy `feed_borrowed`.
 fn decode<const N: usize>(t: AnyTransport, stream: &[u8], seed: u8, borrowed: bool) -> Found {
-    let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
-    let mut out = Vec::new();
-    let mut statuses = Vec::new();
-    let mut take = |d: &mut Decoder<AnyTransport, N>| {
-        while let Some(s) = d.take_tx_status() {
-            check_status(&t, &s);
-            statuses.push(s);
-        }
+    let mut run = Run::<N> {
+        t,
+        d: Decoder::new(t),
+        borrowed,
+        out: Vec::new(),
+        statuses: Vec::new(),
     };
     let mut state = u32::from(seed);
-    let mut rest = stream;
-    while !rest.is_empty() {
+    let sizes = std::iter::repeat_with(move || {
         state = state.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-        let size = if seed == 0 {
-            rest.len()
+        if seed == 0 {
+            usize::MAX
         } else {
             1 + (state >> 16) as usize % 300
-        };
-        let (chunk, tail) = rest.split_at(size.min(rest.len()));
-        rest = tail;
-        let mut input = chunk;
-        loop {
-            let frame = if borrowed {
-                d.feed_borrowed(&mut input)
-            } else {
-                d.feed(&mut input)
-            };
-            let Some(f) = frame else { break };
-            check_frame(&t, &f);
-            out.push(f.raw().to_vec());
-            take(&mut d);
         }
-        assert!(input.is_empty());
-        check_stats(&d);
-        take(&mut d);
-    }
-    while let Some(f) = d.flush() {
-        check_frame(&t, &f);
-        out.push(f.raw().to_vec());
-        take(&mut d);
-    }
-    take(&mut d);
+    });
+    feed_in_chunks(&mut run, stream, sizes);
+    run.take();
+    let Run {
+        d, out, statuses, ..
+    } = run;
     assert_eq!(d.buffered(), 0);
     check_stats(&d);
     let s = *d.stats();

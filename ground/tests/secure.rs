@@ -17,6 +17,7 @@ use pprz_secure::{
     InitiatorState, KEY_EXCHANGE_GCS, KeyError, KeyExchange, KeyExchangeIds, KeyFile, KeyName,
     OVERHEAD, Policy, Reject, Responder, ResponderEvent, SealError, SecureChannel,
 };
+use pprz_test_support::rng::Rng;
 use pprz_transports::{AnyTransport, Encoder, Framing, MsgHeader, PprzV2, TxMeta};
 
 mod common;
@@ -28,8 +29,15 @@ const KEY_FILE: &str = concat!(
     "/../secure/keys/INSECURE-TEST-ONLY.keys"
 );
 
-/// A deterministic generator (splitmix64) for reproducible tests: never for a real link.
-struct TestRng(u64);
+/// A deterministic generator (the workspace's seeded one) for reproducible tests: never
+/// for a real link.
+struct TestRng(Rng);
+
+impl TestRng {
+    const fn new(seed: u64) -> Self {
+        Self(Rng::new(seed))
+    }
+}
 
 impl RngCore for TestRng {
     fn next_u32(&mut self) -> u32 {
@@ -37,18 +45,11 @@ impl RngCore for TestRng {
     }
 
     fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     fn fill_bytes(&mut self, dst: &mut [u8]) {
-        for chunk in dst.chunks_mut(8) {
-            let v = self.next_u64().to_le_bytes();
-            chunk.copy_from_slice(&v[..chunk.len()]);
-        }
+        self.0.fill_bytes(dst);
     }
 }
 
@@ -59,7 +60,7 @@ fn keys() -> KeyFile {
 }
 
 fn ground(ac_id: u8) -> GroundSecure {
-    GroundSecure::with_rng(ac_id, keys().ground().unwrap(), TestRng(1))
+    GroundSecure::with_rng(ac_id, keys().ground().unwrap(), TestRng::new(1))
 }
 
 fn set() -> RuntimeSet {
@@ -97,7 +98,7 @@ impl Aircraft {
         Self {
             channel: SecureChannel::new(Policy::aircraft(7)),
             responder: Responder::new(7, keys().aircraft().unwrap()),
-            rng: TestRng(2),
+            rng: TestRng::new(2),
             received: Vec::new(),
             rejected: Vec::new(),
             refused: Vec::new(),
@@ -392,7 +393,7 @@ fn a_forged_key_exchange_is_refused() {
     let mut g = ground(7);
     let msg1 = g.poll(0).unwrap();
     // An impostor with freshly generated keys answers.
-    let other = KeyFile::generate(&mut TestRng(9));
+    let other = KeyFile::generate(&mut TestRng::new(9));
     let mut fake = Responder::new(7, other.aircraft().unwrap());
     let mut fake_channel = SecureChannel::new(Policy::aircraft(7));
     let (f, _) = PprzV2::new().parse(&msg1).unwrap();
@@ -401,7 +402,7 @@ fn a_forged_key_exchange_is_refused() {
     let kx = KeyExchange::parse(opened.data(), &KeyExchangeIds::PPRZLINK)
         .unwrap()
         .unwrap();
-    let Ok(ResponderEvent::Reply(reply)) = fake.handle(&kx, 0, &mut TestRng(3)) else {
+    let Ok(ResponderEvent::Reply(reply)) = fake.handle(&kx, 0, &mut TestRng::new(3)) else {
         panic!("the impostor answers");
     };
     let mut buf = [0u8; 255];

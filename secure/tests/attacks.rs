@@ -10,7 +10,7 @@ use pprz_secure::{
 };
 
 fn established() -> (Aircraft, Ground, TestRng) {
-    let mut rng = TestRng(42);
+    let mut rng = TestRng::new(42);
     let mut air = Aircraft::new();
     let mut ground = Ground::new();
     establish(&mut air, &mut ground, 0, &mut rng);
@@ -150,7 +150,7 @@ fn every_modified_byte_is_rejected_and_nothing_changes() {
 #[test]
 fn handshake_signed_with_the_wrong_key() {
     let keys = test_keys();
-    let mut other_rng = TestRng(77);
+    let mut other_rng = TestRng::new(77);
     let other = KeyFile::generate(&mut other_rng);
     // A ground whose key the aircraft does not trust (it knows the aircraft's public key).
     let impostor_keys = KeyFile::from_keys(
@@ -280,7 +280,7 @@ fn all_zero_and_low_order_ephemeral_keys() {
 fn msg1_flood_keeps_the_session_and_the_telemetry() {
     let (mut air, mut ground, mut rng) = established();
     let ids = KeyExchangeIds::PPRZLINK;
-    let mut flood_rng = TestRng(999);
+    let mut flood_rng = TestRng::new(999);
     let start = air.hs.stats();
     let mut now = 1_000;
     // 100 fresh P_AE per second for 10 s, each a random (valid) point.

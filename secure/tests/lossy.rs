@@ -61,7 +61,7 @@ impl Sim {
             air: Aircraft::new(),
             ground: Ground::new(),
             now: 0,
-            rng: TestRng(seed),
+            rng: TestRng::new(seed),
             up: Box::new(|_, _| Fate::Deliver),
             down: Box::new(|_, _| Fate::Deliver),
             up_count: 0,
@@ -318,8 +318,8 @@ fn reordered_frames() {
 fn random_loss_both_ways() {
     for seed in 0..20 {
         let mut sim = Sim::new(100 + seed);
-        let mut loss = TestRng(seed);
-        let mut loss2 = TestRng(seed + 1000);
+        let mut loss = TestRng::new(seed);
+        let mut loss2 = TestRng::new(seed + 1000);
         sim.up = Box::new(move |_, _| {
             if loss.below(100) < 30 {
                 Fate::Lose

@@ -3,12 +3,14 @@
 //!
 //! [`reference`](mod@reference) locates the PPRZLINK reference data (`messages.xml`, `units.xml`,
 //! telemetry configurations) that compatibility tests compare against, and decides
-//! whether its absence skips a test or fails it. [`rng`] is the deterministic generator
-//! of fixed-seed tests and benchmark workloads. [`viewer_tools`] finds the independent
+//! whether its absence (or that of any other precondition) skips a test or fails it.
+//! [`rng`] is the deterministic generator of fixed-seed tests, fuzz targets and
+//! benchmark workloads. [`chunked`] feeds a decoder its input in chunks. [`viewer_tools`] finds the independent
 //! MCAP and Foxglove readers the viewer tests use.
 
 #![forbid(unsafe_code)]
 
+pub mod chunked;
 pub mod reference;
 pub mod rng;
 pub mod viewer_tools;

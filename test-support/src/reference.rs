@@ -5,7 +5,9 @@
 //! the directory named by the environment variable [`DIR_VAR`], or else in
 //! [`default_dir`]: `shared/pprzlink` next to the workspace directory, a default data
 //! location only. When it is absent a test is skipped with a printed reason, unless
-//! [`REQUIRE_VAR`] is set (CI sets it), which turns the skip into a failure.
+//! [`REQUIRE_VAR`] is set (CI sets it), which turns the skip into a failure. A test that
+//! needs something else the machine may lack (a device file) follows the same rule
+//! through [`skip_test`].
 //!
 //! ```no_run
 //! // In a test:
@@ -65,13 +67,43 @@ pub fn locate(who: &str) -> Result<Option<PathBuf>, String> {
         "PPRZLINK reference data not found: no messages.xml in {} (set {DIR_VAR} to the directory that holds it)",
         dir.display()
     );
+    skip(who, &reason).map(|()| None)
+}
+
+/// The precondition of the test (or build script) `who` is missing, for `reason`:
+/// prints `skipped {who}: {reason}` to the real standard error (not captured by the test
+/// harness) and returns `Ok(())`, or returns `Err` with the reason when [`required`] is
+/// true. The one rule of every test that needs something the machine may lack.
+///
+/// # Errors
+/// [`required`] is true.
+pub fn skip(who: &str, reason: &str) -> Result<(), String> {
     if required() {
         return Err(format!(
             "{who}: {reason}; {REQUIRE_VAR} is set, so this is an error"
         ));
     }
     let _ = writeln!(std::io::stderr(), "skipped {who}: {reason}");
-    Ok(None)
+    Ok(())
+}
+
+/// [`skip`] for a test: prints the skip reason, the test then returns.
+///
+/// ```no_run
+/// let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") else {
+///     pprz_test_support::reference::skip_test("full_disk", "no /dev/full here");
+///     return;
+/// };
+/// # let _ = full;
+/// ```
+///
+/// # Panics
+/// [`required`] is true: the test fails with the reason.
+#[track_caller]
+pub fn skip_test(who: &str, reason: &str) {
+    if let Err(reason) = skip(who, reason) {
+        panic!("{reason}");
+    }
 }
 
 /// [`locate`] for a test: the directory, or `None` (skip, reason printed).
@@ -80,7 +112,10 @@ pub fn locate(who: &str) -> Result<Option<PathBuf>, String> {
 /// The data is missing and [`required`]: the test fails with the reason.
 #[track_caller]
 pub fn locate_for_test(who: &str) -> Option<PathBuf> {
-    locate(who).unwrap_or_else(|reason| panic!("{reason}"))
+    match locate(who) {
+        Ok(dir) => dir,
+        Err(reason) => panic!("{reason}"),
+    }
 }
 
 #[cfg(test)]

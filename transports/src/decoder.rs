@@ -616,6 +616,7 @@ mod tests {
 
     extern crate std;
     use crate::{AnyTransport, Frame, PprzLog, PprzV1, TxStatus, XBee24, XBee868};
+    use pprz_test_support::chunked::{ChunkFeed, cycled, feed_in_chunks};
     use proptest::prelude::*;
     use std::vec::Vec;
 
@@ -657,6 +658,46 @@ mod tests {
         (frames, stats, in_place)
     }
 
+    /// A decoding run of [`decode_statuses`] for the chunked-feed harness.
+    struct Run<const N: usize> {
+        d: Decoder<AnyTransport, N>,
+        borrowed: bool,
+        out: Vec<Owned>,
+        /// Frames `feed_borrowed` handed out as views of the input.
+        in_place: usize,
+        statuses: Vec<TxStatus>,
+    }
+
+    impl<const N: usize> ChunkFeed for Run<N> {
+        fn feed(&mut self, input: &mut &[u8]) -> bool {
+            let chunk = *input;
+            let Some(f) = next(&mut self.d, input, self.borrowed) else {
+                return false;
+            };
+            if chunk.as_ptr_range().contains(&f.raw().as_ptr()) {
+                assert!(self.borrowed, "feed hands out views of its buffer only");
+                self.in_place += 1;
+            }
+            self.out.push(owned(&f));
+            invariant(&self.d);
+            true
+        }
+
+        fn chunk_done(&mut self) {
+            invariant(&self.d);
+            self.statuses
+                .extend(core::iter::from_fn(|| self.d.take_tx_status()));
+        }
+
+        fn flush(&mut self) -> bool {
+            let Some(f) = self.d.flush() else {
+                return false;
+            };
+            self.out.push(owned(&f));
+            true
+        }
+    }
+
     /// [`decode`], also returning the transmit statuses, taken at the end of every chunk
     /// (so that a chunk full of statuses overflows the ring).
     fn decode_statuses<const N: usize>(
@@ -665,37 +706,21 @@ mod tests {
         sizes: &[usize],
         borrowed: bool,
     ) -> (Vec<Owned>, DecoderStats, usize, Vec<TxStatus>) {
-        let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
-        let (mut out, mut in_place, mut statuses) = (Vec::new(), 0, Vec::new());
-        let mut rest = stream;
-        for &size in sizes.iter().cycle() {
-            if rest.is_empty() {
-                break;
-            }
-            let (chunk, tail) = rest.split_at(size.clamp(1, rest.len()));
-            rest = tail;
-            let mut input = chunk;
-            loop {
-                let frame = if borrowed {
-                    d.feed_borrowed(&mut input)
-                } else {
-                    d.feed(&mut input)
-                };
-                let Some(f) = frame else { break };
-                if chunk.as_ptr_range().contains(&f.raw().as_ptr()) {
-                    assert!(borrowed, "feed hands out views of its buffer only");
-                    in_place += 1;
-                }
-                out.push(owned(&f));
-                invariant(&d);
-            }
-            assert!(input.is_empty());
-            invariant(&d);
-            statuses.extend(core::iter::from_fn(|| d.take_tx_status()));
-        }
-        while let Some(f) = d.flush() {
-            out.push(owned(&f));
-        }
+        let mut run = Run::<N> {
+            d: Decoder::new(t),
+            borrowed,
+            out: Vec::new(),
+            in_place: 0,
+            statuses: Vec::new(),
+        };
+        feed_in_chunks(&mut run, stream, cycled(sizes));
+        let Run {
+            mut d,
+            out,
+            in_place,
+            mut statuses,
+            ..
+        } = run;
         statuses.extend(core::iter::from_fn(|| d.take_tx_status()));
         assert_eq!(d.buffered(), 0);
         assert_eq!(d.tx_statuses_pending(), 0);

@@ -8,13 +8,15 @@ mod roundtrip;
 #[cfg(not(pprz_reference))]
 #[test]
 fn reference_data_missing() {
-    use std::io::Write as _;
-    // The build script found no reference data (and was not told to require it).
-    let _ = writeln!(
-        std::io::stderr(),
-        "skipped: PPRZLINK reference data not found; set {} (see pprz_test_support::reference)",
-        pprz_test_support::reference::DIR_VAR
-    );
+    // The build script found no reference data (and was not told to require it): the
+    // reference tests were not compiled. Skip them visibly, or fail when the data is
+    // required or has appeared since the build.
+    if let Some(dir) = pprz_test_support::reference::locate_for_test("pprz-reference-check tests") {
+        panic!(
+            "reference data found in {} but the crate was built without it: rebuild it (touch codegen/reference-check/build.rs)",
+            dir.display()
+        );
+    }
 }
 
 #[cfg(pprz_reference)]

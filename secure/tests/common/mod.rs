@@ -10,6 +10,7 @@ use pprz_secure::{
     Initiator, InitiatorEvent, KeyExchange, KeyExchangeIds, KeyFile, Opened, Policy, Protection,
     Reject, Responder, ResponderEvent, SealError, SecureChannel,
 };
+use pprz_test_support::rng::Rng;
 use pprz_transports::{Framing, PprzV2};
 
 /// The committed known-answer vectors (`secure/kat/vectors.txt`, made by
@@ -74,11 +75,14 @@ impl RngCore for FixedRng {
 }
 impl CryptoRng for FixedRng {}
 
-/// A deterministic stand-in for a hardware RNG (splitmix64): fresh keys every time,
-/// reproducible runs. Also the loss pattern of the lossy-link tests.
-pub struct TestRng(pub u64);
+/// A deterministic stand-in for a hardware RNG (the workspace's seeded generator): fresh
+/// keys every time, reproducible runs. Also the loss pattern of the lossy-link tests.
+pub struct TestRng(Rng);
 
 impl TestRng {
+    pub const fn new(seed: u64) -> Self {
+        Self(Rng::new(seed))
+    }
     pub fn below(&mut self, n: u64) -> u64 {
         self.next_u64() % n
     }
@@ -89,11 +93,7 @@ impl RngCore for TestRng {
         self.next_u64() as u32
     }
     fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
     fn fill_bytes(&mut self, dst: &mut [u8]) {
         pprz_secure::rand_core::impls::fill_bytes_via_next(self, dst)

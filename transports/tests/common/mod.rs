@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests (std is fine here).
 #![allow(dead_code)]
 
+use pprz_test_support::chunked::{ChunkFeed, cycled, feed_in_chunks};
 use pprz_transports::{
     AnyTransport, Control, Decoder, DecoderStats, Encoder, Extra, Frame, Framing, MsgHeader,
     PprzLog, PprzV1, PprzV2, TxMeta, TxStatus, XBee24, XBee868, xbee,
@@ -109,6 +110,49 @@ pub fn decode_chunked<const N: usize>(
     (frames, stats)
 }
 
+/// A decoding run of [`decode_with_statuses`] for the chunked-feed harness.
+struct Run<const N: usize> {
+    d: Decoder<AnyTransport, N>,
+    borrowed: bool,
+    out: Vec<Owned>,
+    statuses: Vec<TxStatus>,
+}
+
+impl<const N: usize> Run<N> {
+    fn take_statuses(&mut self) {
+        self.statuses
+            .extend(std::iter::from_fn(|| self.d.take_tx_status()));
+    }
+}
+
+impl<const N: usize> ChunkFeed for Run<N> {
+    fn feed(&mut self, input: &mut &[u8]) -> bool {
+        let frame = if self.borrowed {
+            self.d.feed_borrowed(input)
+        } else {
+            self.d.feed(input)
+        };
+        let Some(f) = frame else { return false };
+        self.out.push(Owned::from(f));
+        self.take_statuses();
+        true
+    }
+
+    fn chunk_done(&mut self) {
+        self.take_statuses();
+        check_invariant(&self.d);
+    }
+
+    fn flush(&mut self) -> bool {
+        let Some(f) = self.d.flush() else {
+            return false;
+        };
+        self.out.push(Owned::from(f));
+        self.take_statuses();
+        true
+    }
+}
+
 /// [`decode_chunked`], through `feed_borrowed` when `borrowed`, also returning the
 /// transmit statuses, taken after every call. Checks that every control frame's status
 /// was taken or counted as an overflow.
@@ -118,40 +162,17 @@ pub fn decode_with_statuses<const N: usize>(
     sizes: &[usize],
     borrowed: bool,
 ) -> (Vec<Owned>, Vec<TxStatus>, DecoderStats) {
-    let mut d: Decoder<AnyTransport, N> = Decoder::new(t);
-    let mut out = Vec::new();
-    let mut statuses = Vec::new();
-    let mut rest = stream;
-    let mut i = 0;
-    while !rest.is_empty() {
-        let size = sizes
-            .get(i % sizes.len().max(1))
-            .copied()
-            .unwrap_or(1)
-            .max(1);
-        i += 1;
-        let (chunk, tail) = rest.split_at(size.min(rest.len()));
-        rest = tail;
-        let mut input = chunk;
-        loop {
-            let frame = if borrowed {
-                d.feed_borrowed(&mut input)
-            } else {
-                d.feed(&mut input)
-            };
-            let Some(f) = frame else { break };
-            out.push(Owned::from(f));
-            statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
-        }
-        statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
-        assert!(input.is_empty(), "feed returned None with input left");
-        check_invariant(&d);
-    }
-    while let Some(f) = d.flush() {
-        out.push(Owned::from(f));
-        statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
-    }
-    statuses.extend(std::iter::from_fn(|| d.take_tx_status()));
+    let mut run = Run::<N> {
+        d: Decoder::new(t),
+        borrowed,
+        out: Vec::new(),
+        statuses: Vec::new(),
+    };
+    feed_in_chunks(&mut run, stream, cycled(sizes));
+    run.take_statuses();
+    let Run {
+        d, out, statuses, ..
+    } = run;
     assert_eq!(d.buffered(), 0);
     check_invariant(&d);
     let s = *d.stats();
