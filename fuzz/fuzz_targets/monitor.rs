@@ -70,13 +70,9 @@ fuzz_target!(|data: &[u8]| {
     };
     let mut monitor = Monitor::new(set, transport(selector))
         .with_trackers(PingTracker::new(4, 0.05), SettingTracker::new(0.05));
-    let mut state = u32::from(seed) | 1;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state
-    };
+    // Chunk sizes, times and operations from the workspace's seeded generator.
+    let mut rng = pprz_test_support::rng::Rng::new(u64::from(seed));
+    let mut next = move || (rng.next_u64() >> 32) as u32;
     let on_line = |d: &Decoded<'_>| {
         assert_clean(d.line);
         assert!(!d.raw.is_empty());

@@ -28,6 +28,8 @@ use pprz_ground::ping::PingTracker;
 use pprz_messages::Message;
 use pprz_telemetry::pprz_messages::priority;
 
+use pprz_devices::rng::SplitMix64;
+
 use crate::fleet::SECOND_AC_ID;
 
 /// Seconds (simulated) a submission is remembered for matching.
@@ -38,13 +40,23 @@ pub const HORIZON_S: u64 = 120;
 const MAX_SAMPLES: usize = 1 << 20;
 
 /// A distribution of durations, in microseconds.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Samples {
     values: Vec<u64>,
     /// Values offered (kept or not).
     seen: u64,
-    /// State of the reservoir's random generator (xorshift64).
-    rng: u64,
+    /// The reservoir's random generator (fixed seed: runs are reproducible).
+    rng: SplitMix64,
+}
+
+impl Default for Samples {
+    fn default() -> Self {
+        Self {
+            values: Vec::new(),
+            seen: 0,
+            rng: SplitMix64::new(0),
+        }
+    }
 }
 
 impl Samples {
@@ -57,13 +69,7 @@ impl Samples {
         }
         // Reservoir sampling (algorithm R): keep the new value with probability
         // MAX_SAMPLES / seen, in place of a random one.
-        if self.rng == 0 {
-            self.rng = 0x9E37_79B9_7F4A_7C15;
-        }
-        self.rng ^= self.rng << 13;
-        self.rng ^= self.rng >> 7;
-        self.rng ^= self.rng << 17;
-        let slot = self.rng % self.seen;
+        let slot = self.rng.next_u64() % self.seen;
         if let Some(v) = usize::try_from(slot)
             .ok()
             .and_then(|i| self.values.get_mut(i))

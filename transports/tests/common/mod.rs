@@ -237,21 +237,16 @@ pub fn oracle_with_statuses(
     (out, statuses)
 }
 
-/// A tiny deterministic PRNG (xorshift64*), so randomized tests that are not
-/// proptests are reproducible.
-pub struct Rng(u64);
+/// The seeded generator of the tests (the workspace's one SplitMix64), with the helpers
+/// these tests draw frames with.
+pub struct Rng(pprz_test_support::rng::Rng);
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+        Self(pprz_test_support::rng::Rng::new(seed))
     }
     pub fn next_u64(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        self.0 = x;
-        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        self.0.next_u64()
     }
     pub fn below(&mut self, n: usize) -> usize {
         (self.next_u64() % n.max(1) as u64) as usize
