@@ -30,6 +30,7 @@
 mod aircraft;
 mod bridge;
 mod clock;
+mod figures;
 mod fleet;
 mod ground;
 mod keys;
@@ -177,6 +178,6 @@ fn run_ground(
 ) -> Result<Monitor, Failure> {
     let ground = station.start(args, keys).map_err(Failure::sitl)?;
     let side =
-        |ac: u8| fleet::aircraft_levels(ac, aircraft.downlink, aircraft.second.map(|(_, d)| d));
+        |ac: u8| figures::aircraft_levels(ac, aircraft.downlink, aircraft.second.map(|(_, d)| d));
     Ok(ground.run(&side, stop, start))
 }

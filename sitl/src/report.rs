@@ -14,7 +14,7 @@ use pprz_telemetry::pprz_messages::priority;
 
 use crate::aircraft::{Aircraft, SECURE};
 use crate::bridge;
-use crate::fleet;
+use crate::figures;
 use crate::options::{Args, FlowControl};
 use crate::radio::RadioPlan;
 use crate::record;
@@ -141,7 +141,7 @@ pub fn collect_summary(args: &Args, plan: &RadioPlan, aircraft: &Aircraft) -> Su
     let elapsed_us = Instant::now().as_micros();
     let fleet = aircraft
         .second
-        .map(|(_, downlink_8)| fleet::fleet_figures(aircraft.downlink, downlink_8));
+        .map(|(_, downlink_8)| figures::fleet_figures(aircraft.downlink, downlink_8));
     let stats: DeviceStats = aircraft.downlink.stats(0).unwrap_or_default();
     // Copied out of the record before anything else is locked.
     let (received, ping, messages) = recorded();
