@@ -1,5 +1,6 @@
 //! The frame arena: one shared byte arena for the pending frames of all devices (the
-//! thesis' *Dynamic Memory Space*), with bounded, constant-time allocation and release.
+//! *Dynamic Memory Space* of Jornet's design), with bounded, constant-time allocation and
+//! release.
 //!
 //! A [`FrameArena`] is a `static` block of `N` bytes. [`FrameArena::alloc`] hands out a
 //! [`FrameBuf`]: an exclusively owned, contiguous region of the arena (a *grant*, as in

@@ -1,4 +1,4 @@
-//! The downlink without time: priority order (the thesis' Figure 27 trace), FIFO among
+//! The downlink without time: priority order (the Figure 27 trace of Jornet's design), FIFO among
 //! equal priorities, the overflow policy for queue and arena, per-device accounting under
 //! random load (frames written, failed and abandoned through the devices' ports), and no
 //! leaked arena memory.
@@ -38,7 +38,7 @@ fn drain_indices(port: &mut Port<'_>) -> Vec<u8> {
 }
 
 #[test]
-fn thesis_figure_27_trace() {
+fn jornet_figure_27_trace() {
     // Priorities 0, 1, 0, 1 arrive while the device is busy: sent 2nd, 4th, 1st, 3rd.
     let arena = Arena::new();
     let downlink: Downlink<'_, M, 1, 8> = Downlink::new(&arena, 7, [v2()]);

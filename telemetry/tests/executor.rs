@@ -1,6 +1,6 @@
 //! The downlink as a firmware wires it (`const` statics, one writer task per device
 //! taking the device's port), running on the Embassy std executor with embassy-time's mock driver: a busy
-//! radio and an SD log, the thesis trace on the radio, and the log flushed per frame.
+//! radio and an SD log, the Figure 27 trace of Jornet's design on the radio, and the log flushed per frame.
 //!
 //! The mock clock is advanced by a task of its own, so the run is deterministic. The test
 //! thread only waits for the result (with a generous guard against a hang, not a timing
@@ -137,7 +137,7 @@ fn firmware_style_wiring_on_the_std_executor() {
                 .index
         })
         .collect();
-    // Frame 0 was on the wire; then the thesis order: 2nd, 4th, 1st, 3rd.
+    // Frame 0 was on the wire; then Figure 27's order: 2nd, 4th, 1st, 3rd.
     assert_eq!(radio, [0, 2, 4, 1, 3]);
     let log: Vec<u8> = wire
         .1
