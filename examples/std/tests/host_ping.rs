@@ -4,11 +4,11 @@
 //! reads the answer back through the incremental decoder until the PONG comes.
 //!
 //! The mock clock is advanced by a task of its own. The test thread only waits for the
-//! answer, with a generous guard against a hang (not a timing assertion).
+//! answer; a read timeout guards against a hang (it is not a timing assertion).
 
 use std::io::{Read as _, Write as _};
 use std::net::{TcpListener, TcpStream};
-use std::time::{Duration as StdDuration, Instant as StdInstant};
+use std::time::Duration as StdDuration;
 
 use embassy_executor::Executor;
 use embassy_futures::yield_now;
@@ -96,10 +96,8 @@ fn the_aircraft_answers_a_ping_over_loopback_tcp() {
         })
     });
 
-    let start = StdInstant::now();
     ground.write_all(&uplink(&Ping)).unwrap();
     let (source, destination) = wait_for::<Pong>(&mut ground);
-    assert!(start.elapsed() < StdDuration::from_secs(60));
     assert_eq!(
         (source, destination),
         (AC_ID, Some(0)),
@@ -108,4 +106,19 @@ fn the_aircraft_answers_a_ping_over_loopback_tcp() {
     let stats = LINK.stats();
     assert_eq!(stats.uplink.received, 1, "{stats:?}");
     assert_eq!(stats.services.pings, 1, "{stats:?}");
+}
+
+/// docs/host-tests.md shows this file from its first `static` to the end of the test
+/// above: the page and the test must not drift apart.
+#[test]
+fn the_host_tests_page_shows_this_test() {
+    let page = include_str!("../../../docs/host-tests.md");
+    let this = include_str!("host_ping.rs");
+    let from = this.find("static ARENA").unwrap();
+    let to = this.find("\n/// docs/host-tests.md shows").unwrap();
+    let shown = this[from..to].trim_end();
+    assert!(
+        page.contains(&format!("```rust,ignore\n{shown}\n```")),
+        "docs/host-tests.md must show examples/std/tests/host_ping.rs as it is"
+    );
 }
