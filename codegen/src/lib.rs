@@ -9,6 +9,9 @@
 //! `MESSAGES` descriptor table for generic tools, and a `Set` type naming the set for the
 //! runtime (see [below](#the-set-type-and-its-roles)).
 //!
+//! The runtime that sends and receives these messages is `pprz_telemetry` (its page is
+//! beside this one in the crate list; `cargo doc -p pprz-telemetry --open` opens it).
+//!
 //! # From a `build.rs` (as prost-build or mavlink-bindgen are used)
 //!
 //! ```toml

@@ -31,7 +31,7 @@
 //! # Bounds
 //!
 //! Every piece of state is bounded, whatever arrives: one entry per message of the set
-//! (with its latest fields cut at [`format::MAX_FIELDS_LEN`]) for all aircraft and one per
+//! (with its latest fields cut at [`MAX_FIELDS_LEN`](crate::format::MAX_FIELDS_LEN)) for all aircraft and one per
 //! message and tracked aircraft, rates counted in fixed time buckets, at most
 //! [`MAX_EVENTS`] events and notices, at most [`crate::ping::MAX_OUTSTANDING`] PINGs and
 //! 256 requests outstanding per aircraft. Received frames make the monitor track at most

@@ -14,7 +14,7 @@ impl Monitor {
     /// PINGs outstanding in order, oldest first.
     ///
     /// A PING to aircraft N is answered only by a PONG whose source is N; the aircraft
-    /// is tracked from now on, whatever [`MAX_AIRCRAFT`] says, its statistics are in
+    /// is tracked from now on, whatever [`MAX_AIRCRAFT`](super::MAX_AIRCRAFT) says, its statistics are in
     /// [`aircraft_state`](Self::aircraft_state), and the [`Event::Pong`] it produces is
     /// tagged with N in [`events_with_aircraft`](Self::events_with_aircraft). A PING to
     /// no particular aircraft is answered by a PONG from any aircraft that has no PING

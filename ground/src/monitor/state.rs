@@ -76,7 +76,7 @@ pub struct MessageStats {
     pub count: u64,
     /// Arrivals in the last [`RATE_WINDOW`] seconds.
     recent: Rate,
-    /// The latest fields, formatted and escaped (at most [`format::MAX_FIELDS_LEN`]
+    /// The latest fields, formatted and escaped (at most [`MAX_FIELDS_LEN`](crate::format::MAX_FIELDS_LEN)
     /// bytes).
     pub last: String,
 }
