@@ -955,7 +955,14 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
 
     let d = &e.dispatch;
     let input = if life { "&'a [u8]" } else { "&[u8]" };
+    // A class without messages (legal in messages.xml) decodes nothing: its enum is
+    // uninhabited, its matches dereference `self` to be exhaustive without arms, and its
+    // methods' arguments go unused.
+    let empty = e.variants.is_empty();
     out.push_str(&allow);
+    if empty {
+        out!(out, "{i}#[allow(unused_variables)]");
+    }
     out!(out, "{i}impl{l} AnyMessage{l} {{");
     docs(
         out,
@@ -991,7 +998,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     for method in &e.methods {
         docs(out, &method.doc);
         out!(out, "{i}    pub fn {} {{", method.sig);
-        out!(out, "{i}        match self {{");
+        out!(out, "{i}        match {}self {{", if empty { "*" } else { "" });
         let pat = if method.bind { "m" } else { "_" };
         for v in &e.variants {
             out!(

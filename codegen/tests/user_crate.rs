@@ -60,3 +60,33 @@ fn generated_code_in_a_binary_using_some_messages_has_no_warning() {
         panic!("the generated code gives warnings in a binary crate:\n{stderr}");
     }
 }
+
+/// A class without messages is legal in a messages.xml: its uninhabited `AnyMessage` still
+/// compiles, with no warning, beside a class that has messages.
+#[test]
+fn a_class_without_messages_compiles_without_warning() {
+    let code = Generator::new(repo_file("codegen/tests/fixtures/empty_class.xml"))
+        .generate()
+        .unwrap();
+    let main = r#"#![deny(warnings)]
+
+mod messages {
+    include!("messages.rs");
+}
+
+fn main() {
+    use pprz_messages::Message;
+    let mut buf = [0u8; 4];
+    assert_eq!(messages::telemetry::Pong.encode(&mut buf).unwrap(), 0);
+    assert!(messages::datalink::AnyMessage::decode(1, &[]).is_err());
+}
+"#;
+    let result = ScratchCrate::new("empty-class")
+        .write("messages.rs", &code)
+        .write("main.rs", main)
+        .check();
+    if let Err(stderr) = result {
+        panic!("a class without messages does not compile warning-free:\n{stderr}");
+    }
+}
+
