@@ -998,7 +998,11 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     for method in &e.methods {
         docs(out, &method.doc);
         out!(out, "{i}    pub fn {} {{", method.sig);
-        out!(out, "{i}        match {}self {{", if empty { "*" } else { "" });
+        out!(
+            out,
+            "{i}        match {}self {{",
+            if empty { "*" } else { "" }
+        );
         let pat = if method.bind { "m" } else { "_" };
         for v in &e.variants {
             out!(

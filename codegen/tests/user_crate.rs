@@ -89,4 +89,3 @@ fn main() {
         panic!("a class without messages does not compile warning-free:\n{stderr}");
     }
 }
-
