@@ -1018,13 +1018,19 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     out!(out, "{i}}}\n");
 
     if e.from_impls {
-        for v in &e.variants {
-            out!(out, "{i}impl{l} {FROM}<{}> for AnyMessage{l} {{", v.ty);
-            out!(out, "{i}    fn from(m: {}) -> Self {{", v.ty);
-            out!(out, "{i}        Self::{}(m)", v.name);
-            out!(out, "{i}    }}");
-            out!(out, "{i}}}\n");
-        }
+        emit_any_from_impls(out, e, l);
+    }
+}
+
+/// `From<Message>` for each variant of an `AnyMessage` enum (`l`: its lifetime, if any).
+fn emit_any_from_impls(out: &mut String, e: &AnyEnum, l: &str) {
+    let i = e.indent;
+    for v in &e.variants {
+        out!(out, "{i}impl{l} {FROM}<{}> for AnyMessage{l} {{", v.ty);
+        out!(out, "{i}    fn from(m: {}) -> Self {{", v.ty);
+        out!(out, "{i}        Self::{}(m)", v.name);
+        out!(out, "{i}    }}");
+        out!(out, "{i}}}\n");
     }
 }
 
