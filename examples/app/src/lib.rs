@@ -47,10 +47,8 @@ use pprz_default::messages::telemetry::{
 use pprz_default::periodic::{PROCESSES, SCHEDULE, main};
 use pprz_messages::MessageSet;
 use pprz_messages::{Message, VarArray};
-use pprz_telemetry::reader::Inbox;
-use pprz_telemetry::reader::{Datalink, Reader};
-use pprz_telemetry::registry::Received;
-use pprz_telemetry::registry::RegistryFull;
+use pprz_telemetry::reader::{Datalink, Inbox, Reader};
+use pprz_telemetry::registry::{Received, RegistryFull};
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
 use pprz_telemetry::services::{LinkReporter, Services, SettingsFull};
 use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, RelayStats, Sender};
