@@ -11,7 +11,7 @@ use pprz_default::messages::MESSAGES;
 use pprz_default::messages::telemetry::Payload;
 use pprz_devices::host::HostDevice;
 use pprz_devices::sim::{SimLink, SimRx, SimTx};
-use pprz_example_app::{AC_ID, Config, M};
+use pprz_example_app::{AC_ID, Config, M, RelayCounters};
 use pprz_messages::{Message, VarArray};
 use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
@@ -53,6 +53,9 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// `--secure`: the radio's secure link (its writer seals, the application's reader
 /// opens, the application runs its handshake).
 pub static SECURE: SecureLink<M> = SecureLink::aircraft(AC_ID);
+/// `--fleet 2`: aircraft 7's relay counters (what it forwarded and refused, per reason),
+/// copied after every frame it reads.
+pub static RELAY_COUNTERS: RelayCounters = RelayCounters::new();
 /// XBee: the uplink messages, re-framed as PPRZ v2 for the application's reader.
 static UPLINK_PIPE: Pipe<M, 1024> = Pipe::new();
 
@@ -249,6 +252,7 @@ async fn relay_aircraft(
         link_rx,
         RELAY_PRIORITY,
         Some(&MESSAGES),
+        Some(&RELAY_COUNTERS),
         config,
     )
     .await;

@@ -7,10 +7,12 @@ use pprz_ground::viewer::LevelFigures;
 use pprz_telemetry::DeviceStats;
 use pprz_telemetry::pprz_messages::priority;
 
-use crate::aircraft::{Dl, Dl8};
+use crate::aircraft::{Dl, Dl8, RELAY_COUNTERS};
 use crate::fleet::SECOND_AC_ID;
 use crate::record;
-use crate::summary::{AircraftFigures, AircraftLevel, FleetFigures, PingFigures, RouteFigures};
+use crate::summary::{
+    AircraftFigures, AircraftLevel, FleetFigures, PingFigures, RelayFigures, RouteFigures,
+};
 
 /// The aircraft's own figures per priority level (what it submitted, sent and shed of
 /// its own messages; frames it relays are the other aircraft's), for the viewer's link
@@ -125,5 +127,21 @@ pub fn fleet_figures(downlink_7: &Dl, downlink_8: &Dl8) -> FleetFigures {
             route("ground".to_owned(), &radio_7),
             route(format!("aircraft {SECOND_AC_ID}"), &link_7),
         ],
+        relay: relay_figures(),
+    }
+}
+
+/// What aircraft 7's relay forwarded and refused, per reason.
+fn relay_figures() -> RelayFigures {
+    let r = RELAY_COUNTERS.get();
+    RelayFigures {
+        ac_id: AC_ID,
+        forwarded: r.forwarded,
+        broadcast: r.broadcast,
+        refused: r.refused(),
+        no_route: r.no_route,
+        reverse_path: r.reverse_path,
+        own_source: r.own_source,
+        malformed: r.malformed,
     }
 }

@@ -43,6 +43,33 @@ pub struct FleetFigures {
     pub aircraft: Vec<AircraftFigures>,
     /// The relay's routes: what it forwarded for the others on each of its devices.
     pub routes: Vec<RouteFigures>,
+    /// What the relay did with the frames not only for itself: forwarded, or refused
+    /// and why.
+    pub relay: RelayFigures,
+}
+
+/// The relay's decisions on the frames for other aircraft and broadcast frames it read
+/// on any of its devices (`pprz_telemetry::RelayStats`).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RelayFigures {
+    /// The relay's id.
+    pub ac_id: u8,
+    /// Frames handed to the devices of their route.
+    pub forwarded: u32,
+    /// Broadcast frames delivered to the relay itself.
+    pub broadcast: u32,
+    /// Frames refused, every reason below together.
+    pub refused: u32,
+    /// Refused: their destination's route leads nowhere but back where they came from.
+    pub no_route: u32,
+    /// Refused: they came from a device that is not the relay's route back to their
+    /// source (a forged source, a copy that went round a loop, a second copy of a
+    /// broadcast).
+    pub reverse_path: u32,
+    /// Refused: they claimed the relay's own id as their source.
+    pub own_source: u32,
+    /// Refused: their fields do not match their message's definition.
+    pub malformed: u32,
 }
 
 /// One aircraft of the fleet.
@@ -514,9 +541,22 @@ impl FleetFigures {
                 r.evicted
             );
         }
+        let r = &self.relay;
         let _ = writeln!(
             s,
-            "  (submitted, sent, shed: on the aircraft's own radio, its replies included; forwarded,\n   shed by relay: its frames at the relay, towards the ground; received: at the ground)"
+            "  relay {} refused {} (own source {}, reverse path {}, no route {}, malformed {}); forwarded {}, broadcast {}",
+            r.ac_id,
+            r.refused,
+            r.own_source,
+            r.reverse_path,
+            r.no_route,
+            r.malformed,
+            r.forwarded,
+            r.broadcast
+        );
+        let _ = writeln!(
+            s,
+            "  (submitted, sent, shed: on the aircraft's own radio, its replies included; forwarded,\n   shed by relay: its frames at the relay, towards the ground; received: at the ground;\n   relay refused: frames it would not forward, by rule: own source: claiming its id; reverse\n   path: not from its route back to their source; no route: nowhere to go but back;\n   malformed: fields that do not match their message)"
         );
     }
 }

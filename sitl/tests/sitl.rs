@@ -612,6 +612,11 @@ fn a_fleet_of_two_relays_through_the_first() {
         "{out}"
     );
     assert!(out.contains("relay 7 -> ground: forwarded"), "{out}");
+    // Every frame of the fleet follows the rules: the relay refused none.
+    assert_eq!(uint(fleet, "/relay/ac_id"), 7);
+    assert_eq!(uint(fleet, "/relay/refused"), 0, "{fleet:#}");
+    assert!(uint(fleet, "/relay/forwarded") > 0, "{fleet:#}");
+    assert!(out.contains("relay 7 refused 0 (own source 0, "), "{out}");
 }
 
 /// The number that follows `label` in `out`.

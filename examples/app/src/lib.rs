@@ -47,11 +47,11 @@ use pprz_default::messages::telemetry::{
 use pprz_default::periodic::{PROCESSES, SCHEDULE, main};
 use pprz_messages::MessageSet;
 use pprz_messages::{Message, VarArray};
-use pprz_telemetry::reader::{Datalink, Reader};
-use pprz_telemetry::registry::RegistryFull;
+use pprz_telemetry::reader::{Datalink, Inbox, Reader};
+use pprz_telemetry::registry::{Received, RegistryFull};
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
 use pprz_telemetry::services::{LinkReporter, Services, SettingsFull};
-use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, Sender};
+use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, RelayStats, Sender};
 use pprz_transports::PprzV2;
 
 use crate::vehicle::Vehicle;
@@ -172,8 +172,13 @@ pub async fn run_aircraft<R: Read>(
 /// ([`Downlink::with_routes`](pprz_telemetry::Downlink::with_routes)). Its own telemetry
 /// goes to the ground's route. Requests are answered on the device they came in on.
 ///
+/// The relay lives inside this future; with `counters`, its counters (what it forwarded
+/// and what it refused, per reason) are copied there after every frame it reads, for
+/// the firmware's other tasks to report.
+///
 /// # Errors
 /// As [`run_aircraft`].
+#[allow(clippy::too_many_arguments)]
 pub async fn run_relay_aircraft<R: Read>(
     radio: Device<'_>,
     radio_rx: R,
@@ -181,6 +186,7 @@ pub async fn run_relay_aircraft<R: Read>(
     link_rx: R,
     priority: u8,
     messages: Option<&MessageSet<'_>>,
+    counters: Option<&RelayCounters>,
     config: Config,
 ) -> Result<Infallible, SetupError> {
     run_with_layer(
@@ -191,6 +197,7 @@ pub async fn run_relay_aircraft<R: Read>(
             rx: link_rx,
             priority,
             messages,
+            counters,
         },
         config,
         &Plain,
@@ -283,12 +290,62 @@ impl<'d> Readers<'d> for RadioOnly {
     }
 }
 
+/// The counters of the relay of [`run_relay_aircraft`], as it last copied them: a
+/// snapshot of its [`RelayStats`] that other tasks read. `const`, so it can be a
+/// `static`.
+pub struct RelayCounters(Mutex<M, Cell<RelayStats>>);
+
+impl RelayCounters {
+    /// Zero counters.
+    pub const fn new() -> Self {
+        Self(Mutex::new(Cell::new(RelayStats {
+            forwarded: 0,
+            broadcast: 0,
+            no_route: 0,
+            reverse_path: 0,
+            own_source: 0,
+            malformed: 0,
+        })))
+    }
+
+    /// The relay's counters after the last frame it read.
+    pub fn get(&self) -> RelayStats {
+        self.0.lock(Cell::get)
+    }
+}
+
+impl Default for RelayCounters {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The relay, copying its counters into `counters` after every frame it reads.
+struct Counted<'a, 'r, I: ?Sized> {
+    relay: &'a Relay<'r, M, I>,
+    counters: Option<&'a RelayCounters>,
+}
+
+impl<'d, I: Inbox<'d> + ?Sized> Inbox<'d> for Counted<'_, '_, I> {
+    fn deliver(&self, rx: &Received<'_, 'd>) {
+        self.relay.deliver(rx);
+        if let Some(c) = self.counters {
+            c.0.lock(|s| s.set(self.relay.stats()));
+        }
+    }
+
+    fn read_error(&self) {
+        self.relay.read_error();
+    }
+}
+
 /// The radio and a link to other aircraft, both delivering to a [`Relay`].
 struct RelayLink<'l, 'm, R2> {
     link: Device<'l>,
     rx: R2,
     priority: u8,
     messages: Option<&'m MessageSet<'m>>,
+    counters: Option<&'m RelayCounters>,
 }
 
 impl<'d, R2: Read> Readers<'d> for RelayLink<'d, '_, R2> {
@@ -307,6 +364,10 @@ impl<'d, R2: Read> Readers<'d> for RelayLink<'d, '_, R2> {
         };
         // The link to other aircraft carries no layer (the secure link is per radio,
         // between one aircraft and the ground).
+        let relay = Counted {
+            relay: &relay,
+            counters: self.counters,
+        };
         let mut link = Reader::<R2, PprzV2>::new(self.rx, PprzV2::new(), self.link);
         match select(radio.run(&Layered::new(layer, &relay)), link.run(&relay)).await {
             Either::First(never) | Either::Second(never) => never,
