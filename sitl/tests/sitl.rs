@@ -25,6 +25,22 @@ fn run_sitl(extra: &[&str]) -> String {
 /// Runs the simulation with the monitor (one line per message) for `duration` simulated
 /// seconds at `speed`, plus `extra` options; returns its output.
 fn run_sitl_for(duration: &str, speed: &str, extra: &[&str]) -> String {
+    // The ports are free when chosen, but another test may take one before the SITL
+    // binds it: such a run is repeated with new ports (at most twice).
+    for _ in 0..2 {
+        let (ok, stdout, stderr) = run_sitl_once(duration, speed, extra);
+        if ok || !stderr.to_lowercase().contains("in use") {
+            assert!(ok, "sitl failed: {stderr}\n{stdout}");
+            return stdout;
+        }
+    }
+    let (ok, stdout, stderr) = run_sitl_once(duration, speed, extra);
+    assert!(ok, "sitl failed: {stderr}\n{stdout}");
+    stdout
+}
+
+/// One run of the simulation on fresh ports: success, standard output and error.
+fn run_sitl_once(duration: &str, speed: &str, extra: &[&str]) -> (bool, String, String) {
     let (ground, uplink) = free_ports();
     let ground = format!("127.0.0.1:{ground}");
     let uplink = format!("127.0.0.1:{uplink}");
@@ -44,13 +60,11 @@ fn run_sitl_for(duration: &str, speed: &str, extra: &[&str]) -> String {
         .args(&args)
         .output()
         .expect("the simulation runs");
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
+    (
         out.status.success(),
-        "sitl failed: {}\n{stdout}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 /// A path for a summary in the temporary directory, unique to this test process.
