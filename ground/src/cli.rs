@@ -15,7 +15,9 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::{Parser, ValueEnum};
-use pprz_transports::{AnyTransport, PprzLog, PprzV1, PprzV2, XBee24, XBee868};
+use pprz_transports::{
+    AnyTransport, BROADCAST_ID, GROUND_ID, PprzLog, PprzV1, PprzV2, XBee24, XBee868,
+};
 
 /// Longest `--duration`: one year, in seconds.
 pub const MAX_DURATION: f64 = 366.0 * 24.0 * 3600.0;
@@ -94,7 +96,7 @@ pub struct Args {
     /// Aircraft id for PING/SETTING (the frames' destination and the SETTING's ac_id
     /// field); repeat it or separate ids with commas to PING and SET several aircraft
     /// (each PONG and DL_VALUE is matched to its source). With --secure, one aircraft
-    /// only: the only one accepted.
+    /// only (1 to 254: not the ground's 0 nor broadcast 255): the only one accepted.
     #[arg(long = "ac-id", value_name = "ID", default_values_t = [7u8], value_delimiter = ',')]
     pub ac_id: Vec<u8>,
     /// Secure link: encrypted and authenticated PPRZ v2 (Paparazzi's secure transport)
@@ -145,7 +147,8 @@ impl Args {
     }
 
     /// Checks the combinations of options that clap cannot: PINGs, SETTINGs and the
-    /// secure link need a link to the aircraft, and the secure link PPRZ v2.
+    /// secure link need a link to the aircraft, and the secure link PPRZ v2 and one
+    /// aircraft (not broadcast, not the ground's id 0).
     ///
     /// # Errors
     /// A message naming the problem.
@@ -161,8 +164,21 @@ impl Args {
             );
         }
         if self.secure.is_some() {
-            if self.aircraft().len() != 1 {
-                return Err("--secure talks to one aircraft: give a single --ac-id".into());
+            match self.aircraft().as_slice() {
+                [BROADCAST_ID] => {
+                    return Err(format!(
+                        "--secure talks to one aircraft: --ac-id {BROADCAST_ID} is broadcast, give the aircraft's id (1 to 254)"
+                    ));
+                }
+                [GROUND_ID] => {
+                    return Err(format!(
+                        "--secure talks to one aircraft: --ac-id {GROUND_ID} is the ground itself, give the aircraft's id (1 to 254)"
+                    ));
+                }
+                [_] => {}
+                _ => {
+                    return Err("--secure talks to one aircraft: give a single --ac-id".into());
+                }
             }
             if self.transport != Transport::Pprz2 {
                 return Err(
@@ -403,5 +419,12 @@ mod tests {
             .check()
             .unwrap_err();
         assert!(e.contains("one aircraft"), "{e}");
+        // Broadcast and the ground's own id are no aircraft to make a key exchange with.
+        for (id, what) in [("255", "broadcast"), ("0", "the ground")] {
+            let e = with(&["--secure", "k", "--ac-id", id]).check().unwrap_err();
+            assert!(e.contains(&format!("--ac-id {id} is {what}")), "{e}");
+        }
+        assert_eq!(with(&["--secure", "k", "--ac-id", "254"]).check(), Ok(()));
+        assert_eq!(with(&["--secure", "k", "--ac-id", "1"]).check(), Ok(()));
     }
 }

@@ -106,7 +106,10 @@ impl std::error::Error for SecureSetupError {
 pub enum HandshakeEvent {
     /// Message 2 verified: the session keys are installed, message 3 is the reply.
     Established,
-    /// A copy of the message 2 already accepted: message 3 is sent again.
+    /// A copy of the message 2 already accepted: message 3 is sent again (only while
+    /// the aircraft is unconfirmed, at most
+    /// [`MSG3_RESENDS`](pprz_secure::initiator::MSG3_RESENDS) times per handshake;
+    /// further copies are refused).
     Resend,
     /// Refused (counted): a forged, malformed, duplicate or unexpected message.
     Refused(HandshakeError),
@@ -161,7 +164,7 @@ impl SecureStatus {
         let state = describe_state(self.state);
         [
             format!(
-                "secure link: {state}  handshakes started {}  completed {}  refused {} (bad signature {}, bad tag {}, bad key {}, wrong address {}, unexpected {}, malformed {})  resent {}  re-keys {}",
+                "secure link: {state}  handshakes started {}  completed {}  refused {} (bad signature {}, bad tag {}, bad key {}, wrong address {}, unexpected {}, duplicate {}, malformed {})  resent {}  re-keys {}",
                 h.started,
                 h.completed,
                 h.refused(),
@@ -170,6 +173,7 @@ impl SecureStatus {
                 h.bad_key,
                 h.wrong_address,
                 h.unexpected,
+                h.duplicate,
                 h.malformed,
                 h.resent,
                 self.rekeys,
@@ -200,6 +204,9 @@ pub struct GroundSecure {
     rng: Box<dyn CryptoRng + Send>,
     /// Key-exchange messages that did not even parse (the initiator never sees them).
     malformed_kx: u32,
+    /// Plaintext frames that passed the channel but are not the aircraft's key
+    /// exchange (the initiator never sees them).
+    unexpected_kx: u32,
     rekeys: u32,
 }
 
@@ -237,6 +244,7 @@ impl GroundSecure {
             initiator,
             rng: Box::new(rng),
             malformed_kx: 0,
+            unexpected_kx: 0,
             rekeys: 0,
         }
     }
@@ -304,6 +312,7 @@ impl GroundSecure {
         let kx = match KeyExchange::parse(opened.data(), self.initiator.ids()) {
             Ok(Some(kx)) => kx,
             Ok(None) => {
+                self.unexpected_kx = self.unexpected_kx.wrapping_add(1);
                 return Incoming::Handshake {
                     event: HandshakeEvent::Refused(HandshakeError::Unexpected),
                     reply: None,
@@ -359,6 +368,7 @@ impl GroundSecure {
     pub fn status(&self) -> SecureStatus {
         let mut stats = SecureStats::new(self.initiator.stats(), &self.channel);
         stats.handshake.malformed = stats.handshake.malformed.wrapping_add(self.malformed_kx);
+        stats.handshake.unexpected = stats.handshake.unexpected.wrapping_add(self.unexpected_kx);
         SecureStatus {
             state: self.initiator.state(),
             stats,

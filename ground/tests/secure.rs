@@ -11,11 +11,12 @@ use pprz_ground::monitor::{Event, Monitor, Notice};
 use pprz_ground::secure::{GroundSecure, HandshakeEvent, Incoming, SecureSetupError};
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::uplink;
+use pprz_secure::initiator::MSG3_RESENDS;
 use pprz_secure::keys::{INSECURE_TEST_KEY_FILE, KeyFileErrorKind};
 use pprz_secure::rand_core::{CryptoRng, RngCore};
 use pprz_secure::{
     InitiatorState, KEY_EXCHANGE_GCS, KeyError, KeyExchange, KeyExchangeIds, KeyFile, KeyName,
-    OVERHEAD, Policy, Reject, Responder, ResponderEvent, SealError, SecureChannel,
+    MsgType, OVERHEAD, Policy, Reject, Responder, ResponderEvent, SealError, SecureChannel,
 };
 use pprz_test_support::rng::Rng;
 use pprz_transports::{AnyTransport, Encoder, Framing, MsgHeader, PprzV2, TxMeta};
@@ -424,6 +425,84 @@ fn a_forged_key_exchange_is_refused() {
     assert!(!g.has_session());
 }
 
+/// Whether `frame` is a plaintext `KEY_EXCHANGE_GCS` SIG (message 3) from the ground.
+fn is_message_3(frame: &[u8]) -> bool {
+    frame.len() > 8 && frame[2] == 0xAA && frame[6] == 159 && frame[8] == MsgType::Sig as u8
+}
+
+/// The message-3 frames the monitor writes at `t`.
+fn messages_3(m: &mut Monitor, t: f64) -> usize {
+    m.poll_secure(t).iter().filter(|f| is_message_3(f)).count()
+}
+
+/// A captured message 2, replayed 200 times, gets message 3 again at most
+/// `MSG3_RESENDS` times while the aircraft is unconfirmed and never once it is
+/// confirmed; forged copies get nothing. Every copy not answered is refused, counted
+/// and shown.
+#[test]
+fn replayed_message_2_does_not_make_message_3_again_and_again() {
+    let mut m = secure_monitor();
+    let mut air = Aircraft::new();
+    let msg1 = m.poll_secure(0.0);
+    assert_eq!(msg1.len(), 1);
+    let msg2 = air.receive(&msg1[0], 0);
+    assert!(feed(&mut m, 0.0, &msg2).is_empty());
+    let out = m.poll_secure(0.0);
+    assert_eq!(
+        out.iter().filter(|f| is_message_3(f)).count(),
+        1,
+        "message 3"
+    );
+    for f in &out {
+        air.receive(f, 0);
+    }
+    assert!(air.channel.has_session());
+    let st = m.secure_status().unwrap();
+    assert_eq!(st.state, InitiatorState::WaitConfirm);
+
+    // 200 replays while the aircraft is not yet heard under the session (same instant:
+    // no message 3 is due by the clock).
+    let mut sent = 0;
+    for _ in 0..200 {
+        assert!(feed(&mut m, 0.05, &msg2).is_empty());
+        sent += messages_3(&mut m, 0.05);
+    }
+    assert!(
+        sent <= usize::from(MSG3_RESENDS),
+        "{sent} messages 3 for 200 replays"
+    );
+
+    // The aircraft is heard under the session: confirmed.
+    let alive = air.seal(&plain(7, 0, 1, 2, &[2, 0xDE, 0xAD])).unwrap();
+    assert_eq!(feed(&mut m, 0.1, &alive).len(), 1);
+    assert_eq!(m.secure_status().unwrap().state, InitiatorState::Confirmed);
+    let mut after = 0;
+    for _ in 0..200 {
+        assert!(feed(&mut m, 0.2, &msg2).is_empty());
+        after += messages_3(&mut m, 0.2);
+    }
+    assert_eq!(after, 0, "no message 3 once the aircraft is confirmed");
+
+    // Forged messages 2: a byte of the aircraft's key or of the sealed signature changed.
+    for i in 0..20 {
+        let mut forged = msg2.clone();
+        forged[9 + i * 3] ^= 0x40;
+        assert!(feed(&mut m, 0.3, &refit_checksum(forged)).is_empty());
+        assert_eq!(messages_3(&mut m, 0.3), 0);
+    }
+
+    let st = m.secure_status().unwrap();
+    assert_eq!(st.state, InitiatorState::Confirmed, "{st:?}");
+    assert_eq!(st.stats.handshake.started, 1);
+    let refused = 400 - sent as u32 + 20;
+    assert_eq!(st.stats.handshake.refused(), refused, "{st:?}");
+    let view = m.render(0.3);
+    assert!(view.contains(&format!("refused {refused} (")), "{view}");
+    // The session is unchanged: the aircraft's telemetry still opens.
+    let gps = air.seal(&plain(7, 0, 1, 8, &gps_fields())).unwrap();
+    assert_eq!(feed(&mut m, 0.4, &gps).len(), 1);
+}
+
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("pprz-secure-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -532,6 +611,28 @@ fn the_command_line_refuses_bad_secure_setups() {
     let (code, help, _) = run(monitor().arg("--help"));
     assert_eq!(code, Some(0));
     assert!(help.contains("--secure <KEYFILE>"), "{help}");
+}
+
+/// `--secure` with `--ac-id 255` (broadcast) or `--ac-id 0` (the ground itself) has no
+/// aircraft to make a key exchange with: refused on the command line with one line and
+/// exit status 2, before anything starts (`--duration`: a guard against a hang).
+#[test]
+fn the_command_line_refuses_a_secure_link_to_no_aircraft() {
+    let link = ["--udp", "127.0.0.1:0", "--uplink", "127.0.0.1:9"];
+    for (id, what) in [("255", "broadcast"), ("0", "the ground")] {
+        let (code, out, err) = run(monitor()
+            .args(["--messages", MESSAGES, "--secure", KEY_FILE, "--lines"])
+            .args(link)
+            .args(["--ac-id", id, "--duration", "20"]));
+        assert_eq!(code, Some(2), "--ac-id {id}: {err}");
+        assert!(out.is_empty(), "{out}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            err.starts_with("error: --secure") && err.contains(&format!("--ac-id {id}")),
+            "{err}"
+        );
+        assert!(err.contains(what), "{err}");
+    }
 }
 
 /// `pprz-monitor --secure` over loopback UDP against the in-memory aircraft in a

@@ -149,7 +149,8 @@ pub struct HandshakeStats {
     pub wrong_address: u32,
     /// Refused: unexpected in the current state.
     pub unexpected: u32,
-    /// Ignored: duplicates of handled messages.
+    /// Refused: copies of handled messages (a replay, or a late copy) that get no
+    /// answer.
     pub duplicate: u32,
     /// Refused: rate limit.
     pub rate_limited: u32,
@@ -162,12 +163,13 @@ pub struct HandshakeStats {
 }
 
 impl HandshakeStats {
-    /// Every refusal, whatever the reason (duplicates excluded).
+    /// Every refusal, whatever the reason (duplicates included).
     pub fn refused(&self) -> u32 {
         [
             self.malformed,
             self.wrong_address,
             self.unexpected,
+            self.duplicate,
             self.rate_limited,
             self.bad_key,
             self.bad_tag,

@@ -8,6 +8,11 @@
 //!   [`MSG3_RESENDS`] times in vain or when the aircraft has been silent for
 //!   [`silence_ms`](Initiator::with_silence_ms) (a rebooted aircraft lost its session).
 //! * [`Initiator::handle`] takes message 2 and gives the session keys with message 3.
+//!   A copy of that message 2 gets message 3 again, within the same [`MSG3_RESENDS`]
+//!   and only while the aircraft is unconfirmed: a replayed message 2 cannot make the
+//!   ground send message 3 again and again. Further copies are refused as
+//!   [`HandshakeError::Duplicate`], and another message 2 once the session is up as
+//!   [`HandshakeError::Unexpected`] (forged or stale); both counted.
 //! * [`Initiator::confirm`] is called for every frame the channel decrypted: the
 //!   aircraft uses the session.
 //!
@@ -29,7 +34,8 @@ use crate::handshake::{
 };
 use crate::keys::GroundKeys;
 
-/// How many times message 3 is sent again before a new handshake starts.
+/// How many times message 3 is sent again (after a timeout, or for a copy of message 2)
+/// before a new handshake starts.
 pub const MSG3_RESENDS: u8 = 3;
 
 /// What the caller does after a successful [`Initiator::handle`].
@@ -43,7 +49,10 @@ pub enum InitiatorEvent {
         reply: KeyExchange,
     },
     /// A copy of the message 2 already accepted: send message 3 again (the aircraft
-    /// answered a repeated message 1, so it may have missed message 3).
+    /// answered a repeated message 1, so it may have missed message 3). Only while the
+    /// aircraft has not been heard under the session, and at most [`MSG3_RESENDS`]
+    /// times per handshake, counting the resends of [`Initiator::poll`]; further copies
+    /// are refused as [`HandshakeError::Duplicate`].
     Resend(KeyExchange),
 }
 
@@ -268,6 +277,37 @@ impl Initiator {
         result
     }
 
+    /// Message 2 after the handshake (state `Up`). A copy of the accepted one gets
+    /// message 3 again from the same budget as the clock's resends, and only while the
+    /// aircraft is not heard under the session; beyond that it is a replay. Any other
+    /// message 2 is forged or stale.
+    fn step_up(
+        &mut self,
+        data: &[u8; P_BE_DATA_LEN],
+        now_ms: u64,
+    ) -> Result<InitiatorEvent, HandshakeError> {
+        let State::Up {
+            msg2,
+            msg3,
+            sent_ms,
+            resends,
+            confirmed,
+        } = &mut self.state
+        else {
+            return Err(HandshakeError::Unexpected);
+        };
+        if !ct_eq(msg2, data) {
+            return Err(HandshakeError::Unexpected);
+        }
+        if *confirmed || *resends >= MSG3_RESENDS {
+            return Err(HandshakeError::Duplicate);
+        }
+        *resends += 1;
+        *sent_ms = now_ms;
+        let msg3 = *msg3;
+        Ok(InitiatorEvent::Resend(self.gcs(MsgType::Sig, &msg3)))
+    }
+
     fn step(&mut self, msg: &KeyExchange, now_ms: u64) -> Result<InitiatorEvent, HandshakeError> {
         if msg.msg != self.ids.uav {
             return Err(HandshakeError::Unexpected);
@@ -284,15 +324,13 @@ impl Initiator {
             .data()
             .try_into()
             .map_err(|_| HandshakeError::Malformed)?;
-        let (secret, p_ae) = match &self.state {
-            State::WaitMsg2 { secret, p_ae, .. } => (secret, *p_ae),
-            State::Up { msg2, msg3, .. } if ct_eq(msg2, data) => {
-                let msg3 = *msg3;
-                return Ok(InitiatorEvent::Resend(self.gcs(MsgType::Sig, &msg3)));
-            }
-            State::Up { .. } => return Err(HandshakeError::Duplicate),
-            State::Idle => return Err(HandshakeError::Unexpected),
+        if matches!(self.state, State::Up { .. }) {
+            return self.step_up(data, now_ms);
+        }
+        let State::WaitMsg2 { secret, p_ae, .. } = &self.state else {
+            return Err(HandshakeError::Unexpected);
         };
+        let p_ae = *p_ae;
         let (p_be_bytes, sealed) = data.split_at(PUBLIC_KEY_LEN);
         let mut p_be = [0u8; PUBLIC_KEY_LEN];
         p_be.copy_from_slice(p_be_bytes);

@@ -4,6 +4,7 @@
 mod common;
 
 use common::*;
+use pprz_secure::initiator::MSG3_RESENDS;
 use pprz_secure::{
     HandshakeError, KeyExchange, KeyExchangeIds, KeyFile, KeyName, MsgType, Protection, Reject,
     ResponderState, SealError,
@@ -317,8 +318,8 @@ fn msg1_flood_keeps_the_session_and_the_telemetry() {
     for f in std::mem::take(&mut air.out) {
         match ground.receive(&f, now) {
             Rx::App(p, Protection::Encrypted { .. }) => assert_eq!(p, alive()),
-            // The flood's messages 2 are not for this ground's handshake.
-            Rx::Handshake(Err(HandshakeError::Duplicate)) => {}
+            // The flood's messages 2 are not for this ground's handshake: refused.
+            Rx::Handshake(Err(HandshakeError::Unexpected)) => {}
             other => panic!("{other:?}"),
         }
     }
@@ -404,4 +405,55 @@ fn handshake_not_for_us() {
         air.receive(&as_plaintext(&buf[..n]), 0, &mut rng),
         Rx::Rejected(Reject::WrongAddress)
     );
+}
+
+/// A captured message 2 replayed 200 times: the initiator answers with message 3 at
+/// most `MSG3_RESENDS` times while the aircraft is unconfirmed, never once it is
+/// confirmed; every copy not answered and every forged message 2 is refused and counted.
+#[test]
+fn replayed_message_2_is_answered_at_most_msg3_resends_times() {
+    let mut rng = TestRng::new(42);
+    let (mut air, mut ground) = (Aircraft::new(), Ground::new());
+    ground.poll(0, &mut rng);
+    for f in std::mem::take(&mut ground.out) {
+        air.receive(&f, 0, &mut rng);
+    }
+    let msg2 = std::mem::take(&mut air.out);
+    assert_eq!(msg2.len(), 1);
+    let msg2 = msg2.into_iter().next().unwrap();
+    assert_eq!(ground.receive(&msg2, 0), Rx::Handshake(Ok(())));
+    for f in std::mem::take(&mut ground.out) {
+        air.receive(&f, 0, &mut rng);
+    }
+    assert!(air.ch.has_session() && ground.ch.has_session());
+    let replay = |ground: &mut Ground, now_ms| {
+        let mut sent = 0;
+        for _ in 0..200 {
+            let _ = ground.receive(&msg2, now_ms);
+            sent += std::mem::take(&mut ground.out).len();
+        }
+        sent
+    };
+    let sent = replay(&mut ground, 10);
+    assert!(sent <= usize::from(MSG3_RESENDS), "{sent} messages 3");
+    air.send(&alive()).unwrap();
+    for f in std::mem::take(&mut air.out) {
+        assert!(matches!(ground.receive(&f, 20), Rx::App(_, _)));
+    }
+    assert_eq!(ground.hs.state(), pprz_secure::InitiatorState::Confirmed);
+    assert_eq!(replay(&mut ground, 30), 0, "confirmed: no message 3");
+    // Forged: the aircraft's key changed, or the sealed signature.
+    for i in [10, 40, 100] {
+        assert_eq!(
+            ground.receive(&tamper(&msg2, i, 0x10), 40),
+            Rx::Handshake(Err(HandshakeError::Unexpected))
+        );
+    }
+    assert!(ground.out.is_empty());
+    let st = ground.hs.stats();
+    assert_eq!(st.duplicate, 400 - sent as u32, "{st:?}");
+    assert_eq!(st.unexpected, 3, "{st:?}");
+    assert_eq!(st.refused(), 403 - sent as u32, "{st:?}");
+    assert_eq!((st.started, st.completed), (1, 1), "{st:?}");
+    assert_eq!(ground.hs.state(), pprz_secure::InitiatorState::Confirmed);
 }

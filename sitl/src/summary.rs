@@ -135,8 +135,8 @@ pub struct SecureFigures {
     pub handshakes_started: u32,
     /// Handshakes completed (sessions installed).
     pub handshakes_completed: u32,
-    /// Key-exchange messages refused (malformed, wrong address, unexpected, rate
-    /// limited, bad key, tag or signature).
+    /// Key-exchange messages refused (malformed, wrong address, unexpected, duplicate,
+    /// rate limited, bad key, tag or signature).
     pub handshakes_refused: u32,
     /// Frames encrypted and sent.
     pub encrypted: u32,
