@@ -216,6 +216,47 @@ struct Recording {
     path: String,
 }
 
+impl Recording {
+    /// The first error of the file itself, if any.
+    fn first_error(&self) -> Option<String> {
+        self.error
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Writes the index and summary, flushes and syncs the file.
+    ///
+    /// # Errors
+    /// The file's first error (a full disk, say) rather than what the SDK says after
+    /// it ("attempted another write after a write method failed"), else the error of
+    /// the close.
+    fn close(self) -> Result<(), ViewerError> {
+        let Self {
+            handle,
+            error,
+            path,
+        } = self;
+        let fail = |e: &dyn std::fmt::Display| {
+            ViewerError::Record(format!("recording to {path} failed: {e}"))
+        };
+        let closed = handle
+            .close()
+            .map_err(|e| e.to_string())
+            .and_then(|mut file| {
+                file.flush().map_err(|e| e.to_string())?;
+                let watched = file.into_inner().map_err(|e| e.error().to_string())?;
+                watched.inner.sync_all().map_err(|e| e.to_string())
+            });
+        let first = error.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        match (first, closed) {
+            (Some(first), _) => Err(fail(&first)),
+            (None, Err(e)) => Err(fail(&e)),
+            (None, Ok(())) => Ok(()),
+        }
+    }
+}
+
 /// The topics of one aircraft besides its messages.
 struct AircraftTopics {
     location: Arc<RawChannel>,
@@ -353,11 +394,7 @@ impl Viewer {
     /// The first error of the recording, if any: the run must end.
     pub fn error(&self) -> Option<String> {
         let r = self.recording.as_ref()?;
-        let e = r
-            .error
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()?;
+        let e = r.first_error()?;
         Some(format!("recording to {} failed: {e}", r.path))
     }
 
@@ -549,18 +586,16 @@ impl Viewer {
     /// # Errors
     /// The recording failed (now or earlier).
     pub fn flush(&mut self) -> Result<(), ViewerError> {
-        if let Some(r) = &self.recording
-            && let Err(e) = r.handle.flush()
-        {
-            return Err(ViewerError::Record(format!(
-                "recording to {} failed: {e}",
-                r.path
-            )));
+        let Some(r) = &self.recording else {
+            return Ok(());
+        };
+        let flushed = r.handle.flush();
+        // The file's own error first: after it, the SDK only says that a write failed
+        // before.
+        if let Some(e) = self.error() {
+            return Err(ViewerError::Record(e));
         }
-        match self.error() {
-            Some(e) => Err(ViewerError::Record(e)),
-            None => Ok(()),
-        }
+        flushed.map_err(|e| ViewerError::Record(format!("recording to {} failed: {e}", r.path)))
     }
 
     /// Stops the server (without waiting for its clients) and finalises the recording
@@ -574,31 +609,10 @@ impl Viewer {
             // reading would hold the end of the run forever.
             server.stop().detach_all();
         }
-        let earlier = self.error();
         if let Some(r) = self.recording.take() {
-            let path = r.path.clone();
-            let fail = |e: &dyn std::fmt::Display| {
-                ViewerError::Record(format!("recording to {path} failed: {e}"))
-            };
-            let mut file = r.handle.close().map_err(|e| fail(&e))?;
-            file.flush().map_err(|e| fail(&e))?;
-            let watched = file
-                .into_inner()
-                .map_err(|e| fail(&e.error().to_string()))?;
-            watched.inner.sync_all().map_err(|e| fail(&e))?;
-            if let Some(e) = watched
-                .error
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .clone()
-            {
-                return Err(fail(&e));
-            }
+            r.close()?;
         }
-        match earlier {
-            Some(e) => Err(ViewerError::Record(e)),
-            None => Ok(self.counts),
-        }
+        Ok(self.counts)
     }
 }
 
