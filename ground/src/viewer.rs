@@ -36,7 +36,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
-use std::net::SocketAddr;
+use std::net::{Ipv4Addr, SocketAddr};
 use std::sync::{Arc, Mutex, PoisonError};
 
 use foxglove::{
@@ -49,8 +49,12 @@ use pprz_messages::{MessageDescriptor, priority};
 use crate::json;
 use crate::monitor::{Decoded, MAX_AIRCRAFT, Monitor};
 
+mod gate;
 pub mod settings;
 
+pub use gate::{
+    DEFAULT_MAX_CLIENTS, HANDSHAKE_TIMEOUT, MAX_CLIENT_MESSAGE, MAX_MAX_CLIENTS, MAX_REQUEST_HEAD,
+};
 pub use settings::SettingRequest;
 use settings::Settings;
 
@@ -151,6 +155,12 @@ pub struct ViewerCounts {
     pub undecodable: u64,
     /// Topics created.
     pub topics: u64,
+    /// WebSocket clients refused: the most allowed were connected.
+    pub clients_refused: u64,
+    /// WebSocket clients closed: a message over [`MAX_CLIENT_MESSAGE`] bytes, or an
+    /// HTTP request over [`MAX_REQUEST_HEAD`] bytes or not complete within
+    /// [`HANDSHAKE_TIMEOUT`].
+    pub clients_closed: u64,
 }
 
 impl std::fmt::Display for ViewerCounts {
@@ -158,8 +168,15 @@ impl std::fmt::Display for ViewerCounts {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft",
-            self.messages, self.locations, self.link, self.topics, self.undecodable, self.untracked
+            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft; clients refused {} (too many), closed {} (request too long or too slow)",
+            self.messages,
+            self.locations,
+            self.link,
+            self.topics,
+            self.undecodable,
+            self.untracked,
+            self.clients_refused,
+            self.clients_closed
         )
     }
 }
@@ -273,6 +290,8 @@ pub struct Viewer {
     schemas: HashMap<(u8, u8), Schema>,
     aircraft: BTreeMap<u8, AircraftTopics>,
     server: Option<WebSocketServerHandle>,
+    gate: Option<gate::Gate>,
+    max_clients: usize,
     settings: Option<Settings>,
     recording: Option<Recording>,
     counts: ViewerCounts,
@@ -293,16 +312,30 @@ impl Viewer {
             schemas: HashMap::new(),
             aircraft: BTreeMap::new(),
             server: None,
+            gate: None,
+            max_clients: DEFAULT_MAX_CLIENTS,
             settings: None,
             recording: None,
             counts: ViewerCounts::default(),
         }
     }
 
+    /// At most `n` WebSocket clients at once ([`DEFAULT_MAX_CLIENTS`] unless set; at
+    /// least 1, at most [`MAX_MAX_CLIENTS`]), for the next [`serve`](Self::serve).
+    #[must_use]
+    pub fn max_clients(mut self, n: usize) -> Self {
+        self.max_clients = n.clamp(1, MAX_MAX_CLIENTS);
+        self
+    }
+
     /// Serves the topics over the Foxglove WebSocket protocol at `addr` (port 0: any free
     /// port); returns the address it listens on. With `settings`, clients can read and
     /// write the aircraft's settings as parameters: the ground takes the requests with
     /// [`setting_requests`](Self::setting_requests) and sends them.
+    ///
+    /// The viewer listens at `addr` itself and relays each client to the SDK's server
+    /// (on a loopback port of its own): at most [`max_clients`](Self::max_clients) at
+    /// once, each message from a client at most [`MAX_CLIENT_MESSAGE`] bytes.
     ///
     /// # Errors
     /// The server could not bind or start.
@@ -312,21 +345,24 @@ impl Viewer {
         name: &str,
         settings: bool,
     ) -> Result<SocketAddr, ViewerError> {
+        let fail = |e: &dyn std::fmt::Display| ViewerError::Serve(format!("{addr}: {e}"));
+        let listener = std::net::TcpListener::bind(addr).map_err(|e| fail(&e))?;
+        let bound = listener.local_addr().map_err(|e| fail(&e))?;
         let mut server = WebSocketServer::new()
             .context(&self.context)
             .name(name)
-            .bind(addr.ip().to_string(), addr.port())
+            .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
             .message_backlog_size(CLIENT_BACKLOG);
         if settings {
             let (state, handler) = Settings::new();
             server = server.parameter_handler(Arc::new(handler));
             self.settings = Some(state);
         }
-        let handle = server
-            .start_blocking()
-            .map_err(|e| ViewerError::Serve(format!("{addr}: {e}")))?;
-        let bound = SocketAddr::new(addr.ip(), handle.port());
+        let handle = server.start_blocking().map_err(|e| fail(&e))?;
+        let upstream = SocketAddr::new(Ipv4Addr::LOCALHOST.into(), handle.port());
         self.server = Some(handle);
+        let gate = gate::Gate::start(listener, upstream, self.max_clients).map_err(|e| fail(&e))?;
+        self.gate = Some(gate);
         Ok(bound)
     }
 
@@ -379,9 +415,15 @@ impl Viewer {
         }
     }
 
-    /// What was published so far.
+    /// What was published so far, and the clients turned away.
     pub fn counts(&self) -> ViewerCounts {
-        self.counts
+        let mut c = self.counts;
+        if let Some(g) = &self.gate {
+            let g = g.counts();
+            c.clients_refused = g.refused;
+            c.clients_closed = g.closed;
+        }
+        c
     }
 
     /// WebSocket clients connected now.
@@ -604,6 +646,7 @@ impl Viewer {
     /// # Errors
     /// The recording failed (now or earlier).
     pub fn finish(mut self) -> Result<ViewerCounts, ViewerError> {
+        self.gate = None;
         if let Some(server) = self.server.take() {
             // Not waiting for the clients' connections to close: a client that stopped
             // reading would hold the end of the run forever.
