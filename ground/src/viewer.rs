@@ -25,7 +25,11 @@
 //!
 //! At most [`MAX_AIRCRAFT`] aircraft get topics (frames from further source ids are
 //! counted in [`ViewerCounts::untracked`]); each has at most one topic per message of the
-//! set. Each WebSocket client has a queue of [`CLIENT_BACKLOG`] messages in the SDK: a
+//! set. At most [`Viewer::max_clients`] WebSocket clients are served at once, and each
+//! message from a client is at most [`MAX_CLIENT_MESSAGE`] bytes: the viewer listens
+//! itself and relays each client to the SDK's server, which has neither bound
+//! ([`ViewerCounts::clients_refused`], [`ViewerCounts::clients_closed`] count the
+//! clients turned away). Each WebSocket client has a queue of [`CLIENT_BACKLOG`] messages in the SDK: a
 //! client that reads too slowly or vanishes loses the oldest messages of its own queue
 //! and never holds up decoding (logging to the server never waits). The recording is
 //! written as it goes, in chunks of [`CHUNK_SIZE`] bytes; [`Viewer::flush`] closes the

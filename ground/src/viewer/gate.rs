@@ -57,7 +57,7 @@ const REFUSAL: &[u8] = b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/
 
 /// What the door turned away.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct GateCounts {
+pub(crate) struct GateCounts {
     /// Connections refused because `max_clients` were connected.
     pub refused: u64,
     /// Connections closed because a message or the HTTP request was over its bound, or
@@ -207,41 +207,61 @@ fn relay(client: TcpStream, upstream: SocketAddr, place: &Arc<Place>) -> io::Res
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Breach;
 
-/// Relays the client's bytes to the server, checking each frame; closes both when the
-/// client is done or went over a bound.
+/// How the client's side of a connection ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// The client closed its side: the server's last words (its close frame) still go
+    /// out.
+    Closed,
+    /// A read or write failed.
+    Broken,
+    /// The client went over a bound.
+    Breach,
+}
+
+/// Relays the client's bytes to the server, checking each frame, until the client is
+/// done or went over a bound (both sides are then closed).
 fn inbound(mut client: TcpStream, mut server: TcpStream) -> Result<(), Breach> {
     let mut inspector = Inspector::new();
     let mut buf = vec![0u8; RELAY_BUFFER];
     let start = Instant::now();
-    let _ = client.set_read_timeout(Some(HANDSHAKE_TIMEOUT));
-    let result = loop {
+    let end = loop {
         if inspector.in_head() {
             let left = HANDSHAKE_TIMEOUT.saturating_sub(start.elapsed());
             if left.is_zero() || client.set_read_timeout(Some(left)).is_err() {
-                break Err(Breach);
+                break End::Breach;
             }
         }
         let n = match client.read(&mut buf) {
-            Ok(0) => break Ok(()),
+            Ok(0) => break End::Closed,
             Ok(n) => n,
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-            Err(e) if is_timeout(&e) && inspector.in_head() => break Err(Breach),
-            Err(_) => break Ok(()),
+            Err(e) if is_timeout(&e) && inspector.in_head() => break End::Breach,
+            Err(_) => break End::Broken,
         };
         let was_head = inspector.in_head();
         if inspector.feed(&buf[..n]).is_err() {
-            break Err(Breach);
+            break End::Breach;
         }
         if was_head && !inspector.in_head() {
+            // A viewer may send nothing for hours.
             let _ = client.set_read_timeout(None);
         }
         if server.write_all(&buf[..n]).is_err() {
-            break Ok(());
+            break End::Broken;
         }
     };
+    if end == End::Closed {
+        // The server then closes, and the outbound relay closes the client.
+        let _ = server.shutdown(Shutdown::Write);
+        return Ok(());
+    }
     let _ = server.shutdown(Shutdown::Both);
     let _ = client.shutdown(Shutdown::Both);
-    result
+    match end {
+        End::Breach => Err(Breach),
+        End::Closed | End::Broken => Ok(()),
+    }
 }
 
 /// Whether a read error is its timeout.
@@ -505,13 +525,16 @@ mod tests {
 
     #[test]
     fn the_client_over_the_limit_is_refused_and_a_place_freed_is_taken_again() {
-        // The "server": accepts and holds the relayed connections.
+        // The "server": accepts the relayed connections, closes each when its client
+        // has closed, as the SDK's does.
         let upstream = TcpListener::bind("127.0.0.1:0").unwrap();
         let up = upstream.local_addr().unwrap();
         let held = std::thread::spawn(move || {
-            (0..3)
-                .map(|_| upstream.accept().unwrap().0)
-                .collect::<Vec<_>>()
+            for _ in 0..3 {
+                let (mut s, _) = upstream.accept().unwrap();
+                std::thread::spawn(move || io::copy(&mut s, &mut io::sink()));
+            }
+            3
         });
         let listener = TcpListener::bind("127.0.0.1:0").unwrap();
         let gate = Gate::start(listener, up, 2).unwrap();
@@ -533,8 +556,7 @@ mod tests {
             std::thread::sleep(Duration::from_millis(50));
         }
         assert!(d.is_some(), "the place of the client that left is freed");
-        let servers = held.join().unwrap();
-        assert_eq!(servers.len(), 3);
+        assert_eq!(held.join().unwrap(), 3);
         assert_eq!(gate.counts().refused, 1);
     }
 }

@@ -99,7 +99,9 @@ def main():
         m = re.search(rb"serving ws://127.0.0.1:(\d+)", line)
         if m:
             port = int(m.group(1)); break
-    threading.Thread(target=lambda: mon.stderr.read(), daemon=True).start()
+    tail = []
+    reader = threading.Thread(target=lambda: tail.append(mon.stderr.read()), daemon=True)
+    reader.start()
     mon.stdin.write(frames(a.messages, a.aircraft)); mon.stdin.flush()
     time.sleep(2)
     print("before:", ", ".join(hwm(mon.pid)))
@@ -121,5 +123,9 @@ def main():
     for s in socks: s.close()
     mon.stdin.close()
     mon.wait(30)
+    reader.join(10)
+    for line in b"".join(tail).decode(errors="replace").splitlines():
+        if line.startswith("foxglove:"):
+            print(line)
 
 main()
