@@ -124,6 +124,10 @@ pub struct Args {
     /// protocol at this address (e.g. `127.0.0.1:8765`; port 0: any free port, printed).
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<SocketAddr>,
+    /// The most Foxglove clients served at once (1 to 256); further connections are
+    /// refused and counted.
+    #[arg(long, value_name = "N", default_value_t = crate::viewer::DEFAULT_MAX_CLIENTS, value_parser = parse_clients)]
+    pub foxglove_clients: usize,
     /// Record the decoded telemetry to this MCAP file (same topics and schemas as
     /// `--foxglove`), timestamped with the reception time, or with the log's time stamps
     /// when replaying a PPRZLOG file. It must not be one of the inputs.
@@ -253,6 +257,22 @@ pub fn parse_baud(s: &str) -> Result<u32, String> {
     Ok(v)
 }
 
+/// `--foxglove-clients`: from 1 to [`MAX_MAX_CLIENTS`](crate::viewer::MAX_MAX_CLIENTS).
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_clients(s: &str) -> Result<usize, String> {
+    let max = crate::viewer::MAX_MAX_CLIENTS;
+    let v: usize = s
+        .trim()
+        .parse()
+        .map_err(|e| format!("`{s}` is not a number of clients: {e}"))?;
+    if v == 0 || v > max {
+        return Err(format!("{v} is out of range: 1 to {max}"));
+    }
+    Ok(v)
+}
+
 /// `--setting INDEX=VALUE`: an index 0..=255 and a finite value that fits a `float`.
 ///
 /// # Errors
@@ -300,6 +320,10 @@ mod tests {
         for bad in ["0", "99999999999", "-5"] {
             assert!(parse(&[&format!("--baud={bad}")]).is_err(), "{bad}");
         }
+        for bad in ["0", "257", "-1", "x", ""] {
+            let e = parse(&[&format!("--foxglove-clients={bad}")]).unwrap_err();
+            assert!(e.contains("--foxglove-clients"), "{bad}: {e}");
+        }
         for bad in ["1=NaN", "1=inf", "1=1e39", "256=1", "-1=1", "1", "x=1"] {
             let e = parse(&["--tcp", "127.0.0.1:1", &format!("--setting={bad}")]).unwrap_err();
             assert!(e.contains("--setting"), "{bad}: {e}");
@@ -334,6 +358,9 @@ mod tests {
         assert_eq!(a.settings, [(3, 1.5)]);
         assert_eq!(a.check(), Ok(()));
         assert_eq!(parse(&["--ping", "3600"]).unwrap().ping, Some(3600.0));
+        assert_eq!(a.foxglove_clients, crate::viewer::DEFAULT_MAX_CLIENTS);
+        let n = parse(&["--foxglove-clients", "256"]).unwrap();
+        assert_eq!(n.foxglove_clients, 256);
     }
 
     #[test]

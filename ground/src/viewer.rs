@@ -25,7 +25,11 @@
 //!
 //! At most [`MAX_AIRCRAFT`] aircraft get topics (frames from further source ids are
 //! counted in [`ViewerCounts::untracked`]); each has at most one topic per message of the
-//! set. Each WebSocket client has a queue of [`CLIENT_BACKLOG`] messages in the SDK: a
+//! set. At most [`Viewer::max_clients`] WebSocket clients are served at once, and each
+//! message from a client is at most [`MAX_CLIENT_MESSAGE`] bytes: the viewer listens
+//! itself and relays each client to the SDK's server, which has neither bound
+//! ([`ViewerCounts::clients_refused`], [`ViewerCounts::clients_closed`] count the
+//! clients turned away). Each WebSocket client has a queue of [`CLIENT_BACKLOG`] messages in the SDK: a
 //! client that reads too slowly or vanishes loses the oldest messages of its own queue
 //! and never holds up decoding (logging to the server never waits). The recording is
 //! written as it goes, in chunks of [`CHUNK_SIZE`] bytes; [`Viewer::flush`] closes the
@@ -36,7 +40,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
-use std::net::SocketAddr;
+use std::net::{Ipv4Addr, SocketAddr};
 use std::sync::{Arc, Mutex, PoisonError};
 
 use foxglove::{
@@ -49,8 +53,12 @@ use pprz_messages::{MessageDescriptor, priority};
 use crate::json;
 use crate::monitor::{Decoded, MAX_AIRCRAFT, Monitor};
 
+mod gate;
 pub mod settings;
 
+pub use gate::{
+    DEFAULT_MAX_CLIENTS, HANDSHAKE_TIMEOUT, MAX_CLIENT_MESSAGE, MAX_MAX_CLIENTS, MAX_REQUEST_HEAD,
+};
 pub use settings::SettingRequest;
 use settings::Settings;
 
@@ -151,6 +159,12 @@ pub struct ViewerCounts {
     pub undecodable: u64,
     /// Topics created.
     pub topics: u64,
+    /// WebSocket clients refused: the most allowed were connected.
+    pub clients_refused: u64,
+    /// WebSocket clients closed: a message over [`MAX_CLIENT_MESSAGE`] bytes, or an
+    /// HTTP request over [`MAX_REQUEST_HEAD`] bytes or not complete within
+    /// [`HANDSHAKE_TIMEOUT`].
+    pub clients_closed: u64,
 }
 
 impl std::fmt::Display for ViewerCounts {
@@ -158,8 +172,15 @@ impl std::fmt::Display for ViewerCounts {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft",
-            self.messages, self.locations, self.link, self.topics, self.undecodable, self.untracked
+            "foxglove: published {} messages, {} locations, {} link statistics on {} topics; not published: {} unknown or malformed, {} from untracked aircraft; clients refused {} (too many), closed {} (request too long or too slow)",
+            self.messages,
+            self.locations,
+            self.link,
+            self.topics,
+            self.undecodable,
+            self.untracked,
+            self.clients_refused,
+            self.clients_closed
         )
     }
 }
@@ -216,6 +237,47 @@ struct Recording {
     path: String,
 }
 
+impl Recording {
+    /// The first error of the file itself, if any.
+    fn first_error(&self) -> Option<String> {
+        self.error
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Writes the index and summary, flushes and syncs the file.
+    ///
+    /// # Errors
+    /// The file's first error (a full disk, say) rather than what the SDK says after
+    /// it ("attempted another write after a write method failed"), else the error of
+    /// the close.
+    fn close(self) -> Result<(), ViewerError> {
+        let Self {
+            handle,
+            error,
+            path,
+        } = self;
+        let fail = |e: &dyn std::fmt::Display| {
+            ViewerError::Record(format!("recording to {path} failed: {e}"))
+        };
+        let closed = handle
+            .close()
+            .map_err(|e| e.to_string())
+            .and_then(|mut file| {
+                file.flush().map_err(|e| e.to_string())?;
+                let watched = file.into_inner().map_err(|e| e.error().to_string())?;
+                watched.inner.sync_all().map_err(|e| e.to_string())
+            });
+        let first = error.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        match (first, closed) {
+            (Some(first), _) => Err(fail(&first)),
+            (None, Err(e)) => Err(fail(&e)),
+            (None, Ok(())) => Ok(()),
+        }
+    }
+}
+
 /// The topics of one aircraft besides its messages.
 struct AircraftTopics {
     location: Arc<RawChannel>,
@@ -232,6 +294,8 @@ pub struct Viewer {
     schemas: HashMap<(u8, u8), Schema>,
     aircraft: BTreeMap<u8, AircraftTopics>,
     server: Option<WebSocketServerHandle>,
+    gate: Option<gate::Gate>,
+    max_clients: usize,
     settings: Option<Settings>,
     recording: Option<Recording>,
     counts: ViewerCounts,
@@ -252,16 +316,30 @@ impl Viewer {
             schemas: HashMap::new(),
             aircraft: BTreeMap::new(),
             server: None,
+            gate: None,
+            max_clients: DEFAULT_MAX_CLIENTS,
             settings: None,
             recording: None,
             counts: ViewerCounts::default(),
         }
     }
 
+    /// At most `n` WebSocket clients at once ([`DEFAULT_MAX_CLIENTS`] unless set; at
+    /// least 1, at most [`MAX_MAX_CLIENTS`]), for the next [`serve`](Self::serve).
+    #[must_use]
+    pub fn max_clients(mut self, n: usize) -> Self {
+        self.max_clients = n.clamp(1, MAX_MAX_CLIENTS);
+        self
+    }
+
     /// Serves the topics over the Foxglove WebSocket protocol at `addr` (port 0: any free
     /// port); returns the address it listens on. With `settings`, clients can read and
     /// write the aircraft's settings as parameters: the ground takes the requests with
     /// [`setting_requests`](Self::setting_requests) and sends them.
+    ///
+    /// The viewer listens at `addr` itself and relays each client to the SDK's server
+    /// (on a loopback port of its own): at most [`max_clients`](Self::max_clients) at
+    /// once, each message from a client at most [`MAX_CLIENT_MESSAGE`] bytes.
     ///
     /// # Errors
     /// The server could not bind or start.
@@ -271,21 +349,24 @@ impl Viewer {
         name: &str,
         settings: bool,
     ) -> Result<SocketAddr, ViewerError> {
+        let fail = |e: &dyn std::fmt::Display| ViewerError::Serve(format!("{addr}: {e}"));
+        let listener = std::net::TcpListener::bind(addr).map_err(|e| fail(&e))?;
+        let bound = listener.local_addr().map_err(|e| fail(&e))?;
         let mut server = WebSocketServer::new()
             .context(&self.context)
             .name(name)
-            .bind(addr.ip().to_string(), addr.port())
+            .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
             .message_backlog_size(CLIENT_BACKLOG);
         if settings {
             let (state, handler) = Settings::new();
             server = server.parameter_handler(Arc::new(handler));
             self.settings = Some(state);
         }
-        let handle = server
-            .start_blocking()
-            .map_err(|e| ViewerError::Serve(format!("{addr}: {e}")))?;
-        let bound = SocketAddr::new(addr.ip(), handle.port());
+        let handle = server.start_blocking().map_err(|e| fail(&e))?;
+        let upstream = SocketAddr::new(Ipv4Addr::LOCALHOST.into(), handle.port());
         self.server = Some(handle);
+        let gate = gate::Gate::start(listener, upstream, self.max_clients).map_err(|e| fail(&e))?;
+        self.gate = Some(gate);
         Ok(bound)
     }
 
@@ -338,9 +419,15 @@ impl Viewer {
         }
     }
 
-    /// What was published so far.
+    /// What was published so far, and the clients turned away.
     pub fn counts(&self) -> ViewerCounts {
-        self.counts
+        let mut c = self.counts;
+        if let Some(g) = &self.gate {
+            let g = g.counts();
+            c.clients_refused = g.refused;
+            c.clients_closed = g.closed;
+        }
+        c
     }
 
     /// WebSocket clients connected now.
@@ -353,11 +440,7 @@ impl Viewer {
     /// The first error of the recording, if any: the run must end.
     pub fn error(&self) -> Option<String> {
         let r = self.recording.as_ref()?;
-        let e = r
-            .error
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()?;
+        let e = r.first_error()?;
         Some(format!("recording to {} failed: {e}", r.path))
     }
 
@@ -549,18 +632,16 @@ impl Viewer {
     /// # Errors
     /// The recording failed (now or earlier).
     pub fn flush(&mut self) -> Result<(), ViewerError> {
-        if let Some(r) = &self.recording
-            && let Err(e) = r.handle.flush()
-        {
-            return Err(ViewerError::Record(format!(
-                "recording to {} failed: {e}",
-                r.path
-            )));
+        let Some(r) = &self.recording else {
+            return Ok(());
+        };
+        let flushed = r.handle.flush();
+        // The file's own error first: after it, the SDK only says that a write failed
+        // before.
+        if let Some(e) = self.error() {
+            return Err(ViewerError::Record(e));
         }
-        match self.error() {
-            Some(e) => Err(ViewerError::Record(e)),
-            None => Ok(()),
-        }
+        flushed.map_err(|e| ViewerError::Record(format!("recording to {} failed: {e}", r.path)))
     }
 
     /// Stops the server (without waiting for its clients) and finalises the recording
@@ -569,36 +650,16 @@ impl Viewer {
     /// # Errors
     /// The recording failed (now or earlier).
     pub fn finish(mut self) -> Result<ViewerCounts, ViewerError> {
+        self.gate = None;
         if let Some(server) = self.server.take() {
             // Not waiting for the clients' connections to close: a client that stopped
             // reading would hold the end of the run forever.
             server.stop().detach_all();
         }
-        let earlier = self.error();
         if let Some(r) = self.recording.take() {
-            let path = r.path.clone();
-            let fail = |e: &dyn std::fmt::Display| {
-                ViewerError::Record(format!("recording to {path} failed: {e}"))
-            };
-            let mut file = r.handle.close().map_err(|e| fail(&e))?;
-            file.flush().map_err(|e| fail(&e))?;
-            let watched = file
-                .into_inner()
-                .map_err(|e| fail(&e.error().to_string()))?;
-            watched.inner.sync_all().map_err(|e| fail(&e))?;
-            if let Some(e) = watched
-                .error
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .clone()
-            {
-                return Err(fail(&e));
-            }
+            r.close()?;
         }
-        match earlier {
-            Some(e) => Err(ViewerError::Record(e)),
-            None => Ok(self.counts),
-        }
+        Ok(self.counts)
     }
 }
 

@@ -22,6 +22,7 @@ use std::process::{Child, Command, Stdio};
 use common::{MESSAGES, monitor, run};
 use pprz_ground::set::RuntimeSet;
 use pprz_messages::dynamic;
+use pprz_test_support::reference::skip_test;
 use pprz_test_support::rng::Rng;
 use pprz_test_support::viewer_tools;
 use pprz_transports::{AnyTransport, Encoder, MsgHeader, PprzLog, PprzV2, TxMeta};
@@ -152,7 +153,10 @@ fn a_pprzlog_of_the_full_reference_set_converts_to_an_mcap_an_independent_reader
 #[test]
 fn a_recording_that_cannot_be_written_ends_the_run_with_a_failure() {
     if !Path::new("/dev/full").exists() {
-        eprintln!("skipped: no /dev/full");
+        skip_test(
+            "pprz-ground a_recording_that_cannot_be_written_ends_the_run_with_a_failure",
+            "no /dev/full here",
+        );
         return;
     }
     let set = RuntimeSet::load(MESSAGES).unwrap();
@@ -171,7 +175,13 @@ fn a_recording_that_cannot_be_written_ends_the_run_with_a_failure() {
         ])
         .arg(&input));
     assert_eq!(code, Some(1), "{err}");
-    assert!(err.contains("recording to /dev/full failed"), "{err}");
+    // The first cause, not what the SDK says after it.
+    let failures: Vec<&str> = err.lines().filter(|l| l.contains("failed")).collect();
+    assert_eq!(
+        failures,
+        ["error: recording to /dev/full failed: No space left on device (os error 28)"],
+        "{err}"
+    );
 }
 
 #[test]
@@ -392,4 +402,164 @@ fn hostile_names_are_refused_before_anything_is_served_or_recorded() {
         assert!(!err.contains("serving"), "{err}");
         assert!(!out.exists());
     }
+}
+
+/// Starts `pprz-monitor --stdin --foxglove 127.0.0.1:0` (the input stays open until
+/// the returned stdin is dropped); gives the child, its stdin, the server's address and
+/// the thread reading its standard error.
+fn serving_monitor(
+    extra: &[&str],
+) -> (
+    Child,
+    std::process::ChildStdin,
+    String,
+    std::thread::JoinHandle<String>,
+) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pprz-monitor"))
+        .args([
+            "--stdin",
+            "--lines",
+            "--messages",
+            MESSAGES,
+            "--foxglove",
+            "127.0.0.1:0",
+        ])
+        .args(extra)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdin = child.stdin.take().unwrap();
+    let (url, stderr) = viewer_tools::served_url(child.stderr.take().unwrap());
+    let addr = url.strip_prefix("ws://").unwrap().to_owned();
+    (child, stdin, addr, stderr)
+}
+
+/// Opens a connection and sends a Foxglove WebSocket handshake; gives the stream and the
+/// status line of the answer (empty when the server closed without one).
+fn ws_connect(addr: &str) -> (std::net::TcpStream, String) {
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    // A hang guard only.
+    s.set_read_timeout(Some(std::time::Duration::from_secs(20)))
+        .unwrap();
+    let request = format!(
+        "GET / HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
+    );
+    let _ = s.write_all(request.as_bytes());
+    let mut line = Vec::new();
+    let mut byte = [0u8; 1];
+    while !line.ends_with(b"\r\n") {
+        match s.read(&mut byte) {
+            Ok(1) => line.push(byte[0]),
+            _ => break,
+        }
+    }
+    (s, String::from_utf8_lossy(&line).trim().to_owned())
+}
+
+/// Reads until the server closes the connection: `true`, or `false` when it stays
+/// open (the read's hang guard expires).
+fn closed_by_server(s: &mut std::net::TcpStream) -> bool {
+    let mut buf = vec![0u8; 64 * 1024];
+    loop {
+        match s.read(&mut buf) {
+            Ok(0) => return true,
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => return true,
+            Err(_) => return false,
+        }
+    }
+}
+
+/// Ends a monitor started by [`serving_monitor`]: its status and standard error.
+fn end_monitor(
+    mut child: Child,
+    stdin: std::process::ChildStdin,
+    stderr: std::thread::JoinHandle<String>,
+) -> (Option<i32>, String) {
+    drop(stdin);
+    let status = child.wait().unwrap();
+    (status.code(), stderr.join().unwrap())
+}
+
+/// Peak resident memory of a process, kB (`VmHWM`); `None` without `/proc`.
+fn peak_rss_kb(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+#[test]
+fn the_client_over_the_limit_is_refused_and_counted() {
+    let max = pprz_ground::viewer::DEFAULT_MAX_CLIENTS;
+    let (child, stdin, addr, stderr) = serving_monitor(&[]);
+    let mut clients = Vec::new();
+    for i in 0..max {
+        let (s, status) = ws_connect(&addr);
+        assert!(status.starts_with("HTTP/1.1 101"), "client {i}: {status:?}");
+        clients.push(s);
+    }
+    let (mut extra, status) = ws_connect(&addr);
+    assert!(
+        status.starts_with("HTTP/1.1 503"),
+        "client {max}: {status:?}"
+    );
+    assert!(closed_by_server(&mut extra));
+    // A client that leaves frees its place (bounded retries while the place is freed).
+    drop(clients.pop());
+    let mut accepted = false;
+    for _ in 0..100 {
+        let (s, status) = ws_connect(&addr);
+        if status.starts_with("HTTP/1.1 101") {
+            clients.push(s);
+            accepted = true;
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    assert!(accepted, "a place freed is taken again");
+    drop(clients);
+    let (code, err) = end_monitor(child, stdin, stderr);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("clients refused "), "{err}");
+    assert!(!err.contains("clients refused 0 "), "{err}");
+}
+
+#[test]
+fn a_fragmented_message_over_the_bound_closes_its_connection() {
+    let (child, stdin, addr, stderr) = serving_monitor(&[]);
+    let (mut hostile, status) = ws_connect(&addr);
+    assert!(status.starts_with("HTTP/1.1 101"), "{status:?}");
+    let before = peak_rss_kb(child.id());
+    // One text message in fragments of 1 MiB (masked, as a client's must be), 16 in
+    // all: 16 times the bound.
+    let fragment = |first: bool| {
+        let mut f = vec![if first { 0x01 } else { 0x00 }, 0x80 | 127];
+        f.extend((1u64 << 20).to_be_bytes());
+        f.extend([0u8; 4]); // a zero mask: the payload as it is
+        f.resize(f.len() + (1 << 20), b' ');
+        f
+    };
+    let mut sent = 0;
+    for i in 0..16 {
+        if hostile.write_all(&fragment(i == 0)).is_err() {
+            break;
+        }
+        sent += 1;
+    }
+    assert!(
+        closed_by_server(&mut hostile),
+        "still open after {sent} MiB"
+    );
+    if let (Some(before), Some(after)) = (before, peak_rss_kb(child.id())) {
+        // Unbounded, the server would hold the 16 MiB.
+        assert!(after < before + 8 * 1024, "{before} kB, then {after} kB");
+    }
+    // The others are still served.
+    let (_other, status) = ws_connect(&addr);
+    assert!(status.starts_with("HTTP/1.1 101"), "{status:?}");
+    let (code, err) = end_monitor(child, stdin, stderr);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("closed 1 (request too long"), "{err}");
 }

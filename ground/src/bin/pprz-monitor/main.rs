@@ -309,7 +309,7 @@ fn open_viewer(args: &Args, inputs: &Inputs, uplink: bool) -> Result<Option<View
     if args.mcap.is_none() && args.foxglove.is_none() {
         return Ok(None);
     }
-    let mut viewer = Viewer::new();
+    let mut viewer = Viewer::new().max_clients(args.foxglove_clients);
     if let Some(path) = &args.mcap {
         let file = record::open_recording(path, inputs).map_err(|e| e.to_string())?;
         viewer
