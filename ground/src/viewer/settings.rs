@@ -556,10 +556,13 @@ mod tests {
     use super::*;
     use std::sync::Mutex;
 
+    /// The values of each answer: (name, value).
+    type Values = Vec<Vec<(String, f64)>>;
+
     /// The answers a client got: the values of each, and the error statuses.
     #[derive(Default, Clone)]
     struct Answers {
-        values: Arc<Mutex<Vec<Vec<(String, f64)>>>>,
+        values: Arc<Mutex<Values>>,
         errors: Arc<Mutex<Vec<String>>>,
     }
 
