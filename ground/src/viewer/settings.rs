@@ -382,7 +382,11 @@ impl Settings {
                 .reported
                 .or_else(|| self.known.get(&(w.ac_id, w.index)).copied());
             values.extend(v.map(|v| Parameter::float64(parameter_name(w.ac_id, w.index), v)));
-            errors.extend(w.failed.clone());
+            if let Some(e) = &w.failed
+                && !errors.contains(e)
+            {
+                errors.push(e.clone());
+            }
         }
         p.reply.send(values, &errors);
     }
@@ -698,6 +702,7 @@ mod tests {
         assert!(s.poll(0.0).is_empty());
         assert_eq!(s.not_sent_counts().busy, 1);
         assert_eq!(answers.values.lock().unwrap().len(), 1);
+        assert_eq!(*answers.errors.lock().unwrap(), [BUSY]);
         // The channel itself is bounded: the handler answers empty when it is full.
         let (s2, handler) = Settings::new();
         for _ in 0..MAX_PENDING {
