@@ -273,7 +273,9 @@ pub fn parse_clients(s: &str) -> Result<usize, String> {
     Ok(v)
 }
 
-/// `--setting INDEX=VALUE`: an index 0..=255 and a finite value that fits a `float`.
+/// `--setting INDEX=VALUE`: an index 0..=255 and a value that fits a `float`
+/// ([`setting_value`](crate::settings::setting_value), the rule the viewer's settings
+/// follow too).
 ///
 /// # Errors
 /// A message for the user.
@@ -285,15 +287,11 @@ pub fn parse_setting(s: &str) -> Result<(u8, f32), String> {
         .trim()
         .parse::<u8>()
         .map_err(|e| format!("index `{i}`: {e} (0 to 255)"))?;
-    let v = v
-        .trim()
-        .parse::<f32>()
-        .map_err(|e| format!("value `{v}`: {e}"))?;
-    if !v.is_finite() {
-        return Err(format!(
-            "value `{v}` is not a finite number that fits a float"
-        ));
-    }
+    let text = v.trim();
+    let v = text
+        .parse::<f64>()
+        .map_err(|e| format!("value `{text}`: {e}"))?;
+    let v = crate::settings::setting_value(v).map_err(|e| format!("value `{text}`: {e}"))?;
     Ok((i, v))
 }
 
@@ -324,7 +322,9 @@ mod tests {
             let e = parse(&[&format!("--foxglove-clients={bad}")]).unwrap_err();
             assert!(e.contains("--foxglove-clients"), "{bad}: {e}");
         }
-        for bad in ["1=NaN", "1=inf", "1=1e39", "256=1", "-1=1", "1", "x=1"] {
+        for bad in [
+            "1=NaN", "1=inf", "1=1e39", "1=1e300", "1=-1e39", "256=1", "-1=1", "1", "x=1",
+        ] {
             let e = parse(&["--tcp", "127.0.0.1:1", &format!("--setting={bad}")]).unwrap_err();
             assert!(e.contains("--setting"), "{bad}: {e}");
         }

@@ -53,6 +53,48 @@ pub fn quantize(base: BaseType, v: f64) -> f64 {
     }
 }
 
+/// A SETTING value that cannot be sent: not a finite number that fits a `float` (NaN,
+/// an infinity, or a finite double such as 1e300 that would go out as an infinity).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NotAFloat(pub f64);
+
+impl std::fmt::Display for NotAFloat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
+        // 1e300, not three hundred digits.
+        if v.is_finite() && v != 0.0 && !(1e-5..1e16).contains(&v.abs()) {
+            write!(f, "{v:e} is not a finite number that fits a float")
+        } else {
+            write!(f, "{v} is not a finite number that fits a float")
+        }
+    }
+}
+
+impl std::error::Error for NotAFloat {}
+
+/// The one rule for the value of a SETTING, wherever it comes from (`--setting`, a
+/// viewer): a finite number that fits a `float`. Returns it as a `float`.
+///
+/// ```
+/// use pprz_ground::settings::{NotAFloat, setting_value};
+/// assert_eq!(setting_value(1.5), Ok(1.5f32));
+/// assert_eq!(setting_value(1e300), Err(NotAFloat(1e300)));
+/// assert_eq!(setting_value(-1e39), Err(NotAFloat(-1e39)));
+/// assert!(setting_value(f64::NAN).is_err());
+/// assert_eq!(NotAFloat(1e300).to_string(), "1e300 is not a finite number that fits a float");
+/// ```
+///
+/// # Errors
+/// [`NotAFloat`]: NaN, an infinity, or beyond the range of a `float`.
+pub fn setting_value(v: f64) -> Result<f32, NotAFloat> {
+    let f = v as f32;
+    if f.is_finite() {
+        Ok(f)
+    } else {
+        Err(NotAFloat(v))
+    }
+}
+
 /// What a DL_VALUE means for the requests pending on its index.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Answer {

@@ -165,10 +165,20 @@ pub struct ViewerCounts {
     /// HTTP request over [`MAX_REQUEST_HEAD`] bytes or not complete within
     /// [`HANDSHAKE_TIMEOUT`].
     pub clients_closed: u64,
+    /// Settings set from a viewer to a value a SETTING cannot carry (not a finite
+    /// number that fits a `float`): refused, not sent.
+    pub settings_refused: u64,
+    /// Settings requested from a viewer that the ground could not send (no secure
+    /// session yet, or the uplink failed).
+    pub settings_unsent: u64,
+    /// Settings requests from a viewer answered at once, unsent, because too many were
+    /// waiting for the aircraft.
+    pub settings_busy: u64,
 }
 
 impl std::fmt::Display for ViewerCounts {
-    /// The end-of-run line: `foxglove: published ...; not published: ...`.
+    /// The end-of-run line: `foxglove: published ...; not published: ...`, and the
+    /// settings from viewers not sent, if any.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
@@ -181,7 +191,19 @@ impl std::fmt::Display for ViewerCounts {
             self.untracked,
             self.clients_refused,
             self.clients_closed
-        )
+        )?;
+        let (r, u, b) = (
+            self.settings_refused,
+            self.settings_unsent,
+            self.settings_busy,
+        );
+        if r + u + b > 0 {
+            write!(
+                f,
+                "; settings from viewers not sent: {r} refused (not a float), {u} with no link to send them, {b} with too many waiting"
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -410,6 +432,17 @@ impl Viewer {
         requests
     }
 
+    /// Tells the viewers that `request` (one of [`setting_requests`](Self::setting_requests)'s)
+    /// was not sent, because of `why` (no secure session yet, the uplink failed): the
+    /// client that asked gets its answer (what is known) and an error status naming `why`
+    /// as soon as nothing else of its request is waiting; counted in
+    /// [`ViewerCounts::settings_unsent`].
+    pub fn setting_not_sent(&mut self, request: &SettingRequest, why: &str) {
+        if let Some(s) = self.settings.as_mut() {
+            s.not_sent(request, why);
+        }
+    }
+
     /// Sends warnings to every client.
     fn warn(&self, warnings: Vec<settings::Warning>) {
         if let Some(server) = &self.server {
@@ -419,13 +452,20 @@ impl Viewer {
         }
     }
 
-    /// What was published so far, and the clients turned away.
+    /// What was published so far, the clients turned away and the settings from
+    /// viewers not sent.
     pub fn counts(&self) -> ViewerCounts {
         let mut c = self.counts;
         if let Some(g) = &self.gate {
             let g = g.counts();
             c.clients_refused = g.refused;
             c.clients_closed = g.closed;
+        }
+        if let Some(s) = &self.settings {
+            let n = s.not_sent_counts();
+            c.settings_refused = n.refused;
+            c.settings_unsent = n.unsent;
+            c.settings_busy = n.busy;
         }
         c
     }
@@ -569,9 +609,10 @@ impl Viewer {
         self.warn(warnings);
     }
 
-    /// Publishes the link statistics of every aircraft the monitor tracks at `time_ns`;
-    /// `aircraft_side` gives, when known, the aircraft's own figures per priority level
-    /// (high, normal, low).
+    /// Publishes the link statistics of every aircraft the monitor tracks and heard at
+    /// `time_ns` (an aircraft only addressed takes no place among the
+    /// [`MAX_AIRCRAFT`] with topics); `aircraft_side` gives, when known, the aircraft's
+    /// own figures per priority level (high, normal, low).
     pub fn link_stats(
         &mut self,
         time_ns: u64,
@@ -579,7 +620,7 @@ impl Viewer {
         aircraft_side: impl Fn(u8) -> Option<[LevelFigures; 3]>,
     ) {
         for ac_id in monitor.aircraft() {
-            let Some(state) = monitor.aircraft_state(ac_id) else {
+            let Some(state) = monitor.aircraft_state(ac_id).filter(|a| a.frames() > 0) else {
                 continue;
             };
             let side = aircraft_side(ac_id);

@@ -206,6 +206,13 @@ impl Ground<'_> {
             let (name, values) = request.message();
             if self.send(request.ac_id(), name, &values) {
                 request.sent(&mut self.monitor, t);
+            } else if let Some(v) = self.viewer.as_mut() {
+                let why = if self.monitor.uplink_ready() {
+                    "the uplink failed"
+                } else {
+                    "no secure session yet"
+                };
+                v.setting_not_sent(&request, why);
             }
         }
     }

@@ -169,9 +169,11 @@ impl Monitor {
     }
 
     /// Counts a frame from aircraft `source`, tracked (created while fewer than
-    /// [`MAX_AIRCRAFT`] are) or not.
+    /// [`MAX_AIRCRAFT`] aircraft were heard; already tracked because the ground
+    /// addresses it) or not. Aircraft only addressed, never heard, take none of the
+    /// [`MAX_AIRCRAFT`] places.
     fn admit(&mut self, source: u8) {
-        if !self.aircraft.contains_key(&source) && self.aircraft.len() >= MAX_AIRCRAFT {
+        if !self.aircraft.contains_key(&source) && self.heard >= MAX_AIRCRAFT {
             self.untracked_frames += 1;
             self.untracked_ids[usize::from(source / 64)] |= 1 << (source % 64);
             return;
@@ -181,6 +183,9 @@ impl Monitor {
             .aircraft
             .entry(source)
             .or_insert_with(|| Aircraft::new(source, pings, settings));
+        if a.frames == 0 {
+            self.heard += 1;
+        }
         a.frames += 1;
     }
 

@@ -38,7 +38,9 @@
 //! [`MAX_AIRCRAFT`] aircraft: frames from further source ids are decoded, shown and
 //! counted with all aircraft and in [`Monitor::untracked_frames`], but get no table of
 //! their own (a flood of frames from every source id costs nothing more). Aircraft the
-//! ground addresses are tracked whatever the input. The worst case is
+//! ground addresses are tracked whatever the input, and take none of the places of the
+//! aircraft heard until they are heard themselves (a few hundred bytes each until then,
+//! 256 ids at most). The worst case is
 //! `(MAX_AIRCRAFT + 1) * messages in the set` entries of at most about 4 KiB each (tens of
 //! MiB for the 367 messages of the full PPRZLINK set, every one sent by 32 aircraft with
 //! fields that print to the longest text; a few hundred bytes per entry in practice);
@@ -94,7 +96,8 @@ pub const MAX_SECURE_OUT: usize = 4;
 
 /// Aircraft (source ids) that received frames make the monitor track; frames from
 /// further source ids are counted ([`Monitor::untracked_frames`]), not tracked. Aircraft
-/// the ground addresses (PING, SETTING) are tracked beyond this bound.
+/// the ground addresses (PING, SETTING) are tracked beyond this bound, and take none of
+/// its places until they are heard.
 pub const MAX_AIRCRAFT: usize = 32;
 
 /// Seconds during which rejections of the same reason share one notice.
@@ -110,6 +113,8 @@ pub struct Monitor {
     /// All aircraft together.
     messages: BTreeMap<(u8, u8), MessageStats>,
     aircraft: BTreeMap<u8, Aircraft>,
+    /// Aircraft tracked that sent frames (those only addressed do not count).
+    heard: usize,
     untracked_frames: u64,
     /// Bit `n` set: frames from source `n` were not tracked.
     untracked_ids: [u64; 4],
@@ -142,6 +147,7 @@ impl Monitor {
             decoder: Decoder::new(transport),
             messages: BTreeMap::new(),
             aircraft: BTreeMap::new(),
+            heard: 0,
             untracked_frames: 0,
             untracked_ids: [0; 4],
             bytes: 0,

@@ -562,3 +562,32 @@ fn a_steady_rate_reads_true_whenever_it_is_read() {
         }
     }
 }
+
+/// Issue: GET_SETTINGs to 40 aircraft never heard (ids 100..139) took the
+/// [`MAX_AIRCRAFT`] places, so aircraft 7, heard next, was untracked. Aircraft only
+/// addressed take no place; those heard still make at most [`MAX_AIRCRAFT`].
+#[test]
+fn aircraft_only_addressed_take_no_place_of_aircraft_heard() {
+    let mut m = monitor();
+    for ac in 100..140 {
+        m.get_setting_sent(Some(ac), 0.0, 0);
+    }
+    feed(&mut m, 1.0, &frame_from(7, 0, 215, b"hello"));
+    assert!(m.aircraft_state(7).is_some_and(|a| a.frames() == 1));
+    assert_eq!(m.untracked_frames(), 0);
+    // 31 more aircraft heard: 32 in all, then the bound holds.
+    for src in 0..40u8 {
+        feed(&mut m, 2.0, &frame_from(src, 0, 215, b"x"));
+    }
+    let heard = m
+        .aircraft()
+        .into_iter()
+        .filter(|&a| m.aircraft_state(a).unwrap().frames() > 0)
+        .count();
+    assert_eq!(heard, MAX_AIRCRAFT);
+    // 7, then 0..=31: 32 heard; 32..=39 untracked.
+    assert_eq!(m.untracked_aircraft(), 8);
+    // An aircraft addressed and then heard is tracked, as before.
+    feed(&mut m, 3.0, &frame_from(120, 0, 215, b"x"));
+    assert_eq!(m.aircraft_state(120).unwrap().frames(), 1);
+}

@@ -11,12 +11,24 @@
 //!   says "not applied".
 //! * Requests unanswered after [`ANSWER_TIMEOUT`] seconds are answered with what is known,
 //!   and a warning status says so.
+//! * A value that a SETTING cannot carry (not a finite number that fits a `float`, the
+//!   rule of `--setting`: [`setting_value`]) is refused: nothing is sent, and the answer
+//!   comes at once with what is known and an error status to the client. So is a
+//!   setting the ground cannot send ([`Viewer::setting_not_sent`]: no secure session
+//!   yet, or the uplink failed). Both are counted ([`ViewerCounts`]).
+//! * A request to an aircraft the monitor does not track is sent, but does not make the
+//!   monitor track it ([`SettingRequest::sent`]).
 //!
 //! Bounded: at most [`MAX_NAMES`] parameters per request, [`MAX_PENDING`] requests
-//! waiting (further ones are answered at once with what is known, and counted), and one
-//! value per aircraft and index.
+//! waiting (further ones are answered at once with what is known and an error status,
+//! and counted), and one value per aircraft and index.
+//!
+//! [`Viewer::setting_not_sent`]: super::Viewer::setting_not_sent
+//! [`ViewerCounts`]: super::ViewerCounts
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 
 use foxglove::websocket::{
@@ -26,7 +38,7 @@ use foxglove::websocket::{
 use pprz_messages::BaseType;
 
 use crate::monitor::Monitor;
-use crate::settings::quantize;
+use crate::settings::{quantize, setting_value};
 
 /// Parameters per request, at most (further names are ignored).
 pub const MAX_NAMES: usize = 32;
@@ -106,8 +118,14 @@ impl SettingRequest {
     }
 
     /// Tells `monitor` the request was sent at `now`, so that the aircraft's DL_VALUE
-    /// is matched to it.
+    /// is matched to it, if the monitor tracks the aircraft (it heard it, or the ground
+    /// addresses it). A request from a viewer never makes the monitor track an aircraft:
+    /// it must not take the place of one heard. The viewer matches the answer all the
+    /// same.
     pub fn sent(&self, monitor: &mut Monitor, now: f64) {
+        if monitor.aircraft_state(self.ac_id()).is_none() {
+            return;
+        }
         match *self {
             Self::Get { ac_id, index } => monitor.get_setting_sent(Some(ac_id), now, index),
             Self::Set {
@@ -119,21 +137,60 @@ impl SettingRequest {
     }
 }
 
-/// Where an answer goes (a Foxglove responder; a closure in tests).
-pub(crate) type Respond = Box<dyn FnOnce(Vec<Parameter>) + Send>;
+/// Where an answer goes: the values, and an error status, to the requesting client (a
+/// Foxglove responder and its client; closures in tests).
+pub(crate) struct Reply {
+    values: Box<dyn FnOnce(Vec<Parameter>) + Send>,
+    error: Box<dyn FnOnce(String) + Send>,
+}
+
+impl Reply {
+    /// A reply made of `values` (the parameters answered) and `error` (an error status).
+    pub(crate) fn new(
+        values: impl FnOnce(Vec<Parameter>) + Send + 'static,
+        error: impl FnOnce(String) + Send + 'static,
+    ) -> Self {
+        Self {
+            values: Box::new(values),
+            error: Box::new(error),
+        }
+    }
+
+    /// Answers with `values`, after an error status made of `errors` if there are any
+    /// (the status first: a client reading the answer has seen why).
+    fn send(self, values: Vec<Parameter>, errors: &[String]) {
+        if !errors.is_empty() {
+            (self.error)(errors.join("; "));
+        }
+        (self.values)(values);
+    }
+}
+
+/// A setting refused before anything is sent: its value is not one a SETTING carries.
+pub(crate) struct Refused {
+    ac_id: u8,
+    index: u8,
+    why: String,
+}
 
 /// A request from a viewer, as the handler passes it on.
 pub(crate) enum Call {
     /// Read these settings (none: every known one).
-    Get(Vec<(u8, u8)>, Respond),
-    /// Write these settings.
-    Set(Vec<(u8, u8, f64)>, Respond),
+    Get(Vec<(u8, u8)>, Reply),
+    /// Write these settings; the `refused` ones are not sent.
+    Set {
+        values: Vec<(u8, u8, f64)>,
+        refused: Vec<Refused>,
+        reply: Reply,
+    },
 }
 
 /// The SDK's parameter handler: passes requests to the ground's loop through a bounded
 /// channel (never blocks the server).
 pub(crate) struct Handler {
     tx: SyncSender<Call>,
+    /// Requests answered here because the channel was full.
+    busy: Arc<AtomicU64>,
 }
 
 impl Handler {
@@ -142,11 +199,28 @@ impl Handler {
             self.tx.try_send(call)
         {
             // The ground is behind: nothing is known here, answer empty.
-            match call {
-                Call::Get(_, respond) | Call::Set(_, respond) => respond(Vec::new()),
-            }
+            self.busy.fetch_add(1, Ordering::Relaxed);
+            let reply = match call {
+                Call::Get(_, reply) | Call::Set { reply, .. } => reply,
+            };
+            reply.send(Vec::new(), &[BUSY.to_owned()]);
         }
     }
+}
+
+/// The error status of a request answered at once because too many are waiting.
+const BUSY: &str = "settings not sent: too many requests are waiting for the aircraft";
+
+/// The value of a parameter set from a viewer, if it is one a SETTING carries (the rule
+/// of `--setting`: [`setting_value`]).
+fn set_value(value: Option<&ParameterValue>) -> Result<f64, String> {
+    let v = match value {
+        Some(ParameterValue::Float64(v)) => *v,
+        Some(ParameterValue::Integer(v)) => *v as f64,
+        Some(ParameterValue::Bool(b)) => f64::from(u8::from(*b)),
+        _ => return Err("not a number".to_owned()),
+    };
+    setting_value(v).map(|_| v).map_err(|e| e.to_string())
 }
 
 impl ParameterHandler for Handler {
@@ -162,7 +236,9 @@ impl ParameterHandler for Handler {
             .filter_map(|n| parse_name(n))
             .take(MAX_NAMES)
             .collect();
-        self.pass(Call::Get(keys, Box::new(move |p| responder.respond(p))));
+        let client = responder.client();
+        let reply = Reply::new(move |p| responder.respond(p), move |e| client.send_error(e));
+        self.pass(Call::Get(keys, reply));
     }
 
     fn set(
@@ -172,21 +248,30 @@ impl ParameterHandler for Handler {
         _request_id: Option<String>,
         responder: SetParametersResponder,
     ) {
-        let values = parameters
-            .iter()
-            .filter_map(|p| {
-                let (ac, index) = parse_name(&p.name)?;
-                let value = match p.value.as_ref()? {
-                    ParameterValue::Float64(v) => *v,
-                    ParameterValue::Integer(v) => *v as f64,
-                    ParameterValue::Bool(b) => f64::from(u8::from(*b)),
-                    _ => return None,
-                };
-                value.is_finite().then_some((ac, index, value))
-            })
-            .take(MAX_NAMES)
-            .collect();
-        self.pass(Call::Set(values, Box::new(move |p| responder.respond(p))));
+        let client = responder.client();
+        let reply = Reply::new(move |p| responder.respond(p), move |e| client.send_error(e));
+        self.pass(set_call(&parameters, reply));
+    }
+}
+
+/// The call for setting `parameters` (those named `/ac/<id>/settings/<index>`, the first
+/// [`MAX_NAMES`]): the values a SETTING can carry, and the others refused.
+fn set_call(parameters: &[Parameter], reply: Reply) -> Call {
+    let mut values = Vec::new();
+    let mut refused = Vec::new();
+    let ours = parameters
+        .iter()
+        .filter_map(|p| Some((parse_name(&p.name)?, p.value.as_ref())));
+    for ((ac_id, index), value) in ours.take(MAX_NAMES) {
+        match set_value(value) {
+            Ok(v) => values.push((ac_id, index, v)),
+            Err(why) => refused.push(Refused { ac_id, index, why }),
+        }
+    }
+    Call::Set {
+        values,
+        refused,
+        reply,
     }
 }
 
@@ -198,12 +283,44 @@ struct Wait {
     requested: Option<f64>,
     /// The value reported since the request.
     reported: Option<f64>,
+    /// Why it was not sent (refused, or no link to send it on).
+    failed: Option<String>,
+}
+
+impl Wait {
+    fn new(ac_id: u8, index: u8, requested: Option<f64>) -> Self {
+        Self {
+            ac_id,
+            index,
+            requested,
+            reported: None,
+            failed: None,
+        }
+    }
+
+    /// Answered, or never to be.
+    fn done(&self) -> bool {
+        self.reported.is_some() || self.failed.is_some()
+    }
+
+    /// The request to send for it.
+    fn request(&self) -> SettingRequest {
+        let (ac_id, index) = (self.ac_id, self.index);
+        match self.requested {
+            Some(value) => SettingRequest::Set {
+                ac_id,
+                index,
+                value,
+            },
+            None => SettingRequest::Get { ac_id, index },
+        }
+    }
 }
 
 /// A request waiting for its answers.
 struct Pending {
     waits: Vec<Wait>,
-    respond: Respond,
+    reply: Reply,
     deadline: f64,
 }
 
@@ -211,104 +328,164 @@ struct Pending {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Warning(pub String);
 
+/// Settings requested from the viewers and not sent, by reason.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct NotSent {
+    /// Values refused: not a finite number that fits a float (or not a number).
+    pub(crate) refused: u64,
+    /// Settings the ground could not send (no secure session yet, or the uplink failed).
+    pub(crate) unsent: u64,
+    /// Requests answered at once because [`MAX_PENDING`] were waiting (or the channel
+    /// from the server was full).
+    pub(crate) busy: u64,
+}
+
 /// The ground's side of the viewer's settings.
 pub(crate) struct Settings {
     rx: Receiver<Call>,
     known: BTreeMap<(u8, u8), f64>,
     pending: Vec<Pending>,
-    /// Requests answered at once because [`MAX_PENDING`] were waiting.
-    pub(crate) refused: u64,
+    counts: NotSent,
+    /// Requests the handler answered because the channel was full.
+    handler_busy: Arc<AtomicU64>,
 }
 
 impl Settings {
     /// The settings and the handler to give the server.
     pub(crate) fn new() -> (Self, Handler) {
         let (tx, rx) = sync_channel(MAX_PENDING);
+        let busy = Arc::new(AtomicU64::new(0));
         let settings = Self {
             rx,
             known: BTreeMap::new(),
             pending: Vec::new(),
-            refused: 0,
+            counts: NotSent::default(),
+            handler_busy: busy.clone(),
         };
-        (settings, Handler { tx })
+        (settings, Handler { tx, busy })
     }
 
-    /// The value known for a setting, as a parameter.
-    fn parameter(&self, ac_id: u8, index: u8) -> Option<Parameter> {
-        let v = self.known.get(&(ac_id, index))?;
-        Some(Parameter::float64(parameter_name(ac_id, index), *v))
+    /// What was not sent so far.
+    pub(crate) fn not_sent_counts(&self) -> NotSent {
+        let mut c = self.counts;
+        c.busy += self.handler_busy.load(Ordering::Relaxed);
+        c
+    }
+
+    /// Answers `p`: each setting with the value reported, else the value known; an
+    /// error status names the settings not sent.
+    fn answer(&self, p: Pending) {
+        let mut values = Vec::new();
+        let mut errors = Vec::new();
+        for w in &p.waits {
+            let v = w
+                .reported
+                .or_else(|| self.known.get(&(w.ac_id, w.index)).copied());
+            values.extend(v.map(|v| Parameter::float64(parameter_name(w.ac_id, w.index), v)));
+            if let Some(e) = &w.failed
+                && !errors.contains(e)
+            {
+                errors.push(e.clone());
+            }
+        }
+        p.reply.send(values, &errors);
     }
 
     /// Takes the requests the viewers made since the last call: returns what to send to
-    /// the aircraft, and answers the requests that need no aircraft or are too many.
+    /// the aircraft, and answers the requests that need no aircraft, whose values are
+    /// all refused, or that are too many.
     pub(crate) fn poll(&mut self, now: f64) -> Vec<SettingRequest> {
         let mut out = Vec::new();
         while let Ok(call) = self.rx.try_recv() {
-            let (waits, respond) = match call {
-                Call::Get(keys, respond) if keys.is_empty() => {
+            let (waits, reply) = match call {
+                Call::Get(keys, reply) if keys.is_empty() => {
                     let all = self
                         .known
                         .iter()
                         .map(|(&(ac, i), &v)| Parameter::float64(parameter_name(ac, i), v))
                         .collect();
-                    respond(all);
+                    reply.send(all, &[]);
                     continue;
                 }
-                Call::Get(keys, respond) => (
+                Call::Get(keys, reply) => (
                     keys.into_iter()
-                        .map(|(ac_id, index)| Wait {
-                            ac_id,
-                            index,
-                            requested: None,
-                            reported: None,
-                        })
+                        .map(|(ac_id, index)| Wait::new(ac_id, index, None))
                         .collect::<Vec<_>>(),
-                    respond,
+                    reply,
                 ),
-                Call::Set(values, respond) => (
-                    values
+                Call::Set {
+                    values,
+                    refused,
+                    reply,
+                } => {
+                    self.counts.refused += refused.len() as u64;
+                    let refused = refused.into_iter().map(|r| Wait {
+                        failed: Some(format!(
+                            "{} refused: {}",
+                            parameter_name(r.ac_id, r.index),
+                            r.why
+                        )),
+                        ..Wait::new(r.ac_id, r.index, None)
+                    });
+                    let waits = values
                         .into_iter()
-                        .map(|(ac_id, index, v)| Wait {
-                            ac_id,
-                            index,
-                            requested: Some(v),
-                            reported: None,
-                        })
-                        .collect(),
-                    respond,
-                ),
-            };
-            if waits.is_empty() || self.pending.len() >= MAX_PENDING {
-                if !waits.is_empty() {
-                    self.refused += 1;
+                        .map(|(ac_id, index, v)| Wait::new(ac_id, index, Some(v)));
+                    (waits.chain(refused).collect(), reply)
                 }
-                let known = waits
-                    .iter()
-                    .filter_map(|w| self.parameter(w.ac_id, w.index))
-                    .collect();
-                respond(known);
-                continue;
-            }
-            for w in &waits {
-                out.push(match w.requested {
-                    Some(value) => SettingRequest::Set {
-                        ac_id: w.ac_id,
-                        index: w.index,
-                        value,
-                    },
-                    None => SettingRequest::Get {
-                        ac_id: w.ac_id,
-                        index: w.index,
-                    },
-                });
-            }
-            self.pending.push(Pending {
+            };
+            let pending = Pending {
                 waits,
-                respond,
+                reply,
                 deadline: now + ANSWER_TIMEOUT,
-            });
+            };
+            let to_send = pending.waits.iter().filter(|w| w.failed.is_none()).count();
+            if to_send == 0 {
+                self.answer(pending);
+            } else if self.pending.len() >= MAX_PENDING {
+                self.counts.busy += 1;
+                let mut pending = pending;
+                for w in pending.waits.iter_mut().filter(|w| w.failed.is_none()) {
+                    w.failed = Some(BUSY.to_owned());
+                }
+                self.answer(pending);
+            } else {
+                out.extend(
+                    pending
+                        .waits
+                        .iter()
+                        .filter(|w| w.failed.is_none())
+                        .map(Wait::request),
+                );
+                self.pending.push(pending);
+            }
         }
         out
+    }
+
+    /// `request` (one of [`poll`](Self::poll)'s) was not sent, because of `why`: counted,
+    /// and its request answered (with what is known, and an error status naming `why`)
+    /// as soon as nothing else of it is waiting.
+    pub(crate) fn not_sent(&mut self, request: &SettingRequest, why: &str) {
+        self.counts.unsent += 1;
+        let (ac_id, index, requested) = match *request {
+            SettingRequest::Get { ac_id, index } => (ac_id, index, None),
+            SettingRequest::Set {
+                ac_id,
+                index,
+                value,
+            } => (ac_id, index, Some(value.to_bits())),
+        };
+        // The newest request first: the one just polled.
+        let wait = self.pending.iter_mut().rev().find_map(|p| {
+            p.waits.iter_mut().find(|w| {
+                (w.ac_id, w.index, w.requested.map(f64::to_bits)) == (ac_id, index, requested)
+                    && !w.done()
+            })
+        });
+        if let Some(w) = wait {
+            w.failed = Some(format!("{} not sent: {why}", parameter_name(ac_id, index)));
+        }
+        self.answer_complete();
     }
 
     /// A DL_VALUE from `ac_id`: setting `index` is `value` (a `base` field on the wire).
@@ -326,7 +503,7 @@ impl Settings {
             for w in p
                 .waits
                 .iter_mut()
-                .filter(|w| w.ac_id == ac_id && w.index == index && w.reported.is_none())
+                .filter(|w| w.ac_id == ac_id && w.index == index && !w.done())
             {
                 w.reported = Some(value);
                 if let Some(requested) = w.requested {
@@ -346,24 +523,14 @@ impl Settings {
         )
     }
 
-    /// Answers the requests whose settings all reported.
+    /// Answers the requests whose settings all reported (or failed).
     fn answer_complete(&mut self) {
         let (done, waiting): (Vec<_>, Vec<_>) = std::mem::take(&mut self.pending)
             .into_iter()
-            .partition(|p| p.waits.iter().all(|w| w.reported.is_some()));
+            .partition(|p| p.waits.iter().all(Wait::done));
         self.pending = waiting;
         for p in done {
-            let values = p
-                .waits
-                .iter()
-                .filter_map(|w| {
-                    Some(Parameter::float64(
-                        parameter_name(w.ac_id, w.index),
-                        w.reported?,
-                    ))
-                })
-                .collect();
-            (p.respond)(values);
+            self.answer(p);
         }
     }
 
@@ -376,20 +543,13 @@ impl Settings {
         self.pending = waiting;
         let mut warnings = Vec::new();
         for p in late {
-            let mut values = Vec::new();
-            for w in &p.waits {
-                match w.reported {
-                    Some(v) => values.push(Parameter::float64(parameter_name(w.ac_id, w.index), v)),
-                    None => {
-                        warnings.push(Warning(format!(
-                            "setting {} of aircraft {}: no answer in {ANSWER_TIMEOUT} s",
-                            w.index, w.ac_id
-                        )));
-                        values.extend(self.parameter(w.ac_id, w.index));
-                    }
-                }
+            for w in p.waits.iter().filter(|w| !w.done()) {
+                warnings.push(Warning(format!(
+                    "setting {} of aircraft {}: no answer in {ANSWER_TIMEOUT} s",
+                    w.index, w.ac_id
+                )));
             }
-            (p.respond)(values);
+            self.answer(p);
         }
         warnings
     }
@@ -398,22 +558,41 @@ impl Settings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::{Arc, Mutex};
+    use std::sync::Mutex;
 
-    type Answers = Arc<Mutex<Vec<Vec<(String, f64)>>>>;
+    /// The values of each answer: (name, value).
+    type Values = Vec<Vec<(String, f64)>>;
 
-    fn respond(answers: &Answers) -> Respond {
-        let answers = answers.clone();
-        Box::new(move |params: Vec<Parameter>| {
-            let values = params
-                .into_iter()
-                .map(|p| match p.value {
-                    Some(ParameterValue::Float64(v)) => (p.name, v),
-                    other => panic!("{other:?}"),
-                })
-                .collect();
-            answers.lock().unwrap().push(values);
-        })
+    /// The answers a client got: the values of each, and the error statuses.
+    #[derive(Default, Clone)]
+    struct Answers {
+        values: Arc<Mutex<Values>>,
+        errors: Arc<Mutex<Vec<String>>>,
+    }
+
+    fn respond(answers: &Answers) -> Reply {
+        let (values, errors) = (answers.values.clone(), answers.errors.clone());
+        Reply::new(
+            move |params: Vec<Parameter>| {
+                let v = params
+                    .into_iter()
+                    .map(|p| match p.value {
+                        Some(ParameterValue::Float64(v)) => (p.name, v),
+                        other => panic!("{other:?}"),
+                    })
+                    .collect();
+                values.lock().unwrap().push(v);
+            },
+            move |e| errors.lock().unwrap().push(e),
+        )
+    }
+
+    fn set(values: Vec<(u8, u8, f64)>, answers: &Answers) -> Call {
+        Call::Set {
+            values,
+            refused: Vec::new(),
+            reply: respond(answers),
+        }
     }
 
     fn settings() -> (Settings, SyncSender<Call>) {
@@ -442,8 +621,7 @@ mod tests {
     fn a_setting_is_answered_with_the_reported_value() {
         let (mut s, tx) = settings();
         let answers = Answers::default();
-        tx.try_send(Call::Set(vec![(7, 2, 2.5)], respond(&answers)))
-            .unwrap();
+        tx.try_send(set(vec![(7, 2, 2.5)], &answers)).unwrap();
         let sent = s.poll(0.0);
         assert_eq!(
             sent,
@@ -456,12 +634,12 @@ mod tests {
         // Another aircraft's or index's value answers nothing.
         s.dl_value(8, 2, 2.5, BaseType::F32);
         s.dl_value(7, 3, 2.5, BaseType::F32);
-        assert!(answers.lock().unwrap().is_empty());
+        assert!(answers.values.lock().unwrap().is_empty());
         let (p, warnings) = s.dl_value(7, 2, 2.5, BaseType::F32);
         assert!(warnings.is_empty());
         assert_eq!(p.name, "/ac/7/settings/2");
         assert_eq!(
-            *answers.lock().unwrap(),
+            *answers.values.lock().unwrap(),
             [vec![("/ac/7/settings/2".to_owned(), 2.5)]]
         );
     }
@@ -470,20 +648,18 @@ mod tests {
     fn a_setting_not_applied_is_answered_with_the_aircraft_value_and_a_warning() {
         let (mut s, tx) = settings();
         let answers = Answers::default();
-        tx.try_send(Call::Set(vec![(7, 2, 0.1)], respond(&answers)))
-            .unwrap();
+        tx.try_send(set(vec![(7, 2, 0.1)], &answers)).unwrap();
         s.poll(0.0);
         // 0.1 as a float reads back as f32 0.1: applied.
         let (_, w) = s.dl_value(7, 2, f64::from(0.1f32), BaseType::F32);
         assert!(w.is_empty());
-        tx.try_send(Call::Set(vec![(7, 2, 3.0)], respond(&answers)))
-            .unwrap();
+        tx.try_send(set(vec![(7, 2, 3.0)], &answers)).unwrap();
         s.poll(1.0);
         let (_, w) = s.dl_value(7, 2, 1.0, BaseType::F32);
         assert_eq!(w.len(), 1);
         assert!(w[0].0.contains("not applied"), "{w:?}");
         assert_eq!(
-            answers.lock().unwrap()[1],
+            answers.values.lock().unwrap()[1],
             [("/ac/7/settings/2".to_owned(), 1.0)]
         );
     }
@@ -500,14 +676,14 @@ mod tests {
         let w = s.expire(13.0);
         assert_eq!(w.len(), 2);
         assert_eq!(
-            answers.lock().unwrap()[0],
+            answers.values.lock().unwrap()[0],
             [("/ac/7/settings/1".to_owned(), 4.0)]
         );
         tx.try_send(Call::Get(Vec::new(), respond(&answers)))
             .unwrap();
         assert!(s.poll(14.0).is_empty());
         assert_eq!(
-            answers.lock().unwrap()[1],
+            answers.values.lock().unwrap()[1],
             [("/ac/7/settings/1".to_owned(), 4.0)]
         );
     }
@@ -524,14 +700,106 @@ mod tests {
         tx.try_send(Call::Get(vec![(7, 1)], respond(&answers)))
             .unwrap();
         assert!(s.poll(0.0).is_empty());
-        assert_eq!(s.refused, 1);
-        assert_eq!(answers.lock().unwrap().len(), 1);
+        assert_eq!(s.not_sent_counts().busy, 1);
+        assert_eq!(answers.values.lock().unwrap().len(), 1);
+        assert_eq!(*answers.errors.lock().unwrap(), [BUSY]);
         // The channel itself is bounded: the handler answers empty when it is full.
-        let (_s, handler) = Settings::new();
+        let (s2, handler) = Settings::new();
         for _ in 0..MAX_PENDING {
             handler.pass(Call::Get(vec![(7, 1)], respond(&answers)));
         }
         handler.pass(Call::Get(vec![(7, 1)], respond(&answers)));
-        assert_eq!(answers.lock().unwrap().len(), 2);
+        assert_eq!(answers.values.lock().unwrap().len(), 2);
+        assert_eq!(
+            answers.errors.lock().unwrap().len(),
+            2,
+            "an error status each"
+        );
+        assert_eq!(s2.not_sent_counts().busy, 1);
+    }
+
+    /// Issue: a viewer parameter set to 1e300 or -1e39 went out as SETTING value=+inf /
+    /// -inf. Refused as `--setting` refuses it, answered with an error status, counted.
+    #[test]
+    fn a_value_that_does_not_fit_a_float_is_refused_with_an_error_status() {
+        let (mut s, tx) = settings();
+        let answers = Answers::default();
+        s.dl_value(7, 3, 4.0, BaseType::F32);
+        let bad = [
+            Parameter::float64("/ac/7/settings/2", 1e300),
+            Parameter::float64("/ac/7/settings/3", -1e39),
+            Parameter::string("/ac/7/settings/4", "x"),
+        ];
+        tx.try_send(set_call(&bad, respond(&answers))).unwrap();
+        assert_eq!(s.poll(0.0), [], "nothing is sent");
+        assert_eq!(s.not_sent_counts().refused, 3);
+        // Answered at once: the value known, and why.
+        assert_eq!(
+            *answers.values.lock().unwrap(),
+            [vec![("/ac/7/settings/3".to_owned(), 4.0)]]
+        );
+        let errors = answers.errors.lock().unwrap().clone();
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert!(
+            errors[0].contains(
+                "/ac/7/settings/2 refused: 1e300 is not a finite number that fits a float"
+            ),
+            "{errors:?}"
+        );
+        assert!(
+            errors[0].contains("-1e39 is not a finite number"),
+            "{errors:?}"
+        );
+        assert!(errors[0].contains("/ac/7/settings/4 refused: not a number"));
+        // With a value that fits: that one is sent, the other refused.
+        let mixed = [
+            Parameter::float64("/ac/7/settings/2", 2.5),
+            Parameter::float64("/ac/7/settings/5", f64::from(f32::MAX) * 2.0),
+        ];
+        tx.try_send(set_call(&mixed, respond(&answers))).unwrap();
+        assert_eq!(
+            s.poll(1.0),
+            [SettingRequest::Set {
+                ac_id: 7,
+                index: 2,
+                value: 2.5
+            }]
+        );
+        s.dl_value(7, 2, 2.5, BaseType::F32);
+        assert_eq!(
+            answers.values.lock().unwrap()[1],
+            [("/ac/7/settings/2".to_owned(), 2.5)]
+        );
+        assert_eq!(answers.errors.lock().unwrap().len(), 2);
+        assert_eq!(s.not_sent_counts().refused, 4);
+    }
+
+    /// Issue: a SETTING requested before the secure session was neither sent nor
+    /// counted nor answered as not sent (only "no answer" 3 s later).
+    #[test]
+    fn a_request_not_sent_is_answered_at_once_with_an_error_status_and_counted() {
+        let (mut s, tx) = settings();
+        let answers = Answers::default();
+        tx.try_send(set(vec![(7, 2, 1.5), (7, 3, 0.5)], &answers))
+            .unwrap();
+        tx.try_send(Call::Get(vec![(7, 2)], respond(&answers)))
+            .unwrap();
+        let sent = s.poll(0.0);
+        assert_eq!(sent.len(), 3);
+        s.not_sent(&sent[0], "no secure session yet");
+        assert!(answers.values.lock().unwrap().is_empty(), "one still waits");
+        s.not_sent(&sent[1], "no secure session yet");
+        s.not_sent(&sent[2], "no secure session yet");
+        assert_eq!(answers.values.lock().unwrap().len(), 2, "both answered");
+        let errors = answers.errors.lock().unwrap().clone();
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(
+            errors[0].contains("/ac/7/settings/2 not sent: no secure session yet")
+                && errors[0].contains("/ac/7/settings/3 not sent"),
+            "{errors:?}"
+        );
+        assert_eq!(s.not_sent_counts().unsent, 3);
+        // Nothing left to time out.
+        assert!(s.expire(100.0).is_empty());
     }
 }

@@ -557,20 +557,26 @@ impl<'a> Run<'a> {
             None => Vec::new(),
         };
         for request in requests {
-            if !self.monitor.uplink_ready() {
-                continue; // answered "no answer" when it times out
-            }
-            let (name, values) = request.message();
-            let (monitor, sink) = (&mut self.monitor, &mut self.uplink);
-            if send(
-                monitor,
-                sink,
-                self.transport,
-                request.ac_id(),
-                name,
-                &values,
-            ) {
-                request.sent(monitor, self.start.elapsed().as_secs_f64());
+            let why = if self.monitor.uplink_ready() {
+                let (name, values) = request.message();
+                let (monitor, sink) = (&mut self.monitor, &mut self.uplink);
+                if send(
+                    monitor,
+                    sink,
+                    self.transport,
+                    request.ac_id(),
+                    name,
+                    &values,
+                ) {
+                    request.sent(monitor, self.start.elapsed().as_secs_f64());
+                    continue;
+                }
+                "the uplink failed (see the monitor's messages)"
+            } else {
+                "no secure session yet"
+            };
+            if let Some(v) = self.out.viewer.as_mut() {
+                v.setting_not_sent(&request, why);
             }
         }
     }
