@@ -217,7 +217,7 @@ pub struct RelayStats {
 
 impl RelayStats {
     /// Zero counters, in `const` contexts.
-    pub(crate) const ZERO: Self = Self {
+    pub const ZERO: Self = Self {
         forwarded: 0,
         broadcast: 0,
         no_route: 0,

@@ -298,14 +298,7 @@ pub struct RelayCounters(Mutex<M, Cell<RelayStats>>);
 impl RelayCounters {
     /// Zero counters.
     pub const fn new() -> Self {
-        Self(Mutex::new(Cell::new(RelayStats {
-            forwarded: 0,
-            broadcast: 0,
-            no_route: 0,
-            reverse_path: 0,
-            own_source: 0,
-            malformed: 0,
-        })))
+        Self(Mutex::new(Cell::new(RelayStats::ZERO)))
     }
 
     /// The relay's counters after the last frame it read.
