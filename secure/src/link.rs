@@ -260,7 +260,8 @@ impl<M: RawMutex + Sync> LinkLayer for SecureLink<M> {
             return Opened::Withheld;
         };
         if encrypted {
-            return Opened::Rewritten(len);
+            // Checked by its tag and counter: sealed by the peer, not a replay.
+            return Opened::Authenticated(len);
         }
         // Plaintext passed the whitelist: the key exchange (or a beacon, on a ground).
         let data = out.get(2..len.saturating_sub(2)).unwrap_or_default();
@@ -277,6 +278,10 @@ impl<M: RawMutex + Sync> LinkLayer for SecureLink<M> {
                 Opened::Withheld
             }
         }
+    }
+
+    fn authenticates(&self) -> bool {
+        true
     }
 }
 

@@ -53,6 +53,14 @@ pub trait LinkLayer: Sync {
     /// rejected, or consumed by the layer itself such as a key exchange, is counted by
     /// the layer).
     fn open(&self, frame: &Frame<'_>, out: &mut [u8; MAX_FRAME_LEN]) -> Opened;
+
+    /// Whether this layer authenticates what it opens. If it does, the frames it
+    /// delivers without [`Opened::Authenticated`] are marked
+    /// [`Trust::Unauthenticated`](crate::registry::Trust::Unauthenticated) (they do not
+    /// count as hearing the ground, for one). `false` unless the layer says otherwise.
+    fn authenticates(&self) -> bool {
+        false
+    }
 }
 
 /// What [`LinkLayer::open`] made of a received frame.
@@ -64,6 +72,9 @@ pub enum Opened {
     /// Deliver the PPRZ v2 frame (`STX LEN src dst comp|class id fields CK_A CK_B`) the
     /// layer wrote at the start of `out`, of this length.
     Rewritten(usize),
+    /// Deliver the PPRZ v2 frame the layer wrote at the start of `out`, of this length,
+    /// which the layer authenticated (it was sealed by the peer, and is not a replay).
+    Authenticated(usize),
     /// Deliver nothing.
     Withheld,
 }
@@ -93,5 +104,10 @@ impl<L: LinkLayer + ?Sized> LinkLayer for &L {
     #[inline]
     fn open(&self, frame: &Frame<'_>, out: &mut [u8; MAX_FRAME_LEN]) -> Opened {
         (**self).open(frame, out)
+    }
+
+    #[inline]
+    fn authenticates(&self) -> bool {
+        (**self).authenticates()
     }
 }

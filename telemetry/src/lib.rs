@@ -6,6 +6,7 @@
 pub mod arena;
 pub mod delivery;
 pub mod downlink;
+pub mod health;
 pub mod layer;
 pub mod link;
 mod queue;
@@ -26,6 +27,7 @@ pub use delivery::{DeliveryStats, DeliveryWindow};
 pub use downlink::{
     Device, DeviceConfig, Downlink, FrameAlloc, Pacing, ReplyLimit, SendError, SendOptions, Sender,
 };
+pub use health::{Health, HealthConfig, LinkHealth};
 pub use layer::{LinkLayer, Plain};
 pub use link::{Link, LinkMutex, LinkStats};
 pub use reader::Layered;

@@ -64,6 +64,7 @@ use pprz_transports::{AnyTransport, PprzV2};
 use crate::arena::ArenaStats;
 use crate::delivery::DeliveryStats;
 use crate::downlink::{DeviceConfig, Downlink, FrameAlloc, SendError, SendOptions, Sender};
+use crate::health::{HealthConfig, LinkHealth};
 use crate::layer::{LinkLayer, Plain};
 use crate::reader::{Datalink, Inbox, Layered, Reader, UplinkStats};
 use crate::registry::{Filter, Received, RegistryFull, Subscriber};
@@ -92,6 +93,7 @@ pub struct Link<
     downlink: Downlink<'a, LinkMutex, 1, Q>,
     datalink: Datalink<'a, LinkMutex, SUBSCRIBERS>,
     services: Services<'a, S, LinkMutex, SETTINGS>,
+    health: LinkHealth<LinkMutex>,
     /// The device's port between two runs (a cancelled `run` puts it back here).
     port: Mutex<LinkMutex, Cell<Option<Port<'a>>>>,
 }
@@ -135,8 +137,16 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
             downlink: Downlink::new(arena, ac_id, [config]),
             datalink: Datalink::new(ac_id),
             services: Services::new(ac_id),
+            health: LinkHealth::new(HealthConfig::new()),
             port: Mutex::new(Cell::new(None)),
         }
+    }
+
+    /// The same link, its [health](Self::health) judged by `config` (timeouts, what
+    /// counts as heard, the way back to Up).
+    pub const fn health_config(mut self, config: HealthConfig) -> Self {
+        self.health.set_config(config);
+        self
     }
 
     /// Our aircraft id.
@@ -188,6 +198,13 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
         subscriber: &'a dyn Subscriber<'a>,
     ) -> Result<(), RegistryFull> {
         self.datalink.subscribe(filter, subscriber)
+    }
+
+    /// Whether the ground is still there: its state, the time since it was last heard,
+    /// and an `async` wait for a change that a failsafe task awaits (see
+    /// [`health`](crate::health)). Driven by the frames the link's reader accepts.
+    pub fn health(&self) -> &LinkHealth<LinkMutex> {
+        &self.health
     }
 
     /// A snapshot of every counter.
@@ -291,7 +308,7 @@ impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS
     fn deliver(&self, rx: &Received<'_, 'a>) {
         self.link
             .datalink
-            .deliver_with(rx, Some(&self.link.services));
+            .deliver_with(rx, Some(&self.link.services), Some(&self.link.health));
     }
 
     fn read_error(&self) {

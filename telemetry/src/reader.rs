@@ -72,8 +72,9 @@ use embedded_io_async::Read;
 use pprz_transports::{BROADCAST_ID, Decoder, DecoderStats, Frame, Framing, MAX_FRAME_LEN, PprzV2};
 
 use crate::downlink::Device;
+use crate::health::HealthInput;
 use crate::layer::{LinkLayer, Opened};
-use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber};
+use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber, Trust};
 
 /// Counters of the uplink (all readers of one [`Datalink`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -112,6 +113,7 @@ pub struct Datalink<'a, M: RawMutex, const N: usize> {
     ac_id: u8,
     registry: Registry<'a, M, N>,
     stats: Mutex<M, RefCell<UplinkStats>>,
+    health: Option<&'a dyn HealthInput>,
 }
 
 impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
@@ -127,7 +129,16 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
                 read_errors: 0,
                 last_received: None,
             })),
+            health: None,
         }
+    }
+
+    /// [`new`](Self::new), and every accepted frame drives `health` (see
+    /// [`health`](crate::health) for what counts).
+    pub const fn with_health(ac_id: u8, health: &'a dyn HealthInput) -> Self {
+        let mut datalink = Self::new(ac_id);
+        datalink.health = Some(health);
+        datalink
     }
 
     /// Our aircraft id.
@@ -161,28 +172,38 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
         self.stats.lock(|s| f(&mut s.borrow_mut()));
     }
 
-    /// Applies the destination filter and counts: whether `frame` is for us.
-    fn accept(&self, frame: &Frame<'_>) -> bool {
+    /// Applies the destination filter and counts: when `frame` was accepted, if it is for
+    /// us.
+    fn accept(&self, frame: &Frame<'_>) -> Option<Instant> {
         if let Some(dest) = frame.destination()
             && dest != self.ac_id
             && dest != BROADCAST_ID
         {
             self.count(|s| s.not_for_us = s.not_for_us.wrapping_add(1));
-            return false;
+            return None;
         }
         let now = Instant::now();
         self.count(|s| {
             s.received = s.received.wrapping_add(1);
             s.last_received = Some(now);
         });
-        true
+        Some(now)
     }
 
-    /// Handles one received frame: destination filter, counters, then `first` (built-in
-    /// services, if any) and the registry's subscribers.
-    pub(crate) fn deliver_with(&self, rx: &Received<'_, 'a>, first: Option<&dyn Handler<'a>>) {
-        if !self.accept(&rx.frame) {
+    /// Handles one received frame: destination filter, counters, link health (the
+    /// datalink's, and `health` if any), then `first` (built-in services, if any) and the
+    /// registry's subscribers.
+    pub(crate) fn deliver_with(
+        &self,
+        rx: &Received<'_, 'a>,
+        first: Option<&dyn Handler<'a>>,
+        health: Option<&dyn HealthInput>,
+    ) {
+        let Some(now) = self.accept(&rx.frame) else {
             return;
+        };
+        for h in [self.health, health].into_iter().flatten() {
+            h.frame(rx, now);
         }
         let by_first = first.is_some_and(|f| f.handle(rx));
         let by_subscribers = self.registry.dispatch(rx) > 0;
@@ -194,7 +215,7 @@ impl<'a, M: RawMutex, const N: usize> Datalink<'a, M, N> {
 
 impl<'a, M: RawMutex, const N: usize> Inbox<'a> for Datalink<'a, M, N> {
     fn deliver(&self, rx: &Received<'_, 'a>) {
-        self.deliver_with(rx, None);
+        self.deliver_with(rx, None, None);
     }
 
     fn read_error(&self) {
@@ -259,10 +280,7 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
         let mut frames = 0;
         // Frames that arrived whole in `bytes` are read in place, without a copy.
         while let Some(frame) = self.decoder.feed_borrowed(&mut input) {
-            inbox.deliver(&Received {
-                device: self.device,
-                frame,
-            });
+            inbox.deliver(&Received::new(self.device, frame));
             frames += 1;
         }
         self.pass_tx_statuses();
@@ -277,10 +295,7 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
     {
         let mut frames = 0;
         while let Some(frame) = self.decoder.flush() {
-            inbox.deliver(&Received {
-                device: self.device,
-                frame,
-            });
+            inbox.deliver(&Received::new(self.device, frame));
             frames += 1;
         }
         self.pass_tx_statuses();
@@ -344,22 +359,34 @@ impl<'l, L: ?Sized, I: ?Sized> Layered<'l, L, I> {
 impl<'d, L: LinkLayer + ?Sized, I: Inbox<'d> + ?Sized> Inbox<'d> for Layered<'_, L, I> {
     fn deliver(&self, rx: &Received<'_, 'd>) {
         let mut out = [0u8; MAX_FRAME_LEN];
-        match self.layer.open(&rx.frame, &mut out) {
-            Opened::Unchanged => self.inbox.deliver(rx),
-            Opened::Withheld => {}
-            Opened::Rewritten(len) => {
-                // A layer that returns a bad frame delivers nothing (nothing to count it
-                // under: a bug of the layer, not an input).
-                let Some(bytes) = out.get(..len) else {
-                    return;
-                };
-                if let Ok(frame) = PprzV2::new().view(bytes) {
-                    self.inbox.deliver(&Received {
-                        device: rx.device,
-                        frame,
-                    });
-                }
+        // Behind a layer that authenticates, only what it authenticated is trusted.
+        let unvouched = if self.layer.authenticates() {
+            Trust::Unauthenticated
+        } else {
+            rx.trust
+        };
+        let (len, trust) = match self.layer.open(&rx.frame, &mut out) {
+            Opened::Withheld => return,
+            Opened::Unchanged => {
+                return self.inbox.deliver(&Received {
+                    trust: unvouched,
+                    ..*rx
+                });
             }
+            Opened::Rewritten(len) => (len, unvouched),
+            Opened::Authenticated(len) => (len, Trust::Authenticated),
+        };
+        // A layer that returns a bad frame delivers nothing (nothing to count it under:
+        // a bug of the layer, not an input).
+        let Some(bytes) = out.get(..len) else {
+            return;
+        };
+        if let Ok(frame) = PprzV2::new().view(bytes) {
+            self.inbox.deliver(&Received {
+                device: rx.device,
+                frame,
+                trust,
+            });
         }
     }
 

@@ -44,9 +44,35 @@ pub struct Received<'f, 'd> {
     pub device: Device<'d>,
     /// The frame: source, destination, class, component, message id, payload.
     pub frame: Frame<'f>,
+    /// Whether a link layer vouched for the frame.
+    pub trust: Trust,
+}
+
+/// Whether a [link layer](crate::layer) vouched for a received frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Trust {
+    /// No layer that authenticates is on the device: the frame is as the transport
+    /// decoded it.
+    Plain,
+    /// A layer authenticated it (a sealed frame of the secure link, checked and not a
+    /// replay).
+    Authenticated,
+    /// A layer that authenticates let it through without authenticating it (a plaintext
+    /// frame on its whitelist, such as the key exchange).
+    Unauthenticated,
 }
 
 impl<'f, 'd> Received<'f, 'd> {
+    /// `frame`, received on `device`, with no layer's word on it ([`Trust::Plain`]).
+    pub const fn new(device: Device<'d>, frame: Frame<'f>) -> Self {
+        Self {
+            device,
+            frame,
+            trust: Trust::Plain,
+        }
+    }
+
     /// Class id of the message.
     pub fn class_id(&self) -> u8 {
         self.frame.class()
