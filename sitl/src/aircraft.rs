@@ -137,6 +137,7 @@ fn config(plan: &RadioPlan) -> Config {
             plan.flood_bytes_per_s
         },
         observer: Some(record::submitted),
+        health: None,
     }
 }
 

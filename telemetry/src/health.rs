@@ -484,6 +484,16 @@ impl<M: RawMutex, const D: usize> LinkHealth<M, D> {
     }
 }
 
+impl<M: RawMutex, const D: usize> core::fmt::Debug for LinkHealth<M, D> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("LinkHealth")
+            .field("config", &self.config)
+            .field("ground", &self.ground)
+            .field("state", &self.state())
+            .finish_non_exhaustive()
+    }
+}
+
 /// What a [`Datalink`](crate::reader::Datalink) drives: a [`LinkHealth`] of any mutex and
 /// device count.
 pub trait HealthInput: Sync {

@@ -113,20 +113,46 @@ fn uplink_cut_is_lost_once_at_the_timeout_and_up_when_it_returns() {
         MockDriver::get().advance(STEP);
     }
 
-    assert_eq!(watch.times_of(Health::Up), [0, 20_000], "{:?}", watch.changes);
+    assert_eq!(
+        watch.times_of(Health::Up),
+        [0, 20_000],
+        "{:?}",
+        watch.changes
+    );
     // Last PING at 9.9 s: Degraded 2 s later, Lost 3 s later, exactly once.
-    assert_eq!(watch.times_of(Health::Degraded), [11_900], "{:?}", watch.changes);
-    assert_eq!(watch.times_of(Health::Lost), [12_900], "{:?}", watch.changes);
+    assert_eq!(
+        watch.times_of(Health::Degraded),
+        [11_900],
+        "{:?}",
+        watch.changes
+    );
+    assert_eq!(
+        watch.times_of(Health::Lost),
+        [12_900],
+        "{:?}",
+        watch.changes
+    );
     let lost_at = watch.times_of(Health::Lost)[0];
-    assert!((12_900..=13_000).contains(&lost_at), "within one ground period of 13 s");
+    assert!(
+        (12_900..=13_000).contains(&lost_at),
+        "within one ground period of 13 s"
+    );
 
     let device = HEALTH.device(0).unwrap();
     assert_eq!(device.losses, 1);
-    assert_eq!(device.heard, 100 + 100, "PINGs before and after the cut only");
+    assert_eq!(
+        device.heard,
+        100 + 100,
+        "PINGs before and after the cut only"
+    );
     assert_eq!(device.state, Health::Up);
     let stats = datalink.stats();
     assert_eq!(stats.not_for_us, 100 * 25, "frames for aircraft 8 counted");
-    assert_eq!(reader.decoder_stats().checksum_errors, 100 * 25, "corrupt frames counted");
+    assert_eq!(
+        reader.decoder_stats().checksum_errors,
+        100 * 25,
+        "corrupt frames counted"
+    );
 }
 
 /// Two ground links (a radio and a USB cable); the radio's uplink is cut: the radio is
@@ -159,7 +185,11 @@ fn two_ground_links_one_cut_stays_up() {
         }
         MockDriver::get().advance(STEP);
     }
-    assert_eq!(watch.changes, [(0, Health::Up)], "the aircraft never left Up");
+    assert_eq!(
+        watch.changes,
+        [(0, Health::Up)],
+        "the aircraft never left Up"
+    );
     assert_eq!(HEALTH.device(0).unwrap().losses, 1);
     assert_eq!(HEALTH.device(1).unwrap().losses, 0);
 }
@@ -200,7 +230,11 @@ fn lost_link_recovers_after_the_configured_run_of_frames() {
     }
     HEALTH.heard(0, at(200));
     assert_eq!(HEALTH.state_at(at(200)), Health::Up);
-    assert_eq!(HEALTH.device_at(0, at(200)).unwrap().losses, 0, "nothing lost yet");
+    assert_eq!(
+        HEALTH.device_at(0, at(200)).unwrap().losses,
+        0,
+        "nothing lost yet"
+    );
     assert_eq!(HEALTH.state_at(at(2_500)), Health::Degraded);
     assert_eq!(HEALTH.state_at(at(3_200)), Health::Lost);
     // Frames 1 s apart: each run is one frame long.
@@ -261,15 +295,17 @@ fn the_link_facade_drives_its_health() {
     let mut run = pin!(LINK.run(tx, rx));
     let mut watch = Watch::new(LINK.health());
     for _ in 0..600 {
-        let _ = run
-            .as_mut()
-            .poll(&mut Context::from_waker(Waker::noop()));
+        let _ = run.as_mut().poll(&mut Context::from_waker(Waker::noop()));
         watch.poll();
         MockDriver::get().advance(STEP);
     }
     assert_eq!(
         watch.changes,
-        [(10, Health::Up), (2_010, Health::Degraded), (3_010, Health::Lost)],
+        [
+            (10, Health::Up),
+            (2_010, Health::Degraded),
+            (3_010, Health::Lost)
+        ],
         "the PING read at the first step after start, nothing for us after it"
     );
     assert_eq!(LINK.stats().uplink.not_for_us, 4);

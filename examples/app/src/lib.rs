@@ -40,13 +40,15 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker};
 use embedded_io_async::Read;
 use pprz_default::messages::Set;
+use pprz_default::messages::telemetry::values::RotorcraftStatusApMode as ApMode;
 use pprz_default::messages::telemetry::{
     Alive, Attitude, AutopilotVersion, DatalinkReport, DlValue, Energy, GpsInt, ImuAccelRaw,
-    ImuGyroRaw, ImuMagRaw, Ins, Payload, RotorcraftFp, RotorcraftStatus, UartErrors,
+    ImuGyroRaw, ImuMagRaw, Ins, Payload, RotorcraftFp, RotorcraftStatus, Rssi, UartErrors,
 };
 use pprz_default::periodic::{PROCESSES, SCHEDULE, main};
 use pprz_messages::MessageSet;
 use pprz_messages::{Message, VarArray};
+use pprz_telemetry::health::{Health, HealthConfig, LinkHealth};
 use pprz_telemetry::reader::{Datalink, Inbox, Reader};
 use pprz_telemetry::registry::{Received, RegistryFull};
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
@@ -54,7 +56,7 @@ use pprz_telemetry::services::{LinkReporter, Services, SettingsFull};
 use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, RelayStats, Sender};
 use pprz_transports::PprzV2;
 
-use crate::vehicle::Vehicle;
+use crate::vehicle::{Mode, Vehicle};
 
 /// The mutex of everything shared between tasks (a critical section on boards).
 pub type M = CriticalSectionRawMutex;
@@ -77,6 +79,11 @@ pub struct Config {
     /// 2 KiB of flash).
     #[cfg(feature = "observer")]
     pub observer: Option<Observer>,
+    /// The link health the application's reader drives and its failsafe watches (`None`,
+    /// the default: one of its own, with the default timeouts: Lost after 5 s). Give one
+    /// to read it from other tasks, or to choose the timeouts. The radio must be device 0
+    /// of its downlink (the only ground link of a one-device health).
+    pub health: Option<&'static LinkHealth<M>>,
 }
 
 /// An observer of submissions (see [`Config::observer`]): class id, message id, the
@@ -398,12 +405,30 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let set_gain = |x: f32| gain.lock(|c| c.set(x.clamp(0.0, 10.0)));
     // Our id is the downlink's (the example's `AC_ID` unless a fleet says otherwise).
     let ac_id = radio.sender().ac_id();
-    let services: Services<'_, Set, M, 4> = Services::new(ac_id);
-    let datalink: Datalink<'_, M, { Services::<Set, M, 4>::SUBSCRIPTIONS }> = Datalink::new(ac_id);
+    // The autopilot mode, as ROTORCRAFT_STATUS `ap_mode` numbers it: NAV (13) or HOME (2);
+    // other values leave it as it is (the acknowledgement says which is in force).
+    let get_mode = || match v().mode {
+        Mode::Nav => f32::from(ApMode::Nav.raw()),
+        Mode::Home => f32::from(ApMode::Home.raw()),
+    };
+    let set_mode = |x: f32| {
+        let mode = match x {
+            x if x == f32::from(ApMode::Nav.raw()) => Mode::Nav,
+            x if x == f32::from(ApMode::Home.raw()) => Mode::Home,
+            _ => return,
+        };
+        vehicle.lock(|v| v.borrow_mut().mode = mode);
+    };
+    let own_health = LinkHealth::<M>::new(HealthConfig::new());
+    let health = config.health.unwrap_or(&own_health);
+    let services: Services<'_, Set, M, SETTINGS> = Services::new(ac_id);
+    let datalink: Datalink<'_, M, { Services::<Set, M, SETTINGS>::SUBSCRIPTIONS }> =
+        Datalink::with_health(ac_id, health);
     let settings = services.settings();
     settings.add_mode("telemetry_mode", modes.setting(main::PROCESS)?)?;
     settings.add("payload_flood", &get_flood, &set_flood)?;
     settings.add("gain", &get_gain, &set_gain)?;
+    settings.add("ap_mode", &get_mode, &set_mode)?;
     services.subscribe(datalink.registry())?;
 
     // Periodic telemetry callbacks.
@@ -426,6 +451,10 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
         let down = radio.stats();
         let report = reporter.lock(|r| r.borrow_mut().report(Instant::now(), &up, &down));
         out.send_state(&DatalinkReport::from(report));
+        // With a radio that measures it (XBee), the signal of the last uplink frame.
+        if let Some(rssi) = health.rssi() {
+            out.send_state(&Rssi { rssi, tx_power: 0 });
+        }
     };
     // Cycle through the settings, as the reference firmware's periodic DL_VALUE does
     // (one message type for several settings: not a single state stream, so `send`).
@@ -461,10 +490,31 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let readers = readers.run(reader, layer, &datalink);
     let flood = flood(&out, config.flood_bytes_per_s, &flood_on);
     let app = select4(scheduler.run(), readers, fly(&vehicle), flood);
+    let extra = select(extra, failsafe(health, &vehicle));
     match select(app, extra).await {
         Either::First(Either4::First(never)) => never,
         Either::First(Either4::Second(n) | Either4::Third(n) | Either4::Fourth(n))
-        | Either::Second(n) => match n {},
+        | Either::Second(Either::First(n) | Either::Second(n)) => match n {},
+    }
+}
+
+/// The settings table's size: telemetry mode, payload flood, gain, autopilot mode.
+const SETTINGS: usize = 4;
+
+/// The link-loss failsafe: once the ground has been heard, the vehicle flies home each
+/// time the link becomes Lost, as Paparazzi's autopilot does after its
+/// `DATALINK_LOST_TIME`. It stays in HOME until the ground sets the `ap_mode` setting
+/// back to NAV (13).
+async fn failsafe(health: &LinkHealth<M>, vehicle: &Mutex<M, RefCell<Vehicle>>) -> Infallible {
+    // Not before the ground was heard once: a vehicle waiting for its ground on the
+    // field does not take off for home.
+    health.wait_for(Health::Up).await;
+    let mut state = Health::Up;
+    loop {
+        state = health.changed(state).await;
+        if state == Health::Lost {
+            vehicle.lock(|v| v.borrow_mut().mode = Mode::Home);
+        }
     }
 }
 

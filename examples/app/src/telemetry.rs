@@ -8,7 +8,7 @@ use pprz_default::messages::telemetry::{
 };
 use pprz_messages::VarArray;
 
-use crate::vehicle::{ALTITUDE, RADIUS, SPEED, Vehicle};
+use crate::vehicle::{ALTITUDE, Mode, RADIUS, SPEED, Vehicle};
 
 /// Fixed-point scales of ROTORCRAFT_FP / INS (Paparazzi's BFP formats).
 const POS_FRAC: f32 = 256.0; // 2^8
@@ -117,7 +117,10 @@ pub fn status(v: &Vehicle) -> RotorcraftStatus {
     RotorcraftStatus {
         frame_rate: 50,
         gps_status: values::RotorcraftStatusGpsStatus::V3D.raw(),
-        ap_mode: values::RotorcraftStatusApMode::Nav.raw(),
+        ap_mode: match v.mode {
+            Mode::Nav => values::RotorcraftStatusApMode::Nav.raw(),
+            Mode::Home => values::RotorcraftStatusApMode::Home.raw(),
+        },
         ap_in_flight: u8::from(v.up > 1.0),
         ap_motors_on: 1,
         arming_status: values::RotorcraftStatusArmingStatus::Armed.raw(),

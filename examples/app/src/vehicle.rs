@@ -1,5 +1,15 @@
 //! The simulated rotorcraft: climbs to its altitude, then flies a circle around home,
-//! draining its battery.
+//! draining its battery. In [`Mode::Home`] (the link-loss failsafe) it flies straight
+//! back over home and hovers there; back in [`Mode::Nav`] it returns to its circle.
+
+/// What the autopilot is doing (reported as ROTORCRAFT_STATUS `ap_mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Flying the circle around home.
+    Nav,
+    /// Flying back over home and hovering there.
+    Home,
+}
 
 /// The simulated vehicle.
 #[derive(Debug, Clone, Copy)]
@@ -30,6 +40,10 @@ pub struct Vehicle {
     pub charge_ah: f32,
     /// Energy used (Wh).
     pub energy_wh: f32,
+    /// The autopilot's mode.
+    pub mode: Mode,
+    /// Angle on the circle (rad, from east).
+    angle: f32,
 }
 
 /// Circle radius (m).
@@ -59,26 +73,64 @@ impl Vehicle {
             current: 0.0,
             charge_ah: 0.0,
             energy_wh: 0.0,
+            mode: Mode::Nav,
+            angle: 0.0,
         }
     }
 
-    /// Advances the simulation by `dt` seconds: climb to altitude, then circle.
+    /// Advances the simulation by `dt` seconds: climb to altitude, then circle (or fly
+    /// home, in [`Mode::Home`]).
     pub fn step(&mut self, dt: f32) {
         self.t += dt;
         let w = SPEED / RADIUS;
-        let a = w * self.t;
-        self.east = RADIUS * libm::cosf(a);
-        self.north = RADIUS * libm::sinf(a);
-        self.veast = -SPEED * libm::sinf(a);
-        self.vnorth = SPEED * libm::cosf(a);
+        let distance = libm::hypotf(self.east, self.north);
+        let (ve, vn) = match self.mode {
+            Mode::Nav if distance >= RADIUS - 0.5 => {
+                self.angle = libm::atan2f(self.north, self.east) + w * dt;
+                let a = self.angle;
+                self.east = RADIUS * libm::cosf(a);
+                self.north = RADIUS * libm::sinf(a);
+                (-SPEED * libm::sinf(a), SPEED * libm::cosf(a))
+            }
+            // Inside the circle (back from home): straight out to it.
+            Mode::Nav => self.fly_towards(RADIUS, distance, dt),
+            Mode::Home => self.fly_towards(0.0, distance, dt),
+        };
+        (self.veast, self.vnorth) = (ve, vn);
         self.up = (self.up + 2.0 * dt).min(ALTITUDE);
-        self.psi = libm::atan2f(self.veast, self.vnorth);
-        self.phi = libm::atanf(SPEED * w / 9.81);
-        self.theta = 0.02 * libm::sinf(3.0 * a);
+        if ve != 0.0 || vn != 0.0 {
+            self.psi = libm::atan2f(ve, vn);
+        }
+        let turning = self.mode == Mode::Nav && distance >= RADIUS - 0.5;
+        self.phi = if turning {
+            libm::atanf(SPEED * w / 9.81)
+        } else {
+            0.0
+        };
+        self.theta = 0.02 * libm::sinf(3.0 * self.angle);
         self.current = 12.0 + 2.0 * libm::sinf(0.5 * self.t);
         self.charge_ah += self.current * dt / 3600.0;
         self.voltage = 16.8 - 0.6 * self.charge_ah;
         self.energy_wh += self.voltage * self.current * dt / 3600.0;
+    }
+
+    /// Flies radially (along the line through home) to `radius` metres from home at
+    /// [`SPEED`], stopping there; returns the velocity (east, north).
+    fn fly_towards(&mut self, radius: f32, distance: f32, dt: f32) -> (f32, f32) {
+        let gap = radius - distance;
+        if libm::fabsf(gap) < 0.01 {
+            return (0.0, 0.0);
+        }
+        // The direction out from home (east when over it).
+        let (ue, un) = if distance > 0.01 {
+            (self.east / distance, self.north / distance)
+        } else {
+            (1.0, 0.0)
+        };
+        let move_by = gap.clamp(-SPEED * dt, SPEED * dt);
+        self.east += ue * move_by;
+        self.north += un * move_by;
+        (ue * move_by / dt, un * move_by / dt)
     }
 
     /// Latitude and longitude in degrees.
