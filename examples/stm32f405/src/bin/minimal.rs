@@ -1,7 +1,8 @@
 //! The smallest firmware: telemetry over one UART radio (57600 baud, PPRZ v2), answering
 //! the ground's PING, SETTING and GET_SETTING, with the default message set. The one-link
 //! facade `Link` runs the writer, the reader and the services in one task; any task
-//! sends with `LINK.send(&msg)`, which never blocks.
+//! sends with `LINK.send(&msg)`, which never blocks. A failsafe task raises `GO_HOME` when
+//! the ground has been silent for 5 s (`LINK.health()`).
 
 #![no_std]
 #![no_main]
@@ -11,16 +12,20 @@ use embassy_stm32::peripherals::USART1;
 use embassy_stm32::usart::{
     self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx,
 };
+use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_time::{Duration, Ticker};
 use panic_halt as _;
 use pprz_default::messages::{Set, telemetry::Attitude};
-use pprz_telemetry::{FrameArena, Link, LinkMutex};
+use pprz_telemetry::{FrameArena, Health, HealthConfig, Link, LinkMutex};
 use static_cell::ConstStaticCell;
 
 embassy_stm32::bind_interrupts!(struct Irqs { USART1 => BufferedInterruptHandler<USART1>; });
 
 static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
-static LINK: Link<'static, Set> = Link::new(&ARENA, 7); // aircraft 7
+static LINK: Link<'static, Set> = Link::new(&ARENA, 7) // aircraft 7
+    .health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
+/// Set when the ground has been silent for 5 s: your autopilot flies home.
+static GO_HOME: AtomicBool = AtomicBool::new(false);
 static TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 static RX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 
@@ -44,6 +49,16 @@ async fn attitude() {
     }
 }
 
+#[embassy_executor::task]
+async fn failsafe() {
+    LINK.health().wait_for(Health::Up).await; // not before the ground was heard once
+    loop {
+        LINK.health().wait_for(Health::Lost).await;
+        GO_HOME.store(true, Ordering::Relaxed);
+        LINK.health().wait_for(Health::Up).await;
+    }
+}
+
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(Default::default());
@@ -53,4 +68,5 @@ async fn main(spawner: Spawner) {
     let (tx, rx) = uart.expect("radio UART").split();
     spawner.spawn(radio(tx, rx).unwrap());
     spawner.spawn(attitude().unwrap());
+    spawner.spawn(failsafe().unwrap());
 }
