@@ -264,8 +264,9 @@ impl Kept {
     }
 }
 
-/// How many tasks can wait on one [`LinkHealth`] without spurious wake-ups (more may
-/// wait: they are woken more often than needed, never missed).
+/// How many tasks may wait on one [`LinkHealth`] at once. A change is never missed, but
+/// with more waiters than this they keep waking each other (each registration beyond
+/// the room wakes the others), so keep to this many: one failsafe and a few reporters.
 pub const WAITERS: usize = 4;
 
 /// The state kept under the mutex.
