@@ -18,29 +18,6 @@ fn established() -> (Aircraft, Ground, TestRng) {
     (air, ground, rng)
 }
 
-/// A plaintext (0xAA) frame of a plain v2 frame, as an attacker would forge it.
-fn as_plaintext(plain: &[u8]) -> Vec<u8> {
-    let mut data = vec![0xAA];
-    data.extend_from_slice(&plain[2..plain.len() - 2]);
-    frame(&data)
-}
-
-/// A PPRZ frame around `data` (valid checksum).
-fn frame(data: &[u8]) -> Vec<u8> {
-    let mut f = vec![0x99, (data.len() + 4) as u8];
-    f.extend_from_slice(data);
-    let (a, b) = pprz_transports::checksum::pprz(&f[1..]);
-    f.extend_from_slice(&[a, b]);
-    f
-}
-
-/// The same wire frame with DATA byte `i` changed by `xor`, checksum fixed.
-fn tamper(wire: &[u8], i: usize, xor: u8) -> Vec<u8> {
-    let mut data = wire[2..wire.len() - 2].to_vec();
-    data[i] ^= xor;
-    frame(&data)
-}
-
 #[test]
 fn forged_plaintext_setting() {
     let (mut air, _, mut rng) = established();

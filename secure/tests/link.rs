@@ -8,6 +8,9 @@
 
 #![cfg(feature = "embassy")]
 
+mod common;
+
+use common::Wire;
 use pprz_telemetry::SendOptions;
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -56,24 +59,6 @@ impl embedded_io_async::Read for Uplink<'_> {
             Poll::Ready(Ok(n))
         })
         .await
-    }
-}
-
-/// The radio's downlink: bytes the aircraft's writer wrote.
-struct Wire<'a>(&'a RefCell<Vec<u8>>);
-
-impl embedded_io_async::ErrorType for Wire<'_> {
-    type Error = Infallible;
-}
-
-impl embedded_io_async::Write for Wire<'_> {
-    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.0.borrow_mut().extend_from_slice(buf);
-        Ok(buf.len())
-    }
-
-    async fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
     }
 }
 

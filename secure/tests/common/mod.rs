@@ -1,9 +1,12 @@
-//! Shared by the integration tests: the known-answer vectors, deterministic RNGs, and the
+//! Shared by the integration tests: the known-answer vectors, deterministic RNGs, the
 //! two ends of a link wired the way the telemetry stack and the ground tool use the
-//! crate (reader -> channel -> handshake -> channel -> writer).
+//! crate (reader -> channel -> handshake -> channel -> writer), frames as an attacker
+//! forges them, and an in-memory radio for the Embassy aircraft.
 #![allow(dead_code)]
 
+use std::cell::RefCell;
 use std::collections::HashMap;
+use std::convert::Infallible;
 
 use pprz_secure::rand_core::{CryptoRng, RngCore};
 use pprz_secure::{
@@ -313,4 +316,45 @@ pub fn establish(air: &mut Aircraft, ground: &mut Ground, now_ms: u64, rng: &mut
     }
     assert!(air.ch.has_session() && ground.ch.has_session());
     assert_eq!(air.hs.state(), pprz_secure::ResponderState::Established);
+}
+
+/// A plaintext (0xAA) frame of a plain v2 frame, as an attacker would forge it.
+pub fn as_plaintext(plain: &[u8]) -> Vec<u8> {
+    let mut data = vec![0xAA];
+    data.extend_from_slice(&plain[2..plain.len() - 2]);
+    frame(&data)
+}
+
+/// A PPRZ frame around `data` (valid checksum).
+pub fn frame(data: &[u8]) -> Vec<u8> {
+    let mut f = vec![0x99, (data.len() + 4) as u8];
+    f.extend_from_slice(data);
+    let (a, b) = pprz_transports::checksum::pprz(&f[1..]);
+    f.extend_from_slice(&[a, b]);
+    f
+}
+
+/// The same wire frame with DATA byte `i` changed by `xor`, checksum fixed.
+pub fn tamper(wire: &[u8], i: usize, xor: u8) -> Vec<u8> {
+    let mut data = wire[2..wire.len() - 2].to_vec();
+    data[i] ^= xor;
+    frame(&data)
+}
+
+/// The radio's downlink: bytes the aircraft's writer wrote.
+pub struct Wire<'a>(pub &'a RefCell<Vec<u8>>);
+
+impl embedded_io_async::ErrorType for Wire<'_> {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Write for Wire<'_> {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        self.0.borrow_mut().extend_from_slice(buf);
+        Ok(buf.len())
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
 }
