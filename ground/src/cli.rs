@@ -133,6 +133,11 @@ pub struct Args {
     /// when replaying a PPRZLOG file. It must not be one of the inputs.
     #[arg(long, value_name = "PATH")]
     pub mcap: Option<PathBuf>,
+    /// Mark an aircraft stale when no frame came from it for this many seconds (0.1 to
+    /// 3600), as Paparazzi's link agent does after 5 s: one notice when it goes stale,
+    /// one when it is heard again.
+    #[arg(long, value_name = "SECONDS", default_value_t = crate::monitor::DEFAULT_STALE_AFTER, value_parser = parse_stale_after, allow_negative_numbers = true)]
+    pub stale_after: f64,
     /// Stop after this many seconds (more than 0, at most a year).
     #[arg(long, value_name = "SECONDS", value_parser = parse_duration, allow_negative_numbers = true)]
     pub duration: Option<f64>,
@@ -242,6 +247,17 @@ pub fn parse_ping_period(s: &str) -> Result<f64, String> {
     seconds(s, MIN_PING_PERIOD, true, MAX_PING_PERIOD)
 }
 
+/// `--stale-after`: finite, from
+/// [`MIN_STALE_AFTER`](crate::monitor::MIN_STALE_AFTER) to
+/// [`MAX_STALE_AFTER`](crate::monitor::MAX_STALE_AFTER).
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_stale_after(s: &str) -> Result<f64, String> {
+    use crate::monitor::{MAX_STALE_AFTER, MIN_STALE_AFTER};
+    seconds(s, MIN_STALE_AFTER, true, MAX_STALE_AFTER)
+}
+
 /// `--baud`: from 1 to [`MAX_BAUD`].
 ///
 /// # Errors
@@ -328,6 +344,18 @@ mod tests {
             let e = parse(&["--tcp", "127.0.0.1:1", &format!("--setting={bad}")]).unwrap_err();
             assert!(e.contains("--setting"), "{bad}: {e}");
         }
+        for bad in [
+            "0", "-5", "0.01", "NaN", "nan", "inf", "-inf", "1e9", "x", "", "5s",
+        ] {
+            let e = parse(&["--stdin", &format!("--stale-after={bad}")]).unwrap_err();
+            assert!(e.contains("--stale-after"), "{bad}: {e}");
+        }
+        let e = parse(&["--stale-after", "-1"]).unwrap_err();
+        assert!(e.contains("at least 0.1 s"), "{e}");
+        let e = parse(&["--stale-after", "inf"]).unwrap_err();
+        assert!(e.contains("not a finite number"), "{e}");
+        let e = parse(&["--stale-after", "soon"]).unwrap_err();
+        assert!(e.contains("not a number of seconds"), "{e}");
         let e = parse(&["--duration", "-1"]).unwrap_err();
         assert!(e.contains("more than 0 s"), "{e}");
         let e = parse(&["--duration", "NaN"]).unwrap_err();
@@ -359,6 +387,9 @@ mod tests {
         assert_eq!(a.check(), Ok(()));
         assert_eq!(parse(&["--ping", "3600"]).unwrap().ping, Some(3600.0));
         assert_eq!(a.foxglove_clients, crate::viewer::DEFAULT_MAX_CLIENTS);
+        assert_eq!(a.stale_after, 5.0);
+        assert_eq!(parse(&["--stale-after", "12.5"]).unwrap().stale_after, 12.5);
+        assert_eq!(parse(&["--stale-after", "0.1"]).unwrap().stale_after, 0.1);
         let n = parse(&["--foxglove-clients", "256"]).unwrap();
         assert_eq!(n.foxglove_clients, 256);
     }

@@ -6,7 +6,8 @@
 //! * [`format`](mod@format): text forms of decoded messages (values with units and labels).
 //! * [`escape`]: escaping of everything printed that comes from the aircraft or the XML.
 //! * [`monitor`]: the state of the `pprz-monitor` tool: per-message rates and latest
-//!   values (for all aircraft and per aircraft), link statistics, PING round trips and
+//!   values (for all aircraft and per aircraft), link statistics, link quality per
+//!   aircraft (live or stale, RSSI, downlink loss, autopilot mode), PING round trips and
 //!   SETTING acknowledgements per aircraft.
 //! * [`ping`], [`settings`]: matching PONGs to PINGs and DL_VALUEs to SETTINGs.
 //! * [`input`]: the bounded queue between the reading threads and the decoder.

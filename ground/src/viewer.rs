@@ -12,8 +12,10 @@
 //! * `/ac/<id>/link`: link statistics ([`LINK_SCHEMA`]): frames, unknown and malformed
 //!   messages, per priority level the messages received (and, when the ground knows the
 //!   aircraft's side, as the SITL does, submitted, sent and shed), PINGs and their round
-//!   trip, and the fields of the latest DATALINK_REPORT. Published by
-//!   [`Viewer::link_stats`].
+//!   trip, the fields of the latest DATALINK_REPORT, and the link quality the monitor
+//!   keeps ([`Monitor::link_quality`]): live or stale, seconds since heard, the
+//!   aircraft's uplink silence, its RSSI and the ground modem's, the downlink loss
+//!   estimate and the autopilot mode. Published by [`Viewer::link_stats_at`].
 //!
 //! Settings: with [`Viewer::serve`]'s `settings` on, the Parameters panel reads and
 //! writes the aircraft's settings ([`settings`]).
@@ -51,7 +53,7 @@ use pprz_messages::dynamic::{self, Value};
 use pprz_messages::{MessageDescriptor, priority};
 
 use crate::json;
-use crate::monitor::{Decoded, MAX_AIRCRAFT, Monitor};
+use crate::monitor::{Aircraft, Decoded, LinkQuality, LinkState, MAX_AIRCRAFT, Monitor};
 
 mod gate;
 pub mod settings;
@@ -90,9 +92,19 @@ pub const LINK_SCHEMA: &str = r#"{
   "pings_sent": {"type": "integer"},
   "pings_answered": {"type": "integer"},
   "pings_lost": {"type": "integer"},
-  "datalink_report": {"type": ["object", "null"], "description": "fields of the latest DATALINK_REPORT"}
+  "datalink_report": {"type": ["object", "null"], "description": "fields of the latest DATALINK_REPORT"},
+  "state": {"type": "string", "enum": ["live", "stale"], "description": "stale: no frame from the aircraft for the stale time (pprz-monitor --stale-after, 5 s by default)"},
+  "since_heard_s": {"type": "number", "minimum": 0, "description": "seconds since the latest frame from the aircraft"},
+  "uplink_lost_time": {"type": ["number", "null"], "description": "the aircraft's view of the uplink: seconds since it last received from the ground (DATALINK_REPORT)"},
+  "rssi_dbm": {"type": ["number", "null"], "maximum": 0, "description": "signal strength the aircraft's radio reports (RSSI message), dBm"},
+  "tx_power_db": {"type": ["number", "null"], "description": "transmit power of the aircraft's radio (RSSI message), dB"},
+  "ground_rssi_dbm": {"type": ["number", "null"], "maximum": 0, "description": "signal strength the ground's XBee modem measured on the latest frame, dBm (null with other transports)"},
+  "ground_rssi_mean_dbm": {"type": ["number", "null"], "maximum": 0, "description": "smoothed mean of the ground's XBee RSSI, dBm"},
+  "loss_rate": {"type": ["number", "null"], "minimum": 0, "maximum": 1, "description": "downlink loss estimated over the latest DATALINK_REPORT period: 1 - frames received / messages the aircraft sent"},
+  "loss_overall": {"type": ["number", "null"], "minimum": 0, "maximum": 1, "description": "downlink loss over every report period estimated"},
+  "ap_mode": {"type": ["string", "null"], "description": "autopilot mode (ap_mode of ROTORCRAFT_STATUS or PPRZ_MODE), its label from the messages.xml"}
  },
- "required": ["frames", "unknown", "malformed", "levels", "ping_rtt_ms", "datalink_report"]
+ "required": ["frames", "unknown", "malformed", "levels", "ping_rtt_ms", "datalink_report", "state", "since_heard_s", "uplink_lost_time", "rssi_dbm", "tx_power_db", "ground_rssi_dbm", "ground_rssi_mean_dbm", "loss_rate", "loss_overall", "ap_mode"]
 }"#;
 
 /// The JSON Schema of `foxglove.LocationFix` in JSON encoding.
@@ -609,57 +621,44 @@ impl Viewer {
         self.warn(warnings);
     }
 
-    /// Publishes the link statistics of every aircraft the monitor tracks and heard at
-    /// `time_ns` (an aircraft only addressed takes no place among the
-    /// [`MAX_AIRCRAFT`] with topics); `aircraft_side` gives, when known, the aircraft's
-    /// own figures per priority level (high, normal, low).
+    /// Publishes the link statistics of every aircraft the monitor tracks and heard, as
+    /// [`link_stats_at`](Self::link_stats_at) does at the monitor's
+    /// [`clock`](Monitor::clock) (the latest time it was given).
     pub fn link_stats(
         &mut self,
         time_ns: u64,
         monitor: &Monitor,
         aircraft_side: impl Fn(u8) -> Option<[LevelFigures; 3]>,
     ) {
+        self.link_stats_at(time_ns, monitor, monitor.clock(), aircraft_side);
+    }
+
+    /// Publishes the link statistics of every aircraft the monitor tracks and heard at
+    /// `time_ns` (an aircraft only addressed takes no place among the
+    /// [`MAX_AIRCRAFT`] with topics), with its [`Monitor::link_quality`] at `now` (the
+    /// monitor's time, in seconds); `aircraft_side` gives, when known, the aircraft's
+    /// own figures per priority level (high, normal, low).
+    pub fn link_stats_at(
+        &mut self,
+        time_ns: u64,
+        monitor: &Monitor,
+        now: f64,
+        aircraft_side: impl Fn(u8) -> Option<[LevelFigures; 3]>,
+    ) {
         for ac_id in monitor.aircraft() {
             let Some(state) = monitor.aircraft_state(ac_id).filter(|a| a.frames() > 0) else {
                 continue;
             };
+            let quality = monitor.link_quality(ac_id, now);
             let side = aircraft_side(ac_id);
             let Some(topics) = self.aircraft(ac_id) else {
                 continue;
             };
-            let mut received = [0u64; 3];
-            for (p, n) in state.per_priority() {
-                received[priority::level(p.0)] += n;
-            }
-            let levels: Vec<serde_json::Value> = (0..3)
-                .map(|i| {
-                    let s = side.map(|s| s[i]);
-                    serde_json::json!({
-                        "level": priority::LEVEL_NAMES[i],
-                        "received": received[i],
-                        "submitted": s.map(|s| s.submitted),
-                        "sent": s.map(|s| s.sent),
-                        "shed": s.map(|s| s.shed),
-                    })
-                })
-                .collect();
             let report = topics
                 .report
                 .as_deref()
                 .and_then(|r| serde_json::from_str::<serde_json::Value>(r).ok());
-            let pings = state.pings();
-            let text = serde_json::json!({
-                "frames": state.frames(),
-                "unknown": state.unknown(),
-                "malformed": state.malformed(),
-                "levels": levels,
-                "ping_rtt_ms": state.last_rtt().map(|s| s * 1000.0),
-                "pings_sent": pings.sent_count(),
-                "pings_answered": pings.answered(),
-                "pings_lost": pings.lost(),
-                "datalink_report": report,
-            })
-            .to_string();
+            let text = link_json(state, quality.as_ref(), side, report).to_string();
             topics
                 .link
                 .log_with_meta(text.as_bytes(), PartialMetadata::with_log_time(time_ns));
@@ -702,6 +701,59 @@ impl Viewer {
         }
         Ok(self.counts)
     }
+}
+
+/// The link statistics of one aircraft ([`LINK_SCHEMA`]): its `state` in the
+/// monitor, its link `quality` (`None` before it is heard: then stale, as long as it has
+/// never been heard), the aircraft's own figures per level when known, and the JSON of
+/// its latest DATALINK_REPORT.
+fn link_json(
+    state: &Aircraft,
+    quality: Option<&LinkQuality>,
+    side: Option<[LevelFigures; 3]>,
+    report: Option<serde_json::Value>,
+) -> serde_json::Value {
+    let mut received = [0u64; 3];
+    for (p, n) in state.per_priority() {
+        received[priority::level(p.0)] += n;
+    }
+    let levels: Vec<serde_json::Value> = (0..3)
+        .map(|i| {
+            let s = side.map(|s| s[i]);
+            serde_json::json!({
+                "level": priority::LEVEL_NAMES[i],
+                "received": received[i],
+                "submitted": s.map(|s| s.submitted),
+                "sent": s.map(|s| s.sent),
+                "shed": s.map(|s| s.shed),
+            })
+        })
+        .collect();
+    let pings = state.pings();
+    // Only finite numbers: JSON has no NaN.
+    let finite = |v: Option<f64>| v.filter(|x| x.is_finite());
+    let q = quality;
+    serde_json::json!({
+        "frames": state.frames(),
+        "unknown": state.unknown(),
+        "malformed": state.malformed(),
+        "levels": levels,
+        "ping_rtt_ms": finite(state.last_rtt().map(|s| s * 1000.0)),
+        "pings_sent": pings.sent_count(),
+        "pings_answered": pings.answered(),
+        "pings_lost": pings.lost(),
+        "datalink_report": report,
+        "state": q.map_or(LinkState::Stale, |q| q.state).as_str(),
+        "since_heard_s": finite(q.map(|q| q.since_heard)).unwrap_or(0.0),
+        "uplink_lost_time": finite(q.and_then(|q| q.uplink_lost_time)),
+        "rssi_dbm": q.and_then(|q| q.rssi_dbm),
+        "tx_power_db": q.and_then(|q| q.tx_power_db),
+        "ground_rssi_dbm": q.and_then(|q| q.ground_rssi_dbm),
+        "ground_rssi_mean_dbm": finite(q.and_then(|q| q.ground_rssi_mean_dbm)),
+        "loss_rate": finite(q.and_then(|q| q.loss_rate)),
+        "loss_overall": finite(q.and_then(|q| q.loss_overall)),
+        "ap_mode": q.and_then(|q| q.ap_mode.clone()),
+    })
 }
 
 /// A position fix.
@@ -847,6 +899,140 @@ mod tests {
         assert!(lon > 3.0 && lon < 6.0, "{lon}");
         assert_eq!(utm_to_wgs84(0.0, 500_000.0, 0.0), None);
         assert_eq!(utm_to_wgs84(61.0, 500_000.0, 0.0), None);
+    }
+
+    /// Checks `value` against the parts of JSON Schema [`LINK_SCHEMA`] uses: `type`
+    /// (one or several), `enum`, `minimum`, `maximum`, `properties` (every key of the
+    /// value described), `required`, `items`.
+    fn conforms(schema: &serde_json::Value, value: &serde_json::Value, at: &str) {
+        use serde_json::Value as J;
+        if let Some(types) = schema.get("type") {
+            let types: Vec<&str> = match types {
+                J::String(t) => vec![t.as_str()],
+                J::Array(ts) => ts.iter().filter_map(J::as_str).collect(),
+                other => panic!("{at}: type {other}"),
+            };
+            let ok = types.iter().any(|t| match *t {
+                "null" => value.is_null(),
+                "integer" => value.is_i64() || value.is_u64(),
+                "number" => value.is_number(),
+                "string" => value.is_string(),
+                "object" => value.is_object(),
+                "array" => value.is_array(),
+                other => panic!("{at}: type {other}"),
+            });
+            assert!(ok, "{at}: {value} is not {types:?}");
+        }
+        if let Some(values) = schema.get("enum").and_then(J::as_array) {
+            assert!(values.contains(value), "{at}: {value} not in {values:?}");
+        }
+        if let Some(x) = value.as_f64() {
+            let min = schema.get("minimum").and_then(J::as_f64);
+            let max = schema.get("maximum").and_then(J::as_f64);
+            assert!(min.is_none_or(|m| x >= m), "{at}: {x} below {min:?}");
+            assert!(max.is_none_or(|m| x <= m), "{at}: {x} above {max:?}");
+        }
+        if let (Some(props), Some(object)) = (schema.get("properties"), value.as_object()) {
+            for (key, v) in object {
+                let sub = props
+                    .get(key)
+                    .unwrap_or_else(|| panic!("{at}: {key} not in the schema"));
+                conforms(sub, v, &format!("{at}.{key}"));
+            }
+            for key in schema
+                .get("required")
+                .and_then(J::as_array)
+                .into_iter()
+                .flatten()
+            {
+                let key = key.as_str().unwrap();
+                assert!(object.contains_key(key), "{at}: {key} required");
+            }
+        }
+        if let (Some(items), Some(array)) = (schema.get("items"), value.as_array()) {
+            for (i, v) in array.iter().enumerate() {
+                conforms(items, v, &format!("{at}[{i}]"));
+            }
+        }
+    }
+
+    /// Every field of the link topic is in its schema, with the type the schema gives,
+    /// with every figure known and with none.
+    #[test]
+    fn the_link_statistics_conform_to_their_schema() {
+        use pprz_transports::{Encoder, MsgHeader, PprzV2, TxMeta};
+        let schema: serde_json::Value = serde_json::from_str(LINK_SCHEMA).unwrap();
+        let set =
+            crate::set::RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))
+                .unwrap();
+        let mut m = Monitor::new(set, PprzV2::new().into());
+        let frame = |id: u8, payload: &[u8]| {
+            let mut buf = [0u8; 300];
+            let meta = TxMeta::new(MsgHeader::new(7, 0, 1, id));
+            let n = PprzV2::new().encode(&meta, payload, &mut buf).unwrap();
+            buf[..n].to_vec()
+        };
+        // Heard, nothing more known.
+        m.feed(0.0, &frame(2, &[0]), |_| {});
+        let bare = link_json(
+            m.aircraft_state(7).unwrap(),
+            m.link_quality(7, 9.0).as_ref(),
+            None,
+            None,
+        );
+        conforms(&schema, &bare, "bare");
+        assert_eq!(bare["state"], "stale");
+        assert_eq!(bare["since_heard_s"], 9.0);
+        for key in [
+            "rssi_dbm",
+            "ground_rssi_dbm",
+            "loss_rate",
+            "ap_mode",
+            "uplink_lost_time",
+        ] {
+            assert!(bare[key].is_null(), "{key}: {bare}");
+        }
+        // Everything known.
+        let report = |nb: u16| {
+            let mut p = Vec::new();
+            for v in [3u16, 1, nb, 100, 2] {
+                p.extend(v.to_le_bytes());
+            }
+            p.push(0);
+            frame(30, &p)
+        };
+        m.feed(1.0, &frame(28, &[62, 10]), |_| {});
+        m.feed(1.0, &report(10), |_| {});
+        m.feed(1.0, &frame(2, &[0]), |_| {});
+        m.feed(2.0, &report(14), |_| {});
+        let mut status = vec![0u8; 24];
+        status[8] = 2;
+        m.feed(2.0, &frame(231, &status), |_| {});
+        let side = [LevelFigures {
+            submitted: 3,
+            sent: 2,
+            shed: 1,
+        }; 3];
+        let full = link_json(
+            m.aircraft_state(7).unwrap(),
+            m.link_quality(7, 2.5).as_ref(),
+            Some(side),
+            Some(serde_json::json!({"uplink_lost_time": 3})),
+        );
+        conforms(&schema, &full, "full");
+        assert_eq!(full["state"], "live");
+        assert_eq!(full["rssi_dbm"], -62);
+        assert_eq!(full["tx_power_db"], 10);
+        assert_eq!(full["uplink_lost_time"], 3.0);
+        assert_eq!(full["loss_rate"], 0.5);
+        assert_eq!(full["ap_mode"], "HOME");
+        assert!(full["ground_rssi_dbm"].is_null());
+        // Not heard yet (an aircraft only addressed): stale, no figure.
+        conforms(
+            &schema,
+            &link_json(m.aircraft_state(7).unwrap(), None, None, None),
+            "none",
+        );
     }
 
     #[test]

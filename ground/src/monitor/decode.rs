@@ -79,6 +79,7 @@ impl Monitor {
     /// ([`Decoded`]: its text line, escaped and without control characters, the raw
     /// frame bytes for recording, and the decoded form for viewers).
     pub fn feed(&mut self, now: f64, bytes: &[u8], mut on_message: impl FnMut(&Decoded<'_>)) {
+        self.advance(now);
         self.bytes += bytes.len() as u64;
         self.byte_rate.add(now, bytes.len() as u64);
         let mut input = bytes;
@@ -90,6 +91,7 @@ impl Monitor {
 
     /// End of input: decodes frames held behind an incomplete false start.
     pub fn flush(&mut self, now: f64, mut on_message: impl FnMut(&Decoded<'_>)) {
+        self.advance(now);
         while let Some(frame) = self.decoder.flush() {
             let received = Received::of(&frame);
             self.deliver(now, received, &mut on_message);
@@ -158,6 +160,7 @@ impl Monitor {
     /// for the live view, and abandons the frame being assembled (its end was dropped),
     /// decoding the frames buffered behind it, as [`flush`](Self::flush) does.
     pub fn input_gap(&mut self, now: f64, dropped: Drops, on_message: impl FnMut(&Decoded<'_>)) {
+        self.advance(now);
         if dropped.is_empty() {
             return;
         }
@@ -203,6 +206,7 @@ impl Monitor {
             source, class, id, ..
         } = header;
         self.admit(source);
+        self.link_heard(source, now, header.rssi);
         let aircraft = self.aircraft.get_mut(&source);
         let Some(desc) = self.set.find(class, id) else {
             self.unknown += 1;
@@ -231,6 +235,9 @@ impl Monitor {
         }
         if !ok {
             self.malformed += 1;
+        }
+        if ok {
+            self.link_message(source, desc, payload);
         }
         if report {
             self.last_report = Some(body.clone());
@@ -278,6 +285,8 @@ struct Header {
     destination: Option<u8>,
     class: u8,
     id: u8,
+    /// The signal strength the ground's XBee modem measured (`n` = `-n` dBm).
+    rssi: Option<u8>,
 }
 
 impl Header {
@@ -287,6 +296,7 @@ impl Header {
             destination: frame.destination(),
             class: frame.class(),
             id: frame.msg_id(),
+            rssi: frame.rssi(),
         }
     }
 

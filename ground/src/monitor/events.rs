@@ -35,7 +35,8 @@ pub enum Event {
     },
 }
 
-/// Things that went wrong, worth a line of their own in the live view.
+/// Things that went wrong (and a link's return), worth a line of their own in the live
+/// view.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Notice {
     /// PINGs counted as lost (no PONG within the timeout, or too many outstanding).
@@ -59,6 +60,21 @@ pub enum Notice {
     },
     /// A key-exchange message from the aircraft refused (forged, malformed, unexpected).
     HandshakeRefused(HandshakeError),
+    /// No frame from the aircraft for the stale time
+    /// ([`Monitor::stale_after`](super::Monitor::stale_after)): its link is stale.
+    LinkStale {
+        /// The aircraft.
+        aircraft: u8,
+        /// Seconds since its latest frame.
+        silent: f64,
+    },
+    /// A frame from a stale aircraft: its link is live again.
+    LinkLive {
+        /// The aircraft.
+        aircraft: u8,
+        /// Seconds it was silent.
+        silent: f64,
+    },
 }
 
 /// An event or notice, the aircraft it concerns (if any), and when it happened.

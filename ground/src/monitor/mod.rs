@@ -22,11 +22,21 @@
 //! (destination 0, broadcast, or none with PPRZ v1) answer anything: one aircraft's
 //! answer to another, seen on a shared link, does not.
 //!
+//! # Link quality
+//!
+//! Each aircraft's link is tracked ([`Monitor::link_quality`], [`LinkQuality`]): live or
+//! stale (no frame for [`Monitor::stale_after`] seconds, 5 by default, as Paparazzi's
+//! `link` agent), the aircraft's own view of the uplink (DATALINK_REPORT), the signal
+//! strength its RSSI message reports and the one the ground's XBee modem measures, an
+//! estimate of the downlink loss over each report period, and the autopilot mode.
+//! [`Monitor::tick`] notes an aircraft going stale ([`Notice::LinkStale`]); its next
+//! frame notes it live again ([`Notice::LinkLive`]).
+//!
 //! # Modules
 //!
 //! The monitor is one type whose methods are kept by concept: decoding (`decode`), the
-//! state it updates (`state`), request tracking (`requests`), events and notices
-//! (`events`), and rendering (`render`).
+//! state it updates (`state`), request tracking (`requests`), link quality (`link`),
+//! events and notices (`events`), and rendering (`render`).
 //!
 //! # Bounds
 //!
@@ -61,6 +71,9 @@ use crate::settings::SettingTracker;
 
 mod decode;
 mod events;
+mod link;
+#[cfg(test)]
+mod link_tests;
 mod render;
 mod requests;
 mod state;
@@ -69,6 +82,10 @@ mod tests;
 
 pub use decode::Decoded;
 pub use events::{Event, Notice};
+pub use link::{
+    DEFAULT_STALE_AFTER, GROUND_RSSI_WEIGHT, LinkQuality, LinkState, MAX_STALE_AFTER,
+    MIN_STALE_AFTER, StaleAfterError,
+};
 pub use render::{describe_event, describe_notice};
 pub use state::{Aircraft, MessageStats};
 
@@ -137,6 +154,10 @@ pub struct Monitor {
     secure_out: VecDeque<Vec<u8>>,
     /// Replaying a recording: this monitor sent no request, so PONGs answer none.
     replay: bool,
+    /// Seconds without a frame after which an aircraft is stale.
+    stale_after: f64,
+    /// The latest time given.
+    clock: f64,
 }
 
 impl Monitor {
@@ -167,6 +188,8 @@ impl Monitor {
             secure: None,
             secure_out: VecDeque::new(),
             replay: false,
+            stale_after: DEFAULT_STALE_AFTER,
+            clock: 0.0,
         }
     }
 

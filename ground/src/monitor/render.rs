@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use super::state::{Aircraft, MessageStats};
-use super::{Event, MAX_AIRCRAFT, Monitor, Notice};
+use super::{Event, LinkQuality, LinkState, MAX_AIRCRAFT, Monitor, Notice};
 use crate::format;
 use crate::ping::PingTracker;
 use crate::settings::{Answer, Expired, SettingTracker};
@@ -18,9 +18,32 @@ impl Monitor {
     }
 
     /// A notice as a line of the live view, named after its aircraft as
-    /// [`event_line`](Self::event_line) does.
+    /// [`event_line`](Self::event_line) does (a link notice always names its
+    /// aircraft).
     pub fn notice_line(&self, aircraft: Option<u8>, notice: &Notice) -> String {
-        self.about(aircraft) + &describe_notice(notice)
+        match notice {
+            Notice::LinkStale { .. } | Notice::LinkLive { .. } => describe_notice(notice),
+            _ => self.about(aircraft) + &describe_notice(notice),
+        }
+    }
+
+    /// The link line of aircraft `ac_id` at `now`: `aircraft N link: ` and its
+    /// [`link_quality`](Self::link_quality) (`live, heard 0.2 s ago`, or `stale, not
+    /// heard for 6.0 s`, then the figures known); `None` when it is not tracked.
+    pub fn link_line(&self, ac_id: u8, now: f64) -> Option<String> {
+        Some(format!(
+            "aircraft {ac_id} link: {}",
+            self.link_body(ac_id, now)?
+        ))
+    }
+
+    /// The text of [`link_line`](Self::link_line) after `link: `.
+    fn link_body(&self, ac_id: u8, now: f64) -> Option<String> {
+        self.aircraft.get(&ac_id)?;
+        Some(
+            self.link_quality(ac_id, now)
+                .map_or_else(|| "not heard".to_owned(), |q| link_text(&q)),
+        )
     }
 
     /// `aircraft N: ` with several aircraft, or nothing.
@@ -79,6 +102,13 @@ impl Monitor {
         Some(s)
     }
 
+    /// With a single aircraft, its link (`link: ...`, as in
+    /// [`link_line`](Self::link_line)), once it is heard.
+    fn single_link_line(&self, now: f64) -> Option<String> {
+        let a = self.aircraft.values().find(|a| a.frames > 0)?;
+        Some(format!("link: {}", self.link_body(a.id, now)?))
+    }
+
     /// The secure link's status lines, if the monitor has one.
     pub fn secure_lines(&self) -> Vec<String> {
         self.secure_status()
@@ -104,6 +134,9 @@ impl Monitor {
                 if let Some(report) = &self.last_report {
                     let _ = writeln!(s, "aircraft link report: {report}");
                 }
+                if let Some(line) = self.single_link_line(now) {
+                    let _ = writeln!(s, "{line}");
+                }
                 table(&mut s, &self.messages, now);
             }
             Some(fleet) => {
@@ -115,6 +148,9 @@ impl Monitor {
                     }
                     if let Some(report) = &a.last_report {
                         let _ = writeln!(s, "aircraft link report: {report}");
+                    }
+                    if let Some(line) = self.link_line(a.id, now) {
+                        let _ = writeln!(s, "{line}");
                     }
                     table(&mut s, &a.messages, now);
                 }
@@ -148,9 +184,11 @@ impl Monitor {
     }
 
     /// The summary at the end of a run: the status line (with the input dropped under
-    /// overload), PING and SETTING statistics, and messages per priority level; with
+    /// overload), PING and SETTING statistics, messages per priority level and, with a
+    /// single aircraft heard, its link (`link: ...`); with
     /// [`several_aircraft`](Self::several_aircraft), then the aircraft and the
-    /// [`aircraft_summary`](Self::aircraft_summary) of each.
+    /// [`aircraft_summary`](Self::aircraft_summary) of each, with its link (`  link:
+    /// ...`).
     pub fn summary(&self, now: f64) -> String {
         let mut s = self.status(now);
         for line in self.secure_lines().into_iter().chain(self.uplink_status()) {
@@ -159,14 +197,23 @@ impl Monitor {
         }
         s.push('\n');
         s.push_str(&self.priority_summary());
-        if let Some(fleet) = self.fleet_line() {
-            s.push('\n');
-            s.push_str(&fleet);
-            for id in self.aircraft.keys() {
-                if let Some(a) = self.aircraft_summary(*id) {
-                    s.push('\n');
-                    s.push_str(&a);
-                }
+        let Some(fleet) = self.fleet_line() else {
+            if let Some(line) = self.single_link_line(now) {
+                s.push('\n');
+                s.push_str(&line);
+            }
+            return s;
+        };
+        s.push('\n');
+        s.push_str(&fleet);
+        for id in self.aircraft.keys() {
+            if let Some(a) = self.aircraft_summary(*id) {
+                s.push('\n');
+                s.push_str(&a);
+            }
+            if let Some(body) = self.link_body(*id, now) {
+                s.push_str("\n  link: ");
+                s.push_str(&body);
             }
         }
         s
@@ -267,6 +314,43 @@ fn uplink_lines(pings: &PingTracker, settings: &SettingTracker) -> Vec<String> {
     out
 }
 
+/// A link quality as text: the state, then the figures known.
+fn link_text(q: &LinkQuality) -> String {
+    let mut s = match q.state {
+        LinkState::Live => format!("live, heard {:.1} s ago", q.since_heard),
+        LinkState::Stale => format!("stale, not heard for {:.1} s", q.since_heard),
+    };
+    if let Some(t) = q.uplink_lost_time {
+        let _ = write!(s, "  uplink lost {t} s");
+    }
+    if let Some(dbm) = q.rssi_dbm {
+        let _ = write!(s, "  RSSI {dbm} dBm");
+        if let Some(p) = q.tx_power_db {
+            let _ = write!(s, " (tx power {p} dB)");
+        }
+    }
+    if let Some(dbm) = q.ground_rssi_dbm {
+        let _ = write!(s, "  ground RSSI {dbm} dBm");
+        if let Some(mean) = q.ground_rssi_mean_dbm {
+            let _ = write!(s, " (mean {mean:.1} dBm)");
+        }
+    }
+    if let Some(loss) = q.loss_rate {
+        let _ = write!(
+            s,
+            "  downlink loss {:.1}% over the last report period",
+            loss * 100.0
+        );
+        if let Some(all) = q.loss_overall {
+            let _ = write!(s, " ({:.1}% overall)", all * 100.0);
+        }
+    }
+    if let Some(mode) = &q.ap_mode {
+        let _ = write!(s, "  mode {mode}");
+    }
+    s
+}
+
 /// A rate with `decimals` decimals, or `-` when there is none yet.
 fn rate_text(rate: Option<f64>, decimals: usize) -> String {
     rate.map_or_else(|| "-".to_owned(), |r| format!("{r:.decimals$}"))
@@ -344,5 +428,11 @@ pub fn describe_notice(n: &Notice) -> String {
             format!("{count} frame(s) rejected by the secure link: {reason}")
         }
         Notice::HandshakeRefused(e) => format!("key exchange from the aircraft refused: {e}"),
+        Notice::LinkStale { aircraft, silent } => {
+            format!("aircraft {aircraft}: link stale, not heard for {silent:.1} s")
+        }
+        Notice::LinkLive { aircraft, silent } => {
+            format!("aircraft {aircraft}: link live again after {silent:.1} s")
+        }
     }
 }

@@ -144,10 +144,13 @@ impl Monitor {
         }
     }
 
-    /// Gives up the PINGs and requests older than their timeouts at `now` (counted
-    /// lost, noted for the live view), of every aircraft. Call it regularly; the other
-    /// methods taking `now` do it too where it matters.
+    /// Notes the aircraft that go stale at `now` ([`Notice::LinkStale`]), and gives up
+    /// the PINGs and requests older than their timeouts (counted lost, noted for the
+    /// live view), of every aircraft. Call it regularly, whether frames arrive or not;
+    /// the other methods taking `now` do it too where it matters.
     pub fn tick(&mut self, now: f64) {
+        self.advance(now);
+        self.check_links(now);
         self.expire_pings(now, None);
         for e in self.settings.expire(now) {
             self.notice(now, None, Notice::RequestExpired(e));

@@ -7,6 +7,7 @@ use pprz_messages::MessageDescriptor;
 use pprz_transports::{AnyTransport, Decoder, DecoderStats};
 
 use super::events::Logged;
+use super::link::LinkTrack;
 use super::{BUCKETS, Event, MIN_RATE_INTERVAL, Monitor, Notice, RATE_WINDOW};
 use crate::input::Drops;
 use crate::ping::PingTracker;
@@ -104,6 +105,7 @@ pub struct Aircraft {
     pub(super) settings: SettingTracker,
     pub(super) last_rtt: Option<f64>,
     pub(super) last_report: Option<String>,
+    pub(super) link: LinkTrack,
 }
 
 impl Aircraft {
@@ -118,6 +120,7 @@ impl Aircraft {
             settings: SettingTracker::new(settings.timeout()),
             last_rtt: None,
             last_report: None,
+            link: LinkTrack::default(),
         }
     }
 
@@ -163,6 +166,12 @@ impl Aircraft {
         self.last_rtt
     }
 
+    /// The time of the latest frame from this aircraft (the monitor's time); `None`
+    /// when it was never heard. [`Monitor::link_quality`] tells more.
+    pub fn last_heard(&self) -> Option<f64> {
+        self.link.last_heard()
+    }
+
     /// The fields of the latest DATALINK_REPORT of this aircraft (escaped).
     pub fn last_report(&self) -> Option<&str> {
         self.last_report.as_deref()
@@ -180,6 +189,7 @@ impl Aircraft {
             + self.pings.capacity() * 8
             + self.settings.pending() * 64
             + self.last_report.as_ref().map_or(0, String::capacity)
+            + self.link.retained_bytes()
     }
 }
 

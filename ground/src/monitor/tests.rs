@@ -333,7 +333,7 @@ fn frames_from_two_aircraft_make_two_sections() {
     let summary = m.summary(1.0);
     assert!(
         summary.contains(&format!(
-            "aircraft: 7, 8\naircraft 7: frames 1  unknown 0  malformed 0\n  received per priority level:  {prio}: 1\naircraft 8:"
+            "aircraft: 7, 8\naircraft 7: frames 1  unknown 0  malformed 0\n  received per priority level:  {prio}: 1\n  link: live, heard 1.0 s ago\naircraft 8:"
         )),
         "{summary}"
     );

@@ -169,7 +169,7 @@ impl Output {
             self.last_ns
         };
         if let Some(v) = self.viewer.as_mut() {
-            v.link_stats(ns, monitor, |_| None);
+            v.link_stats_at(ns, monitor, now, |_| None);
             if self.viewer_error.is_none()
                 && let Err(e) = v.flush()
             {
@@ -365,7 +365,9 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
     let queue = start_reading(source);
     let stop = stop_on_ctrl_c();
     let live = queue.overflow() == Overflow::DropOldest;
-    let mut monitor = Monitor::new(set, transport);
+    let mut monitor = Monitor::new(set, transport)
+        .with_stale_after(args.stale_after)
+        .map_err(|e| e.to_string())?;
     if !live {
         // A file or standard input: a recording, whose PINGs another station sent.
         monitor = monitor.replaying();
