@@ -1,6 +1,7 @@
 //! What the firmwares of this crate share: the MPS2 board's clock and UART0 with its
-//! interrupts, the executor's pender and its WFI idle loop, and the exception handlers.
-//! Each binary includes this module (`mod board;`) and calls [`init`] then [`run`].
+//! interrupts, the executor's pender and its WFI idle loop, the exception handlers, and
+//! the application's link health. Each binary includes this module (`mod board;`), calls
+//! [`init`] then [`run`], and runs the application with [`app_config`].
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -8,6 +9,9 @@ use cortex_m::interrupt::InterruptNumber;
 use cortex_m::peripheral::NVIC;
 use cortex_m_rt::exception;
 use embassy_executor::raw::Executor;
+use embassy_time::Duration;
+use pprz_example_app::{Config, M};
+use pprz_telemetry::health::{HealthConfig, LinkHealth};
 use static_cell::StaticCell;
 
 use crate::time_driver;
@@ -22,6 +26,24 @@ const UART0_BASE: usize = 0x4000_4000;
 /// UART0 buffers: received bytes (uplink) and bytes waiting to be sent (telemetry).
 pub const UART_RX_BUF: usize = 256;
 pub const UART_TX_BUF: usize = 512;
+
+/// The link health the application's reader drives and its failsafe watches: Degraded
+/// after 1 s without a frame from the ground, Lost (the vehicle flies home) after 2 s,
+/// shorter than the application's default (5 s) so that the QEMU test of the failsafe
+/// stays short. A ground that PINGs every second never lets it become Lost.
+static HEALTH: LinkHealth<M> = LinkHealth::new(
+    HealthConfig::new()
+        .degraded_after(Duration::from_secs(1))
+        .lost_after(Duration::from_secs(2)),
+);
+
+/// The application's configuration: the default, with [`HEALTH`] as its link health.
+pub fn app_config() -> Config {
+    Config {
+        health: Some(&HEALTH),
+        ..Config::default()
+    }
+}
 
 /// Device-specific interrupts of the MPS2 AN385/AN386 images that this firmware uses.
 #[derive(Debug, Clone, Copy)]

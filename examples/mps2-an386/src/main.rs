@@ -19,7 +19,7 @@ mod uart;
 
 use cortex_m_rt::entry;
 use panic_halt as _;
-use pprz_example_app::{AC_ID, Config, M};
+use pprz_example_app::{AC_ID, M};
 use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use pprz_transports::{AnyTransport, PprzV2};
 
@@ -40,7 +40,7 @@ async fn radio_writer(mut port: Port<'static>, tx: board::Tx) {
 /// The application, reading the uplink from UART0.
 #[embassy_executor::task]
 async fn aircraft(radio: Device<'static>, rx: board::Rx) {
-    let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+    let Err(e) = pprz_example_app::run_aircraft(radio, rx, board::app_config()).await;
     panic!("the aircraft application cannot start: {e}");
 }
 

@@ -1,9 +1,10 @@
 //! The emulated Cortex-M4 firmware (`examples/mps2-an386`) under QEMU's `mps2-an386`
 //! machine, with this test as its ground station: QEMU carries the firmware's UART0 over
-//! loopback TCP; the test decodes the telemetry, sends PING and SETTING frames up, and
+//! a socket; the test decodes the telemetry, sends PING and SETTING frames up, and
 //! checks that PONG and the DL_VALUE acknowledgement come back and that the periodic
 //! telemetry of `telemetry.xml` arrives at its configured rates, measured on the guest's
-//! own clock (GPS_INT's `tow` field).
+//! own clock (GPS_INT's `tow` field). A second test cuts the uplink: the firmware's
+//! link-loss failsafe flies home, and the `ap_mode` setting brings it back to NAV.
 //!
 //! QEMU's serial port is a Unix socket of this test's own (a path unique to the process
 //! and the test), so tests running side by side never race for a TCP port.
@@ -20,7 +21,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use pprz_default::messages::telemetry::{DlValue, GpsInt};
+use pprz_default::messages::telemetry::values::RotorcraftStatusApMode as ApMode;
+use pprz_default::messages::telemetry::{DlValue, GpsInt, Pong, RotorcraftStatus};
 use pprz_default::periodic::SCHEDULE;
 use pprz_example_app::AC_ID;
 use pprz_ground::monitor::{Event, Monitor};
@@ -175,9 +177,10 @@ fn firmware_path(name: &str) -> PathBuf {
     }
 }
 
-/// Boots firmware `name` under QEMU and connects to its UART0, or `None` (the test is
-/// skipped, or fails where QEMU is required) when QEMU or the firmware is missing.
-fn boot(name: &str) -> Option<Serial> {
+/// Boots firmware `name` under QEMU and connects to its UART0 (a socket named after
+/// `test`, which no other test of the process uses), or `None` (the test is skipped, or
+/// fails where QEMU is required) when QEMU or the firmware is missing.
+fn boot(name: &str, test: &str) -> Option<Serial> {
     let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
     let firmware = firmware_path(name);
     if !firmware.is_file() {
@@ -197,7 +200,7 @@ fn boot(name: &str) -> Option<Serial> {
         skip(&format!("{qemu} is not installed"));
         return None;
     }
-    let socket = std::env::temp_dir().join(format!("pprz-qemu-{}-{name}.sock", std::process::id()));
+    let socket = std::env::temp_dir().join(format!("pprz-qemu-{}-{test}.sock", std::process::id()));
     let _ = std::fs::remove_file(&socket);
     let mut guard = Qemu::start(&qemu, &firmware, &socket).expect("QEMU starts");
     let stream = guard.connect(&socket).unwrap_or_else(|e| panic!("{e}"));
@@ -216,19 +219,23 @@ fn boot(name: &str) -> Option<Serial> {
 fn requests(set: &RuntimeSet) -> (Vec<u8>, Vec<u8>) {
     let transport = AnyTransport::from(PprzV2::new());
     let ping = uplink::frame(set, transport, AC_ID, "PING", &[]).expect("PING frame");
-    let setting = uplink::frame(
+    (ping, setting(set, GAIN_INDEX, GAIN))
+}
+
+/// The SETTING of setting `index` to `value` (a plain frame).
+fn setting(set: &RuntimeSet, index: u8, value: f32) -> Vec<u8> {
+    uplink::frame(
         set,
-        transport,
+        AnyTransport::from(PprzV2::new()),
         AC_ID,
         "SETTING",
         &[
-            ("index", f64::from(GAIN_INDEX)),
+            ("index", f64::from(index)),
             ("ac_id", f64::from(AC_ID)),
-            ("value", f64::from(GAIN)),
+            ("value", f64::from(value)),
         ],
     )
-    .expect("SETTING frame");
-    (ping, setting)
+    .expect("SETTING frame")
 }
 
 /// The project's default message set, as the ground tools load it.
@@ -246,7 +253,7 @@ struct Received {
 
 #[test]
 fn firmware_answers_and_sends_telemetry_at_configured_rates() {
-    let Some(mut serial) = boot("aircraft") else {
+    let Some(mut serial) = boot("aircraft", "rates") else {
         return;
     };
     let set = default_set();
@@ -435,7 +442,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
 /// exchange), and none is rejected by the ground.
 #[test]
 fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
-    let Some(mut serial) = boot("aircraft-secure") else {
+    let Some(mut serial) = boot("aircraft-secure", "secure") else {
         return;
     };
     let keys = KeyFile::parse(pprz_secure::keys::INSECURE_TEST_KEY_FILE).expect("test keys");
@@ -517,5 +524,250 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
         rtt * 1e3,
         status.stats.channel.decrypted,
         crypto_bytes.iter().filter(|&&b| b == 0xAA).count(),
+    );
+}
+
+/// The example application's `ap_mode` setting (its fourth) and the ROTORCRAFT_STATUS
+/// `ap_mode` values the test sees.
+const AP_MODE_INDEX: u8 = 3;
+const NAV: u8 = ApMode::Nav.raw();
+const HOME: u8 = ApMode::Home.raw();
+/// The firmware's lost timeout (`HEALTH` in its `board.rs`), in ms of guest time: after
+/// this long without a frame from the ground, the vehicle flies home.
+const LOST_AFTER_MS: u32 = 2_000;
+/// Seconds between the test's PINGs while it keeps the link up (the firmware's link is
+/// Degraded after 1 s of silence).
+const PING_EVERY: f64 = 0.5;
+
+/// The steps of the link-loss test, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    /// PINGs every [`PING_EVERY`] until a PONG and, after it, a ROTORCRAFT_STATUS.
+    Up,
+    /// Nothing sent, until a ROTORCRAFT_STATUS reports HOME.
+    Silent,
+    /// The SETTING `ap_mode` = NAV, again every second until its DL_VALUE.
+    Setting,
+    /// PINGs every [`PING_EVERY`] until a ROTORCRAFT_STATUS reports NAV.
+    Back,
+    /// All seen.
+    Done,
+}
+
+impl Step {
+    fn next(self) -> Self {
+        match self {
+            Step::Up => Step::Silent,
+            Step::Silent => Step::Setting,
+            Step::Setting => Step::Back,
+            Step::Back | Step::Done => Step::Done,
+        }
+    }
+}
+
+/// The ground's side of the link-loss test: the step it is in, and what the aircraft
+/// reported. A frame's guest time is the `tow` (ms) of the latest GPS_INT received before
+/// it. Frames leave in the order they were queued, higher priorities first, and the UART
+/// is not paced, so the queue is short: a frame of GPS_INT's priority or higher (STATUS,
+/// PONG) was queued at that time or up to one GPS_INT period later.
+struct LinkLoss {
+    step: Step,
+    /// The `tow` of the latest GPS_INT.
+    tow: Option<u32>,
+    /// The guest time of the latest PONG (the last frame the aircraft heard).
+    pong_tow: Option<u32>,
+    /// The guest time of the first ROTORCRAFT_STATUS reporting HOME.
+    home_tow: Option<u32>,
+    /// Every ROTORCRAFT_STATUS's `ap_mode`, with the step it came in.
+    statuses: Vec<(Step, u8)>,
+    /// The wall-clock time (s) at which each step ended, for the report.
+    ended: Vec<(Step, f64)>,
+}
+
+impl LinkLoss {
+    fn new() -> Self {
+        Self {
+            step: Step::Up,
+            tow: None,
+            pong_tow: None,
+            home_tow: None,
+            statuses: Vec::new(),
+            ended: Vec::new(),
+        }
+    }
+
+    fn advance(&mut self, now: f64) {
+        self.ended.push((self.step, now));
+        self.step = self.step.next();
+    }
+
+    /// Takes in one message from the aircraft, received at wall-clock time `now`.
+    fn message(&mut self, (class, id): (u8, u8), payload: &[u8], now: f64) {
+        let is = |class_id, msg_id| (class, id) == (class_id, msg_id);
+        if is(GpsInt::CLASS_ID, GpsInt::ID) {
+            self.tow = Some(GpsInt::decode(payload).expect("GPS_INT decodes").tow);
+        } else if is(Pong::CLASS_ID, Pong::ID) {
+            // A PONG still on its way when the test fell silent counts; those of step
+            // Back do not (the link was lost before them).
+            if matches!(self.step, Step::Up | Step::Silent) {
+                self.pong_tow = self.tow;
+            }
+        } else if is(DlValue::CLASS_ID, DlValue::ID) {
+            let v = DlValue::decode(payload).expect("DL_VALUE decodes");
+            // The acknowledgement (the periodic DL_VALUE cannot report NAV before it).
+            if self.step == Step::Setting && v.index == AP_MODE_INDEX && v.value == f32::from(NAV) {
+                self.advance(now);
+            }
+        } else if is(RotorcraftStatus::CLASS_ID, RotorcraftStatus::ID) {
+            let mode = RotorcraftStatus::decode(payload)
+                .expect("ROTORCRAFT_STATUS decodes")
+                .ap_mode;
+            self.statuses.push((self.step, mode));
+            match (self.step, mode) {
+                (Step::Up, _) if self.pong_tow.is_some() => self.advance(now),
+                (Step::Silent, HOME) => {
+                    self.home_tow = self.tow;
+                    self.advance(now);
+                }
+                (Step::Back, NAV) => self.advance(now),
+                _ => {}
+            }
+        }
+    }
+
+    /// The `ap_mode` of every ROTORCRAFT_STATUS that came in `step`.
+    fn modes(&self, step: Step) -> Vec<u8> {
+        self.statuses
+            .iter()
+            .filter(|(s, _)| *s == step)
+            .map(|&(_, mode)| mode)
+            .collect()
+    }
+}
+
+/// The period of message `M` in telemetry.xml's default mode, in ms.
+fn default_period_ms<M: Message>() -> u32 {
+    let mode = &SCHEDULE.processes[0].modes[0];
+    let ticks = mode
+        .messages
+        .iter()
+        .find(|m| m.is(M::CLASS_ID, M::ID))
+        .map(|m| m.period_ticks.max(1))
+        .unwrap_or_else(|| panic!("{} is in the default mode", M::NAME));
+    ticks * 1000 / SCHEDULE.frequency_hz
+}
+
+/// The link-loss failsafe: with its link Up (the test PINGs it), the aircraft reports
+/// NAV; once the test is silent for longer than the firmware's lost timeout, it reports
+/// HOME, no earlier than the timeout after the last frame it heard (on the guest's
+/// clock); it stays HOME until the SETTING `ap_mode` = NAV, which it acknowledges, and
+/// then reports NAV again. Only the aircraft's reports are checked; the wall clock only
+/// bounds the test against hangs.
+#[test]
+fn firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting() {
+    let Some(mut serial) = boot("aircraft", "link-loss") else {
+        return;
+    };
+    let set = default_set();
+    let (ping, _) = requests(&set);
+    let nav = setting(&set, AP_MODE_INDEX, f32::from(NAV));
+    let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+    let mut ground = LinkLoss::new();
+    let mut next_send = 0.0;
+    let mut buf = [0u8; 1024];
+    let start = Instant::now();
+    while ground.step != Step::Done && start.elapsed() < DEADLINE {
+        let now = start.elapsed().as_secs_f64();
+        // PINGs once the guest clock runs (a GPS_INT came).
+        if ground.tow.is_some() && now >= next_send {
+            match ground.step {
+                Step::Up | Step::Back => {
+                    serial.send(&ping, "send PING");
+                    next_send = now + PING_EVERY;
+                }
+                Step::Setting => {
+                    serial.send(&nav, "send SETTING ap_mode");
+                    next_send = now + 1.0;
+                }
+                Step::Silent | Step::Done => {}
+            }
+        }
+        let n = serial.receive(&mut buf);
+        let now = start.elapsed().as_secs_f64();
+        let mut input = &buf[..n];
+        while let Some(frame) = decoder.feed(&mut input) {
+            assert_eq!(frame.source(), AC_ID, "frame from another aircraft");
+            let step = ground.step;
+            ground.message((frame.class(), frame.msg_id()), frame.payload(), now);
+            if ground.step != step {
+                // The next step's first request goes at once.
+                next_send = now;
+            }
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    assert_eq!(
+        ground.step,
+        Step::Done,
+        "in {wall:.1} s, stuck in step {:?}; ap_mode of every ROTORCRAFT_STATUS: {:?}",
+        ground.step,
+        ground.statuses
+    );
+
+    // Before the ground was heard, and while it was, NAV; HOME only once the link was
+    // lost, and kept until the SETTING.
+    let (up, silent, setting) = (
+        ground.modes(Step::Up),
+        ground.modes(Step::Silent),
+        ground.modes(Step::Setting),
+    );
+    assert!(up.iter().all(|&m| m == NAV), "link up: ap_mode {up:?}");
+    assert!(
+        matches!(silent.split_last(), Some((&HOME, before)) if before.iter().all(|&m| m == NAV)),
+        "silent: ap_mode {silent:?}"
+    );
+    assert!(
+        setting.iter().all(|&m| m == HOME),
+        "until the SETTING: ap_mode {setting:?}"
+    );
+    // After the acknowledgement, NAV: a ROTORCRAFT_STATUS queued just before the SETTING
+    // came may still leave after the acknowledgement (a reply, queued ahead), no more.
+    let back = ground.modes(Step::Back);
+    let late_home = |before: &[u8]| before.len() <= 1 && before.iter().all(|&m| m == HOME);
+    assert!(
+        matches!(back.split_last(), Some((&NAV, before)) if late_home(before)),
+        "after the SETTING: ap_mode {back:?}"
+    );
+
+    // On the guest's clock, HOME came after the lost timeout, within a ROTORCRAFT_STATUS
+    // period of it. Each stamp is up to a GPS_INT period early; a scheduler tick of slack.
+    let (Some(pong_tow), Some(home_tow)) = (ground.pong_tow, ground.home_tow) else {
+        panic!("no GPS_INT before the PONG or the HOME report");
+    };
+    let silence = home_tow.saturating_sub(pong_tow);
+    let gps = default_period_ms::<GpsInt>();
+    let status = default_period_ms::<RotorcraftStatus>();
+    let slack = 1000 / SCHEDULE.frequency_hz + 1;
+    assert!(
+        silence + gps + slack >= LOST_AFTER_MS,
+        "HOME {silence} ms (guest clock) after the last PONG, before the lost timeout of \
+         {LOST_AFTER_MS} ms"
+    );
+    assert!(
+        silence <= LOST_AFTER_MS + status + gps + slack,
+        "HOME {silence} ms (guest clock) after the last PONG, long after the lost timeout \
+         of {LOST_AFTER_MS} ms"
+    );
+    let ended: Vec<String> = ground
+        .ended
+        .iter()
+        .map(|(step, t)| format!("{step:?} {t:.2} s"))
+        .collect();
+    let _ = writeln!(
+        std::io::stderr(),
+        "qemu link loss: HOME {silence} ms of guest time after the last PONG (lost after \
+         {LOST_AFTER_MS} ms); ap_mode up {up:?}, silent {silent:?}, until the SETTING \
+         {setting:?}, after it {back:?}; steps ended (wall clock): {}; {wall:.1} s in all",
+        ended.join(", ")
     );
 }

@@ -25,7 +25,7 @@ mod uart;
 
 use cortex_m_rt::entry;
 use panic_halt as _;
-use pprz_example_app::{AC_ID, Config, M};
+use pprz_example_app::{AC_ID, M};
 use pprz_secure::link::SecureLink;
 use pprz_secure::{KeyFile, Responder};
 use pprz_telemetry::{Device, Downlink, FrameArena, Port, run_writer_with};
@@ -61,7 +61,7 @@ async fn aircraft(radio: Device<'static>, rx: board::Rx) {
     let Err(e) = pprz_example_app::run_secure_aircraft(
         radio,
         rx,
-        Config::default(),
+        board::app_config(),
         &SECURE,
         responder,
         rng,
