@@ -405,20 +405,8 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let set_gain = |x: f32| gain.lock(|c| c.set(x.clamp(0.0, 10.0)));
     // Our id is the downlink's (the example's `AC_ID` unless a fleet says otherwise).
     let ac_id = radio.sender().ac_id();
-    // The autopilot mode, as ROTORCRAFT_STATUS `ap_mode` numbers it: NAV (13) or HOME (2);
-    // other values leave it as it is (the acknowledgement says which is in force).
-    let get_mode = || match v().mode {
-        Mode::Nav => f32::from(ApMode::Nav.raw()),
-        Mode::Home => f32::from(ApMode::Home.raw()),
-    };
-    let set_mode = |x: f32| {
-        let mode = match x {
-            x if x == f32::from(ApMode::Nav.raw()) => Mode::Nav,
-            x if x == f32::from(ApMode::Home.raw()) => Mode::Home,
-            _ => return,
-        };
-        vehicle.lock(|v| v.borrow_mut().mode = mode);
-    };
+    let get_mode = || ap_mode_setting(v().mode);
+    let set_mode = |x: f32| set_ap_mode(&vehicle, x);
     let own_health = LinkHealth::<M>::new(HealthConfig::new());
     let health = config.health.unwrap_or(&own_health);
     let services: Services<'_, Set, M, SETTINGS> = Services::new(ac_id);
@@ -446,16 +434,7 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let mag = || out.send_state(&telemetry::mag());
     let uart_errors = || out.send_state(&UartErrors::default());
     let reporter = Mutex::<M, _>::new(RefCell::new(LinkReporter::new()));
-    let report = || {
-        let up = datalink.stats();
-        let down = radio.stats();
-        let report = reporter.lock(|r| r.borrow_mut().report(Instant::now(), &up, &down));
-        out.send_state(&DatalinkReport::from(report));
-        // With a radio that measures it (XBee), the signal of the last uplink frame.
-        if let Some(rssi) = health.rssi() {
-            out.send_state(&Rssi { rssi, tx_power: 0 });
-        }
-    };
+    let report = || link_report(&out, &reporter, &datalink, radio, health);
     // Cycle through the settings, as the reference firmware's periodic DL_VALUE does
     // (one message type for several settings: not a single state stream, so `send`).
     let dl_value_index: Mutex<M, Cell<u8>> = Mutex::new(Cell::new(0));
@@ -490,12 +469,64 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let readers = readers.run(reader, layer, &datalink);
     let flood = flood(&out, config.flood_bytes_per_s, &flood_on);
     let app = select4(scheduler.run(), readers, fly(&vehicle), flood);
-    let extra = select(extra, failsafe(health, &vehicle));
+    Ok(forever(app, select(extra, failsafe(health, &vehicle))).await)
+}
+
+/// Runs the application's tasks and the extra ones; none of them ends.
+async fn forever<A, B, C, D>(
+    app: impl Future<Output = Either4<A, B, C, D>>,
+    extra: impl Future<Output = Either<Infallible, Infallible>>,
+) -> Infallible
+where
+    A: Into<Infallible>,
+    B: Into<Infallible>,
+    C: Into<Infallible>,
+    D: Into<Infallible>,
+{
     match select(app, extra).await {
-        Either::First(Either4::First(never)) => never,
-        Either::First(Either4::Second(n) | Either4::Third(n) | Either4::Fourth(n))
-        | Either::Second(Either::First(n) | Either::Second(n)) => match n {},
+        Either::First(Either4::First(n)) => n.into(),
+        Either::First(Either4::Second(n)) => n.into(),
+        Either::First(Either4::Third(n)) => n.into(),
+        Either::First(Either4::Fourth(n)) => n.into(),
+        Either::Second(Either::First(n) | Either::Second(n)) => n,
     }
+}
+
+/// Sends DATALINK_REPORT from the datalink's and the radio's counters and, with a radio
+/// that measures it (XBee), RSSI: the signal of the last uplink frame.
+fn link_report<const N: usize>(
+    out: &Out<'_>,
+    reporter: &Mutex<M, RefCell<LinkReporter>>,
+    datalink: &Datalink<'_, M, N>,
+    radio: Device<'_>,
+    health: &LinkHealth<M>,
+) {
+    let (up, down) = (datalink.stats(), radio.stats());
+    let report = reporter.lock(|r| r.borrow_mut().report(Instant::now(), &up, &down));
+    out.send_state(&DatalinkReport::from(report));
+    if let Some(rssi) = health.rssi() {
+        out.send_state(&Rssi { rssi, tx_power: 0 });
+    }
+}
+
+/// The `ap_mode` setting's value: ROTORCRAFT_STATUS `ap_mode` numbering, NAV (13) or
+/// HOME (2).
+fn ap_mode_setting(mode: Mode) -> f32 {
+    match mode {
+        Mode::Nav => f32::from(ApMode::Nav.raw()),
+        Mode::Home => f32::from(ApMode::Home.raw()),
+    }
+}
+
+/// Sets the autopilot mode from the `ap_mode` setting; other values than NAV and HOME
+/// leave it as it is (the acknowledgement says which is in force).
+fn set_ap_mode(vehicle: &Mutex<M, RefCell<Vehicle>>, x: f32) {
+    let mode = match x {
+        x if x == ap_mode_setting(Mode::Nav) => Mode::Nav,
+        x if x == ap_mode_setting(Mode::Home) => Mode::Home,
+        _ => return,
+    };
+    vehicle.lock(|v| v.borrow_mut().mode = mode);
 }
 
 /// The settings table's size: telemetry mode, payload flood, gain, autopilot mode.
