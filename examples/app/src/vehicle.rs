@@ -148,3 +148,35 @@ impl Default for Vehicle {
         Self::new()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn distance(v: &Vehicle) -> f32 {
+        libm::hypotf(v.east, v.north)
+    }
+
+    #[test]
+    fn home_flies_back_and_hovers_then_nav_returns_to_the_circle() {
+        let mut v = Vehicle::new();
+        for _ in 0..500 {
+            v.step(0.02);
+        }
+        assert!((distance(&v) - RADIUS).abs() < 0.01, "on the circle");
+        v.mode = Mode::Home;
+        // 80 m at 6 m/s: home within 14 s, then still.
+        for _ in 0..700 {
+            v.step(0.02);
+        }
+        assert!(distance(&v) < 0.02, "over home: {}", distance(&v));
+        assert_eq!((v.veast, v.vnorth), (0.0, 0.0), "hovering");
+        v.mode = Mode::Nav;
+        for _ in 0..700 {
+            v.step(0.02);
+        }
+        assert!((distance(&v) - RADIUS).abs() < 0.01, "back on the circle");
+        let speed = libm::hypotf(v.veast, v.vnorth);
+        assert!((speed - SPEED).abs() < 0.01, "circling at {speed} m/s");
+    }
+}
