@@ -34,6 +34,7 @@ mod figures;
 mod fleet;
 mod ground;
 mod keys;
+mod link;
 mod options;
 mod radio;
 mod record;
