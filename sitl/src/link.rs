@@ -42,26 +42,38 @@ pub fn check(args: &Args) -> Result<(), String> {
             ));
         }
     }
-    if let Some(o) = args.outage.iter().find(|o| o.from_s >= args.duration) {
-        return Err(format!(
-            "--outage {}:{}..{} starts at or after the end of the run (--duration {})",
-            o.cut.name(),
-            o.from_s,
-            o.until_s,
-            args.duration
-        ));
-    }
-    match args.resume_nav {
-        Some(_) if args.headless => Err(
+    if args.resume_nav.is_some() && args.headless {
+        return Err(
             "--resume-nav is sent by the in-process ground: drop --headless (or set ap_mode from your ground)"
                 .to_owned(),
-        ),
-        Some(t) if t >= args.duration => Err(format!(
-            "--resume-nav {t} is at or after the end of the run (--duration {})",
-            args.duration
-        )),
-        _ => Ok(()),
+        );
     }
+    Ok(())
+}
+
+/// What the link options ask for after the end of the run (it will not happen): one
+/// message per option, for standard error.
+pub fn after_the_end(args: &Args) -> Vec<String> {
+    let end = args.duration;
+    let mut late: Vec<String> = args
+        .outage
+        .iter()
+        .filter(|o| o.from_s >= end)
+        .map(|o| {
+            format!(
+                "--outage {}:{}..{} starts at or after the end of the run (--duration {end}): it has no effect",
+                o.cut.name(),
+                o.from_s,
+                o.until_s
+            )
+        })
+        .collect();
+    if let Some(t) = args.resume_nav.filter(|&t| t >= end) {
+        late.push(format!(
+            "--resume-nav {t} is at or after the end of the run (--duration {end}): it has no effect"
+        ));
+    }
+    late
 }
 
 /// A time in the run as an instant of the simulation's clock.

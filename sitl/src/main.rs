@@ -103,6 +103,9 @@ fn plan_or_exit(args: &Args) -> RadioPlan {
 /// The run: what can fail is opened first, then the aircraft start, the ground runs
 /// until the end, and the summary is printed.
 fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
+    for warning in link::after_the_end(args) {
+        eprintln!("sitl: {warning}");
+    }
     let json = JsonFile::create(args).map_err(Failure::sitl)?;
     let keys = load_keys(args)?;
     // The ground listens for telemetry before the aircraft starts.
