@@ -8,7 +8,9 @@ use embassy_futures::join::join;
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_time::{Duration, Instant};
 use embedded_io_async::{Read, Write};
-use pprz_devices::sim::{Direction, Overflow, SimConfig, SimLink, SimStats};
+use pprz_devices::sim::{
+    Direction, MAX_OUTAGES, OutageError, Overflow, SimConfig, SimLink, SimStats,
+};
 use pprz_transports::{MsgHeader, PprzV2, PprzV2Decoder, TxMeta, write_frame};
 
 fn ms(t: Instant) -> f64 {
@@ -201,6 +203,78 @@ fn both_directions_are_independent() {
     assert_eq!(a_tx.stats().bytes_sent, 8);
     assert_eq!(b_rx.stats().bytes_delivered, 8);
     assert_eq!(a_rx.stats().bytes_delivered, 2);
+}
+
+/// An outage loses the bytes whose transmission ends in its window, and only in its
+/// direction; the modem keeps its pace, so the bytes after the window arrive on time.
+#[test]
+fn an_outage_loses_what_is_sent_in_its_window() {
+    let _t = mock_time();
+    let config = SimConfig::new(1000)
+        .latency(Duration::from_millis(5))
+        .buffer(256)
+        .overflow(Overflow::Wait);
+    let link = SimLink::<NoopRawMutex, 512>::new(config);
+    // Byte k ends its transmission at (k + 1) ms: bytes 19 to 48 end in [20, 50) ms.
+    link.add_outage(
+        Direction::AToB,
+        Instant::from_millis(20),
+        Instant::from_millis(50),
+    )
+    .unwrap();
+    let (a, b) = link.endpoints();
+    let (mut a_rx, mut a_tx) = a.split();
+    let (mut b_rx, mut b_tx) = b.split();
+    let data: Vec<u8> = (0..100).collect();
+    let (_, down, up) = run(
+        async {
+            let w = join(a_tx.write_all(&data), b_tx.write_all(&data[..40]));
+            let r = join(read_n(&mut b_rx, 70), read_n(&mut a_rx, 40));
+            let (_, (down, up)) = join(w, r).await;
+            ((), down, up)
+        },
+        Duration::from_micros(100),
+        100_000,
+    );
+    let expected: Vec<u8> = (0..19).chain(49..100).collect();
+    assert_eq!(down.iter().map(|&(b, _)| b).collect::<Vec<_>>(), expected);
+    assert_eq!(down[19].1, Instant::from_millis(50 + 5), "byte 49 on time");
+    assert_eq!(up.len(), 40, "the other direction is not cut");
+    let s = link.stats(Direction::AToB);
+    assert_eq!(
+        (
+            s.bytes_written,
+            s.bytes_sent,
+            s.outage_bytes,
+            s.dropped_bytes
+        ),
+        (100, 70, 30, 0)
+    );
+    assert_eq!(s.air_busy_us, 100_000, "lost bytes took their air time");
+    assert_eq!(link.stats(Direction::BToA).outage_bytes, 0);
+}
+
+#[test]
+fn outage_windows_are_checked() {
+    let link = SimLink::<NoopRawMutex, 16>::new(SimConfig::new(100));
+    let t = Instant::from_millis;
+    assert_eq!(
+        link.add_outage(Direction::BToA, t(10), t(10)),
+        Err(OutageError::Empty)
+    );
+    assert_eq!(
+        link.add_outage(Direction::BToA, t(10), t(5)),
+        Err(OutageError::Empty)
+    );
+    for i in 0..MAX_OUTAGES as u64 {
+        link.add_outage(Direction::BToA, t(i), t(i + 1)).unwrap();
+    }
+    assert_eq!(
+        link.add_outage(Direction::BToA, t(100), t(200)),
+        Err(OutageError::Full)
+    );
+    // The other direction has its own windows.
+    assert_eq!(link.add_outage(Direction::AToB, t(100), t(200)), Ok(()));
 }
 
 /// Sends `len` zero bytes over a link with `ber`, returns (flipped bits seen, stats).

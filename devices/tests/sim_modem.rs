@@ -587,6 +587,40 @@ fn xbee_lost_frames_do_not_arrive() {
     assert_eq!(s.air_busy_us, 8_000);
 }
 
+/// XBee transmissions that end in an outage fail like unacknowledged ones: the modem
+/// retries, and a frame whose every attempt falls in the window is lost ("no ACK").
+#[test]
+fn xbee_transmissions_in_an_outage_fail_and_are_retried() {
+    let request = tx16(5, 0x0100, 0, &[9; 20]);
+    // 29 bytes on the UART: 5.8 ms; each attempt 3 ms on the air, then 1 ms of ACK wait:
+    // attempts end at 8.8, 12.8, 16.8 and 20.8 ms.
+    for (until_us, status, arrives, outage_attempts) in [
+        (10_000, xbee::STATUS_SUCCESS, Some(12_800 + 2_000), 1),
+        (100_000, xbee::STATUS_NO_ACK, None, 4),
+    ] {
+        let _t = mock_time();
+        let link = SimLink::<NoopRawMutex, 1024>::new(xbee_config(xbee24()));
+        link.add_outage(Direction::AToB, at_us(0), at_us(until_us))
+            .unwrap();
+        let Exchange { down, up, .. } = exchange(&link, &request, &[], 50_000, 1000);
+        let down = api_frames(&down);
+        assert_eq!(
+            down.first().map(|(_, t)| *t),
+            arrives.map(at_us),
+            "{until_us}"
+        );
+        assert_eq!(
+            frame_data(&up),
+            [vec![xbee::API_TX_STATUS, 5, status]],
+            "{until_us}"
+        );
+        let s = link.stats(Direction::AToB);
+        assert_eq!(s.outage_attempts, outage_attempts, "{until_us}");
+        assert_eq!(s.failed_attempts, outage_attempts, "{until_us}");
+        assert_eq!(s.frames_lost, u32::from(arrives.is_none()), "{until_us}");
+    }
+}
+
 #[test]
 fn xbee_bit_errors_fail_transmissions_instead_of_corrupting_frames() {
     let _t = mock_time();

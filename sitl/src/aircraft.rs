@@ -16,6 +16,7 @@ use pprz_messages::{Message, VarArray};
 use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
 use pprz_secure::rand_core::{OsRng, TryRngCore};
+use pprz_telemetry::health::LinkHealth;
 use pprz_telemetry::pprz_messages::priority;
 use pprz_telemetry::pprz_transports::{Decoder, Encoder, MAX_FRAME_LEN, PprzV2, XBee24};
 use pprz_telemetry::{Device, Downlink, FrameArena, Port, Sender, run_writer, run_writer_with};
@@ -25,7 +26,7 @@ use crate::bridge::ground_bridge;
 use crate::fleet::{self, SECOND_AC_ID};
 use crate::options::{Args, TransportArg};
 use crate::radio::{RADIO_RING, Radio, RadioPlan};
-use crate::{clock, record};
+use crate::{clock, link, record};
 
 /// Aircraft 7's downlink: device 0 its radio to the ground, device 1 its radio to
 /// aircraft 8 (`--fleet 2`; unused otherwise).
@@ -49,6 +50,10 @@ static LINK_78: StaticCell<Radio> = StaticCell::new();
 /// known at compile time).
 static DOWNLINK: StaticCell<Dl> = StaticCell::new();
 static RADIO: StaticCell<Radio> = StaticCell::new();
+/// Aircraft 7's link health, with the timeout of `--lost-timeout`.
+static HEALTH: StaticCell<LinkHealth<M>> = StaticCell::new();
+/// Aircraft 8's (`--fleet 2`).
+static HEALTH_8: StaticCell<LinkHealth<M>> = StaticCell::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// `--secure`: the radio's secure link (its writer seals, the application's reader
 /// opens, the application runs its handshake).
@@ -70,6 +75,20 @@ pub struct Aircraft {
     pub radio: &'static Radio,
     /// `--fleet 2`: the radio between 7 and 8, and 8's downlink.
     pub second: Option<(&'static Radio, &'static Dl8)>,
+    /// Aircraft 7's link health (its application's reader drives it, its failsafe
+    /// watches it).
+    pub health: &'static LinkHealth<M>,
+    /// `--fleet 2`: aircraft 8's.
+    pub health_8: Option<&'static LinkHealth<M>>,
+}
+
+impl Aircraft {
+    /// Each aircraft's id and link health, aircraft 7 first.
+    pub fn healths(&self) -> Vec<(u8, &'static LinkHealth<M>)> {
+        let mut all = vec![(AC_ID, self.health)];
+        all.extend(self.health_8.map(|h| (SECOND_AC_ID, h)));
+        all
+    }
 }
 
 /// Aircraft 8 (`--fleet 2`) before it starts: its radio to 7, its downlink and the port
@@ -78,6 +97,7 @@ struct Second {
     link: &'static Radio,
     downlink: &'static Dl8,
     port: Port<'static>,
+    health: &'static LinkHealth<M>,
 }
 
 /// Builds the aircraft the options describe, starts the clock and runs the aircraft on
@@ -90,6 +110,8 @@ pub fn start(
     udp: HostDevice,
 ) -> Result<Aircraft, String> {
     let radio: &'static Radio = RADIO.init(SimLink::new(plan.sim_config(args.flow_control)));
+    link::cut(radio, &args.outage)?;
+    let health: &'static LinkHealth<M> = HEALTH.init(link::health(args));
     let fleet = args.fleet > 1;
     let downlink: &'static Dl = DOWNLINK.init(
         Downlink::new(&ARENA, AC_ID, [plan.device_config(), plan.device_config()])
@@ -107,13 +129,15 @@ pub fn start(
         radio_device,
         radio,
         second: second.as_ref().map(|s| (s.link, s.downlink)),
+        health,
+        health_8: second.as_ref().map(|s| s.health),
     };
     let tasks = Tasks {
         radio_port,
         link_port,
         radio,
         second,
-        config: config(plan),
+        config: config(plan, health),
         responder,
         xbee: plan.xbee(),
         flood: plan.flood_bytes_per_s,
@@ -128,8 +152,8 @@ pub fn start(
 }
 
 /// The application's configuration: the flood (over XBee, [`xbee_flood`] sends it
-/// instead) and the record of what it submits.
-fn config(plan: &RadioPlan) -> Config {
+/// instead), the record of what it submits and its link `health`.
+fn config(plan: &RadioPlan, health: &'static LinkHealth<M>) -> Config {
     Config {
         flood_bytes_per_s: if plan.xbee() {
             0 // the flood task sends frames that fit XBee 802.15.4
@@ -137,7 +161,7 @@ fn config(plan: &RadioPlan) -> Config {
             plan.flood_bytes_per_s
         },
         observer: Some(record::submitted),
-        health: None,
+        health: Some(health),
     }
 }
 
@@ -154,6 +178,7 @@ fn second_aircraft(args: &Args, plan: &RadioPlan) -> Result<Second, String> {
         link,
         downlink,
         port,
+        health: HEALTH_8.init(link::health(args)),
     })
 }
 
@@ -179,6 +204,9 @@ impl Tasks {
         let secure = self.responder.is_some();
         let config = self.config;
         let layer = secure.then_some(&SECURE);
+        if let Some(health) = config.health {
+            spawner.spawn(link::watch(AC_ID, health).unwrap());
+        }
         spawner.spawn(radio_writer(self.radio_port, air_tx, layer).unwrap());
         if let Some(second) = self.second {
             let (side_7, side_8) = second.link.endpoints();
@@ -188,8 +216,10 @@ impl Tasks {
             let device_8 = second.port.device();
             let config_8 = Config {
                 observer: Some(record::submitted_by_second),
+                health: Some(second.health),
                 ..config
             };
+            spawner.spawn(link::watch(SECOND_AC_ID, second.health).unwrap());
             spawner.spawn(radio_writer(self.link_port, tx_7, None).unwrap());
             spawner.spawn(radio_writer(second.port, tx_8, None).unwrap());
             spawner.spawn(relay_aircraft(radio_device, air_rx, link_device, rx_7, config).unwrap());

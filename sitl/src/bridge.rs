@@ -86,7 +86,7 @@ pub async fn ground_bridge(
                     while let Some(f) = decoder.feed(&mut input) {
                         if !secure {
                             let to = f.destination().unwrap_or(AC_ID);
-                            record::uplink(to, f.class(), f.msg_id(), now);
+                            record::uplink(to, f.class(), f.msg_id(), f.payload(), now);
                         }
                         if xbee
                             && let Ok(len) =

@@ -1,7 +1,8 @@
 //! The ground station in this process (without `--headless`): it listens for the
 //! telemetry on UDP, decodes it live, runs the key exchange of `--secure`, PINGs every
-//! aircraft, changes a setting at 3 s, serves `--foxglove`, and shows the live table or
-//! one line per message.
+//! aircraft (its PINGs keep their uplink alive), changes a setting at 3 s, sets
+//! `ap_mode` back to NAV at `--resume-nav`, serves `--foxglove`, and shows the live
+//! table or one line per message. Its clock is the simulation's (the aircraft's).
 
 use std::net::UdpSocket;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -21,7 +22,7 @@ use pprz_telemetry::pprz_transports::{AnyTransport, Framing, PprzV2};
 
 use crate::fleet::{self, SECOND_AC_ID};
 use crate::options::Args;
-use crate::record;
+use crate::{link, record};
 
 /// Simulated seconds between two views of the live table at `--speed 1` or slower (at
 /// higher speeds, that many wall-clock seconds). The first view waits as long: a byte
@@ -86,6 +87,7 @@ impl Station {
             secure,
             next_ping: 1.0,
             setting_sent: false,
+            resume_sent: false,
             next_render: render_period(args.speed),
             next_link: 0.0,
         })
@@ -114,6 +116,8 @@ pub struct Ground<'a> {
     next_render: f64,
     next_link: f64,
     setting_sent: bool,
+    /// `--resume-nav`: the SETTING of `ap_mode` went.
+    resume_sent: bool,
 }
 
 impl Ground<'_> {
@@ -127,7 +131,9 @@ impl Ground<'_> {
         start: StdInstant,
     ) -> Monitor {
         let speed = self.args.speed;
-        let sim_now = || start.elapsed().as_secs_f64() * speed;
+        // The simulation's clock, so that what the ground sends at a time of the run
+        // (a PING at 10 s, the SETTING of `--resume-nav`) meets the radio at that time.
+        let sim_now = || Instant::now().as_micros() as f64 / 1e6;
         let wall_limit = self.args.duration / speed;
         let _ = self
             .socket
@@ -138,6 +144,7 @@ impl Ground<'_> {
             self.exchange_keys(t);
             self.ping(t);
             self.set_once(t);
+            self.resume_nav(t);
             self.serve_viewer_requests(t);
             self.receive(&mut buf, &sim_now);
             self.show(t, aircraft_side);
@@ -168,7 +175,7 @@ impl Ground<'_> {
                 if self.send(ac, "PING", &[]) {
                     self.monitor.ping_sent(Some(ac), t);
                     if self.secure {
-                        record::uplink(ac, Ping::CLASS_ID, Ping::ID, Instant::now());
+                        record::uplink(ac, Ping::CLASS_ID, Ping::ID, &[], Instant::now());
                     }
                 }
             }
@@ -182,6 +189,23 @@ impl Ground<'_> {
             return;
         }
         let (index, value) = SETTING;
+        self.set_all(t, index, value);
+        self.setting_sent = true;
+    }
+
+    /// `--resume-nav`: `ap_mode` NAV on every aircraft, once, at its time (lost if the
+    /// uplink is cut then).
+    fn resume_nav(&mut self, t: f64) {
+        let due = self.args.resume_nav.is_some_and(|at| t >= at);
+        if self.resume_sent || !due || !self.monitor.uplink_ready() {
+            return;
+        }
+        self.set_all(t, link::AP_MODE_SETTING, f64::from(link::NAV));
+        self.resume_sent = true;
+    }
+
+    /// SETTING `index` = `value` to every aircraft at `t`.
+    fn set_all(&mut self, t: f64, index: u8, value: f64) {
         let fleet = self.fleet;
         for &ac in fleet {
             let values = [
@@ -193,7 +217,6 @@ impl Ground<'_> {
                 self.monitor.setting_sent(Some(ac), t, index, value);
             }
         }
-        self.setting_sent = true;
     }
 
     /// Settings read and written from the viewer.

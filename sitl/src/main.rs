@@ -12,20 +12,22 @@
 //! (telemetry to port 4242, uplink from port 4243, PPRZ v2 on UDP whatever the radio
 //! speaks), so Paparazzi ground tools or `pprz-monitor` can listen. With the monitor
 //! view on (the default), this process also is the ground: it decodes the UDP
-//! telemetry live, PINGs the aircraft every second and changes a SETTING, and at the
-//! end prints, per priority level, what was sent, shed, received and how old it was
+//! telemetry live, PINGs the aircraft every second (which keeps their link health Up)
+//! and changes a SETTING, and at the end prints, per priority level, what was sent,
+//! shed, received and how old it was, and each aircraft's link health and failsafe
 //! (`--summary-json` writes the same figures as JSON).
 //!
 //! Time: the aircraft runs on embassy-time's mock clock, advanced by a pacer thread to
 //! follow wall-clock time (`--speed` runs it faster), so the same binary is also
-//! reproducible in tests. Ages and round trips in the summary are measured on that
-//! clock ([`record`]).
+//! reproducible in tests. The ground in this process reads the same clock. Ages, round
+//! trips and link health changes in the summary are measured on it ([`record`]).
 //!
 //! The modules follow a run: [`options`] (the command line) and [`radio`] (the radio
 //! they describe, checked as a whole); [`aircraft`] (the application, its downlink and
 //! tasks) with [`clock`] and [`fleet`] (a second aircraft behind the first); [`bridge`]
 //! (the radio's ground end on UDP); [`ground`] (the ground station in this process,
-//! with [`keys`] for `--secure`); [`record`], [`report`] and [`summary`] (the figures).
+//! with [`keys`] for `--secure`); [`link`] (the outages of `--outage`, each aircraft's
+//! link health and its failsafe); [`record`], [`report`] and [`summary`] (the figures).
 
 mod aircraft;
 mod bridge;
@@ -34,6 +36,7 @@ mod figures;
 mod fleet;
 mod ground;
 mod keys;
+mod link;
 mod options;
 mod radio;
 mod record;
@@ -102,6 +105,9 @@ fn plan_or_exit(args: &Args) -> RadioPlan {
 /// The run: what can fail is opened first, then the aircraft start, the ground runs
 /// until the end, and the summary is printed.
 fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
+    for warning in link::after_the_end(args) {
+        eprintln!("sitl: {warning}");
+    }
     let json = JsonFile::create(args).map_err(Failure::sitl)?;
     let keys = load_keys(args)?;
     // The ground listens for telemetry before the aircraft starts.

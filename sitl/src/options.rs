@@ -102,6 +102,21 @@ pub struct Args {
     /// in-process ground (not `--headless`).
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<SocketAddr>,
+    /// Cut the radio to the ground from START to END seconds of simulated time
+    /// (decimals allowed): DIR `up` cuts the uplink (ground to aircraft), `down` the
+    /// downlink, `both` both. What is sent in the window is lost, counted by the
+    /// simulated radio. Repeat for several windows (at most 8 per direction).
+    #[arg(long, value_name = "DIR:START..END", value_parser = parse_outage)]
+    pub outage: Vec<Outage>,
+    /// The aircraft's link health: Lost (and the failsafe flies home) after this many
+    /// seconds without a frame from the ground, 0.1 to 3600 (Degraded after 2 s).
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0, value_parser = parse_lost_timeout)]
+    pub lost_timeout: f64,
+    /// At this simulated time the ground sets every aircraft's `ap_mode` back to NAV
+    /// (SETTING index 3, value 13): after a link-loss failsafe, the aircraft stays in
+    /// HOME until the ground sets the mode again. Needs the in-process ground.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_instant)]
+    pub resume_nav: Option<f64>,
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))]
     pub messages: PathBuf,
@@ -150,6 +165,93 @@ impl TransportArg {
             Self::Xbee => XBee24::new().into(),
         }
     }
+}
+
+/// The directions an outage cuts (`--outage`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cut {
+    /// The uplink: ground to aircraft.
+    Up,
+    /// The downlink: aircraft to ground.
+    Down,
+    /// Both.
+    Both,
+}
+
+impl Cut {
+    /// The name on the command line and in the summary: `up`, `down` or `both`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Up => "up",
+            Self::Down => "down",
+            Self::Both => "both",
+        }
+    }
+
+    /// Whether it cuts the uplink.
+    pub fn up(self) -> bool {
+        self != Self::Down
+    }
+
+    /// Whether it cuts the downlink.
+    pub fn down(self) -> bool {
+        self != Self::Up
+    }
+}
+
+/// One `--outage`: a window of simulated time in which the radio to the ground carries
+/// nothing in the directions of `cut`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Outage {
+    /// What it cuts.
+    pub cut: Cut,
+    /// Its start, simulated seconds.
+    pub from_s: f64,
+    /// Its end (after the start), simulated seconds.
+    pub until_s: f64,
+}
+
+/// `--outage DIR:START..END`.
+fn parse_outage(s: &str) -> Result<Outage, String> {
+    const FORM: &str = "DIR:START..END, e.g. up:10..20";
+    let (dir, window) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}` is not {FORM}"))?;
+    let cut = match dir.trim() {
+        "up" => Cut::Up,
+        "down" => Cut::Down,
+        "both" => Cut::Both,
+        other => {
+            return Err(format!(
+                "`{other}` is not a direction: up, down or both ({FORM})"
+            ));
+        }
+    };
+    let (from, until) = window
+        .split_once("..")
+        .ok_or_else(|| format!("`{window}` has no `..` ({FORM})"))?;
+    let from_s = parse_instant(from)?;
+    let until_s = parse_instant(until)?;
+    if until_s <= from_s {
+        return Err(format!(
+            "the outage `{s}` ends at or before it starts ({FORM})"
+        ));
+    }
+    Ok(Outage {
+        cut,
+        from_s,
+        until_s,
+    })
+}
+
+/// A time in the run: simulated seconds from 0 to a year (`--outage`, `--resume-nav`).
+fn parse_instant(s: &str) -> Result<f64, String> {
+    number_in(s, 0.0, cli::MAX_DURATION)
+}
+
+/// `--lost-timeout`: from 0.1 s to an hour.
+fn parse_lost_timeout(s: &str) -> Result<f64, String> {
+    number_in(s, 0.1, 3600.0)
 }
 
 /// A finite number within `min..=max`, for the options below.

@@ -13,19 +13,25 @@
 //! application did not submit itself (PONG, and DL_VALUE answering a SETTING, sent by the
 //! services) have no submission of their own: PONG is measured by the PING round trip
 //! instead, and a DL_VALUE answer matches the periodic DL_VALUE of the same setting and
-//! value if there was one. Submissions older than [`HORIZON_S`] are forgotten, so a
-//! message waiting longer than that counts as received but not aged.
+//! value submitted since the SETTING went up, if there was one. Submissions older than
+//! [`HORIZON_S`] are forgotten, so a message waiting longer than that counts as received
+//! but not aged.
+//!
+//! Per aircraft, it also keeps the changes of its link health (recorded from the
+//! aircraft's side by [`crate::link`]), and what the ground saw: the `ap_mode` of its
+//! ROTORCRAFT_STATUS messages and the times it heard nothing from it.
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{LazyLock, Mutex, MutexGuard};
 
 use embassy_time::Instant;
 use pprz_default::messages::MESSAGES;
-use pprz_default::messages::datalink::Ping;
-use pprz_default::messages::telemetry::Pong;
+use pprz_default::messages::datalink::{Ping, Setting};
+use pprz_default::messages::telemetry::{DlValue, Pong, RotorcraftStatus};
 use pprz_example_app::AC_ID;
 use pprz_ground::ping::PingTracker;
-use pprz_messages::Message;
+use pprz_messages::{Decode, Message};
+use pprz_telemetry::health::Health;
 use pprz_telemetry::pprz_messages::priority;
 
 use pprz_devices::rng::SplitMix64;
@@ -159,6 +165,43 @@ pub struct AircraftRecord {
     pub pings: PingTracker,
     /// Their round trips.
     pub rtt: Samples,
+    /// Its link health's changes (µs, new state), as the aircraft saw them.
+    pub health: Vec<(u64, Health)>,
+    /// Its `ap_mode` as the ground saw it: the first ROTORCRAFT_STATUS, then each one
+    /// that changed it (µs, raw `ap_mode`).
+    pub ap_modes: Vec<(u64, u8)>,
+    /// When the ground last received a message from it (µs).
+    pub last_heard_us: Option<u64>,
+    /// Times the ground heard nothing from it for more than [`SILENCE_US`]: the last
+    /// message before and the first after (µs).
+    pub silences: Vec<(u64, u64)>,
+}
+
+/// A gap between two messages from an aircraft longer than this (µs) is a silence in
+/// the summary (its telemetry comes several times a second).
+pub const SILENCE_US: u64 = 1_000_000;
+
+impl AircraftRecord {
+    /// A message from the aircraft reached the ground at `now_us`: ends a silence.
+    fn heard(&mut self, now_us: u64) {
+        if let Some(last) = self.last_heard_us
+            && now_us.saturating_sub(last) > SILENCE_US
+        {
+            self.silences.push((last, now_us));
+        }
+        self.last_heard_us = Some(now_us);
+    }
+
+    /// A ROTORCRAFT_STATUS from the aircraft with `payload` reached the ground at
+    /// `now_us`: its `ap_mode`, kept if it changed.
+    fn status(&mut self, payload: &[u8], now_us: u64) {
+        let Ok(status) = RotorcraftStatus::decode(payload) else {
+            return;
+        };
+        if self.ap_modes.last().map(|&(_, m)| m) != Some(status.ap_mode) {
+            self.ap_modes.push((now_us, status.ap_mode));
+        }
+    }
 }
 
 static RECORD: LazyLock<Mutex<Record>> = LazyLock::new(Mutex::default);
@@ -181,9 +224,23 @@ pub fn submitted_by_second(class_id: u8, msg_id: u8, payload: &[u8], now: Instan
     lock().submitted(SECOND_AC_ID, class_id, msg_id, payload, now.as_micros());
 }
 
-/// A frame from the ground to `destination` went up the radio at `now`: tracked if it
-/// is a PING.
-pub fn uplink(destination: u8, class_id: u8, msg_id: u8, now: Instant) {
+/// A frame from the ground to `destination` with `payload` went up the radio at `now`:
+/// tracked if it is a PING. A SETTING makes the DL_VALUE of its setting and value
+/// submitted before it unmatchable: the acknowledgement is not that old one.
+pub fn uplink(destination: u8, class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
+    if (class_id, msg_id) == (Setting::CLASS_ID, Setting::ID)
+        && let Ok(setting) = Setting::decode(payload)
+    {
+        let answer = DlValue {
+            index: setting.index,
+            value: setting.value,
+        };
+        let mut fields = [0u8; 8];
+        if let Ok(len) = answer.encode(&mut fields) {
+            let key = (DlValue::CLASS_ID, DlValue::ID, fields[..len].to_vec());
+            lock().submissions.remove(&key);
+        }
+    }
     if (class_id, msg_id) == (Ping::CLASS_ID, Ping::ID) {
         let mut record = lock();
         let t = seconds(now.as_micros());
@@ -197,6 +254,16 @@ pub fn uplink(destination: u8, class_id: u8, msg_id: u8, now: Instant) {
             .pings
             .sent(t);
     }
+}
+
+/// The link health of aircraft `ac` became `state` at `at`.
+pub fn health(ac: u8, at: Instant, state: Health) {
+    lock()
+        .aircraft
+        .entry(ac)
+        .or_default()
+        .health
+        .push((at.as_micros(), state));
 }
 
 /// A message from `source` arrived at the ground end of the radio at `now`.
@@ -236,6 +303,10 @@ impl Record {
         // Only the fleet's aircraft get a record (a forged source cannot grow it).
         if let Some(aircraft) = self.aircraft.get_mut(&source) {
             aircraft.received[priority::level(desc.priority)] += 1;
+            aircraft.heard(now_us);
+            if (class_id, msg_id) == (RotorcraftStatus::CLASS_ID, RotorcraftStatus::ID) {
+                aircraft.status(payload, now_us);
+            }
             if (class_id, msg_id) == (Pong::CLASS_ID, Pong::ID)
                 && let Some(rtt) = aircraft.pings.pong(seconds(now_us))
             {

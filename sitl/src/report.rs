@@ -15,6 +15,7 @@ use pprz_telemetry::pprz_messages::priority;
 use crate::aircraft::{Aircraft, SECURE};
 use crate::bridge;
 use crate::figures;
+use crate::link;
 use crate::options::{Args, FlowControl};
 use crate::radio::RadioPlan;
 use crate::record;
@@ -185,6 +186,7 @@ pub fn collect_summary(args: &Args, plan: &RadioPlan, aircraft: &Aircraft) -> Su
         messages,
         secure: plan.secure.then(secure_figures),
         fleet,
+        link: link::figures(args, aircraft),
     }
 }
 

@@ -34,6 +34,182 @@ pub struct Summary {
     /// `null`, with one aircraft). The figures above are the radio's: every aircraft's
     /// frames together.
     pub fleet: Option<FleetFigures>,
+    /// The link to the ground: each aircraft's link health and what the ground saw of
+    /// its failsafe, with the outages of the run.
+    pub link: LinkFigures,
+}
+
+/// The link to the ground, per aircraft: the health the aircraft kept (from its own
+/// side) and what the ground saw. Times are simulated seconds.
+#[derive(Debug, Clone, Serialize)]
+pub struct LinkFigures {
+    /// The aircraft's link health is Lost (and its failsafe flies home) after this
+    /// many seconds without a frame from the ground (`--lost-timeout`).
+    pub lost_timeout_s: f64,
+    /// It is Degraded after this many.
+    pub degraded_timeout_s: f64,
+    /// When the ground set `ap_mode` back to NAV (`--resume-nav`; `None`, JSON `null`,
+    /// without).
+    pub resume_nav_s: Option<f64>,
+    /// Bytes sent on the downlink during an outage, lost (transparent radio).
+    pub lost_bytes_down: u32,
+    /// Bytes sent on the uplink during an outage, lost (transparent radio).
+    pub lost_bytes_up: u32,
+    /// XBee: downlink transmissions that failed in an outage.
+    pub failed_attempts_down: u32,
+    /// XBee: uplink transmissions that failed in an outage.
+    pub failed_attempts_up: u32,
+    /// Each aircraft, the one whose radio reaches the ground first.
+    pub aircraft: Vec<AircraftLink>,
+}
+
+/// One aircraft's link to the ground.
+#[derive(Debug, Clone, Serialize)]
+pub struct AircraftLink {
+    /// Its id.
+    pub ac_id: u8,
+    /// The outages of its way to the ground (aircraft 7's radio, also aircraft 8's way).
+    pub outages: Vec<Window>,
+    /// Its link health's changes, from Lost (nothing heard yet) at the start.
+    pub transitions: Vec<Transition>,
+    /// Times its link became Lost after it was heard (one in progress included).
+    pub losses: u32,
+    /// Its link health at the end: `"up"`, `"degraded"` or `"lost"`.
+    pub state: &'static str,
+    /// Its `ap_mode` as the ground saw it in ROTORCRAFT_STATUS: the first, then each
+    /// change.
+    pub ap_modes: Vec<ModeChange>,
+    /// Each failsafe as the ground saw it.
+    pub failsafes: Vec<Failsafe>,
+    /// Times the ground heard nothing from it for more than a second.
+    pub silences: Vec<Silence>,
+}
+
+/// An outage window.
+#[derive(Debug, Clone, Serialize)]
+pub struct Window {
+    /// `"up"`, `"down"` or `"both"`.
+    pub direction: &'static str,
+    /// Its start.
+    pub from_s: f64,
+    /// Its end.
+    pub until_s: f64,
+}
+
+/// A change of link health.
+#[derive(Debug, Clone, Serialize)]
+pub struct Transition {
+    /// When.
+    pub t_s: f64,
+    /// The new state: `"up"`, `"degraded"` or `"lost"`.
+    pub state: &'static str,
+}
+
+/// A ROTORCRAFT_STATUS whose `ap_mode` differed from the one before (or the first).
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeChange {
+    /// When it reached the ground.
+    pub t_s: f64,
+    /// Its `ap_mode` (`"NAV"`, `"HOME"`; the number if it has no name).
+    pub ap_mode: String,
+}
+
+/// A failsafe as the ground saw it.
+#[derive(Debug, Clone, Serialize)]
+pub struct Failsafe {
+    /// The first ROTORCRAFT_STATUS with `ap_mode` HOME reached the ground then.
+    pub home_s: f64,
+    /// The first after it with NAV (`None`, JSON `null`: still in HOME at the end).
+    pub nav_s: Option<f64>,
+}
+
+/// A time the ground heard nothing from an aircraft.
+#[derive(Debug, Clone, Serialize)]
+pub struct Silence {
+    /// The last message before it reached the ground then.
+    pub from_s: f64,
+    /// The first after it (`None`, JSON `null`: silent until the end).
+    pub until_s: Option<f64>,
+}
+
+impl LinkFigures {
+    /// Appends the link's lines to `s`.
+    fn text(&self, s: &mut String) {
+        use std::fmt::Write as _;
+        let resume = self
+            .resume_nav_s
+            .map(|t| format!("; ap_mode set back to NAV at {t} s"))
+            .unwrap_or_default();
+        let _ = writeln!(
+            s,
+            "Link to the ground (the aircraft's health: degraded after {} s, lost after {} s without a frame from the ground{resume}):",
+            self.degraded_timeout_s, self.lost_timeout_s
+        );
+        if let Some(first) = self.aircraft.first()
+            && !first.outages.is_empty()
+        {
+            let windows: Vec<String> = first
+                .outages
+                .iter()
+                .map(|w| format!("{} {}..{} s", w.direction, w.from_s, w.until_s))
+                .collect();
+            let _ = writeln!(
+                s,
+                "  outages: {}; lost in them: downlink {} bytes, uplink {} bytes (XBee attempts failed: down {}, up {})",
+                windows.join(", "),
+                self.lost_bytes_down,
+                self.lost_bytes_up,
+                self.failed_attempts_down,
+                self.failed_attempts_up
+            );
+        }
+        for a in &self.aircraft {
+            a.text(s);
+        }
+    }
+}
+
+impl AircraftLink {
+    /// Appends the aircraft's lines to `s`.
+    fn text(&self, s: &mut String) {
+        use std::fmt::Write as _;
+        let changes: Vec<String> = self
+            .transitions
+            .iter()
+            .map(|t| format!("{} {:.3} s", t.state, t.t_s))
+            .collect();
+        let changes = if changes.is_empty() {
+            "never heard the ground".to_owned()
+        } else {
+            changes.join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "  aircraft {} link health: {changes}; losses {}; {} at the end",
+            self.ac_id, self.losses, self.state
+        );
+        for f in &self.failsafes {
+            let nav = f.nav_s.map_or_else(
+                || "still HOME at the end".to_owned(),
+                |t| format!("NAV again at {t:.3} s"),
+            );
+            let _ = writeln!(
+                s,
+                "  aircraft {} failsafe, as the ground saw it: HOME at {:.3} s, {nav}",
+                self.ac_id, f.home_s
+            );
+        }
+        for q in &self.silences {
+            let until = q
+                .until_s
+                .map_or_else(|| "the end".to_owned(), |t| format!("{t:.3} s"));
+            let _ = writeln!(
+                s,
+                "  aircraft {}: the ground heard nothing from it from {:.3} s to {until}",
+                self.ac_id, q.from_s
+            );
+        }
+    }
 }
 
 /// A fleet: each aircraft, and what the relay carried on each of its routes.
@@ -335,6 +511,7 @@ impl Summary {
         if let Some(fleet) = &self.fleet {
             fleet.text(&mut s);
         }
+        self.link.text(&mut s);
         s
     }
 

@@ -190,6 +190,20 @@ fn nonsense_options_are_refused() {
         ("--transport", "mavlink"),
         ("--in-modem", "0"),
         ("--in-modem", "9"),
+        ("--outage", "up:20..10"),
+        ("--outage", "up:10..10"),
+        ("--outage", "up:-1..5"),
+        ("--outage", "down:NaN..5"),
+        ("--outage", "both:1..inf"),
+        ("--outage", "sideways:1..2"),
+        ("--outage", "up:1-2"),
+        ("--outage", "up"),
+        ("--lost-timeout", "0"),
+        ("--lost-timeout", "-3"),
+        ("--lost-timeout", "NaN"),
+        ("--lost-timeout", "inf"),
+        ("--resume-nav", "-1"),
+        ("--resume-nav", "NaN"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
             .args(["--headless", &format!("{option}={value}")])
@@ -258,6 +272,30 @@ fn contradictory_radio_options_are_refused() {
             &["--fleet", "2", "--secure", TEST_KEYS],
             &["--fleet 2", "--secure"],
         ),
+        (&["--resume-nav", "5"], &["--resume-nav", "--headless"]),
+        (
+            &[
+                "--outage",
+                "up:1..2",
+                "--outage",
+                "up:3..4",
+                "--outage",
+                "up:5..6",
+                "--outage",
+                "up:7..8",
+                "--outage",
+                "up:9..10",
+                "--outage",
+                "both:11..12",
+                "--outage",
+                "up:13..14",
+                "--outage",
+                "up:15..16",
+                "--outage",
+                "up:17..18",
+            ],
+            &["--outage", "9 windows cut up", "at most 8"],
+        ),
         (
             &[
                 "--pacing",
@@ -280,6 +318,29 @@ fn contradictory_radio_options_are_refused() {
         for text in expected {
             assert!(stderr.contains(text), "{args:?}: no `{text}` in {stderr}");
         }
+    }
+}
+
+/// An outage or `--resume-nav` after the end of the run has no effect: the run goes
+/// on, and says so.
+#[test]
+fn link_options_after_the_end_are_reported() {
+    let extra = ["--outage", "up:30..40", "--resume-nav", "1"];
+    // Repeated with new ports if another test took one (as `run_sitl_for` does).
+    let (mut ok, mut stderr) = (false, String::new());
+    for _ in 0..3 {
+        let (success, _, err) = run_sitl_once("1", "10", &extra);
+        (ok, stderr) = (success, err);
+        if ok || !stderr.to_lowercase().contains("in use") {
+            break;
+        }
+    }
+    assert!(ok, "{stderr}");
+    for text in [
+        "--outage up:30..40 starts at or after the end of the run (--duration 1)",
+        "--resume-nav 1 is at or after the end of the run (--duration 1)",
+    ] {
+        assert!(stderr.contains(text), "no `{text}` in {stderr}");
     }
 }
 
@@ -391,6 +452,19 @@ fn summary_json_has_the_documented_fields() {
     assert!(uint(attitude, "/received") >= 12);
     assert!(uint(attitude, "/submitted") >= uint(attitude, "/received"));
     assert!(attitude["max_gap_ms"].as_f64().is_some_and(|g| g < 1000.0));
+    // The link: the default timeouts, no outage, up from the first PING (at 1 s) on.
+    let link = &json["link"];
+    assert_eq!(link["lost_timeout_s"].as_f64(), Some(5.0), "{link:#}");
+    assert_eq!(link["degraded_timeout_s"].as_f64(), Some(2.0), "{link:#}");
+    assert_eq!(link["resume_nav_s"], Value::Null);
+    let ac = &link["aircraft"][0];
+    assert_eq!(uint(ac, "/ac_id"), 7);
+    assert_eq!(ac["outages"].as_array().map(Vec::len), Some(0), "{ac:#}");
+    assert_eq!(states(ac), ["up"], "{ac:#}");
+    assert_eq!((uint(ac, "/losses"), ac["state"].as_str()), (0, Some("up")));
+    assert_eq!(ac["ap_modes"][0]["ap_mode"], "NAV", "{ac:#}");
+    assert_eq!(ac["failsafes"].as_array().map(Vec::len), Some(0), "{ac:#}");
+    assert_eq!(ac["silences"].as_array().map(Vec::len), Some(0), "{ac:#}");
 }
 
 /// Issue 13, scenario a: a 57600-baud UART into a modem with a 2048-byte buffer that
@@ -631,6 +705,153 @@ fn a_fleet_of_two_relays_through_the_first() {
     assert_eq!(uint(fleet, "/relay/refused"), 0, "{fleet:#}");
     assert!(uint(fleet, "/relay/forwarded") > 0, "{fleet:#}");
     assert!(out.contains("relay 7 refused 0 (own source 0, "), "{out}");
+}
+
+/// The states of an aircraft's link health transitions (`link.aircraft[i]`).
+fn states(aircraft: &Value) -> Vec<&str> {
+    transitions(aircraft).into_iter().map(|(_, s)| s).collect()
+}
+
+/// The link health transitions of `link.aircraft[i]`: time and state.
+fn transitions(aircraft: &Value) -> Vec<(f64, &str)> {
+    aircraft["transitions"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no transitions in {aircraft:#}"))
+        .iter()
+        .map(|t| (t["t_s"].as_f64().unwrap(), t["state"].as_str().unwrap()))
+        .collect()
+}
+
+/// The times of the transitions of `aircraft` to `state`.
+fn times_of(aircraft: &Value, state: &str) -> Vec<f64> {
+    transitions(aircraft)
+        .into_iter()
+        .filter(|&(_, s)| s == state)
+        .map(|(t, _)| t)
+        .collect()
+}
+
+/// The `ap_mode` names the ground saw from `aircraft`, in order.
+fn ap_modes(aircraft: &Value) -> Vec<&str> {
+    aircraft["ap_modes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["ap_mode"].as_str().unwrap())
+        .collect()
+}
+
+/// The uplink cut from 10 to 20 s, the link Lost after 3 s without the ground: the
+/// ground PINGs every second, so the aircraft last heard it at 9 s and a few ms (the
+/// PING of 10 s went into the cut), and its health is Degraded 2 s later and Lost 3 s
+/// later, once. The failsafe flies home, and the ground sees HOME in the next
+/// ROTORCRAFT_STATUS (every 1.2 s). The PING of 20 s makes the link Up again, and the
+/// aircraft stays in HOME until the ground sets NAV again at 25 s (`--resume-nav`).
+#[test]
+fn an_uplink_outage_triggers_the_failsafe_until_the_ground_resumes_nav() {
+    let (out, json) = run_sitl_json(
+        "outage-up",
+        "28",
+        "10",
+        &[
+            "--outage",
+            "up:10..20",
+            "--lost-timeout",
+            "3",
+            "--resume-nav",
+            "25",
+        ],
+    );
+    let link = &json["link"];
+    let ac = &link["aircraft"][0];
+    assert_eq!(states(ac), ["up", "degraded", "lost", "up"], "{ac:#}");
+    let [lost] = times_of(ac, "lost")[..] else {
+        panic!("one loss: {ac:#}");
+    };
+    assert!((12.0..13.0).contains(&lost), "lost at {lost}: {ac:#}");
+    let degraded = times_of(ac, "degraded")[0];
+    assert!((lost - degraded - 1.0).abs() < 1e-6, "{ac:#}");
+    let back = times_of(ac, "up")[1];
+    assert!((20.0..21.0).contains(&back), "up again at {back}: {ac:#}");
+    assert_eq!((uint(ac, "/losses"), ac["state"].as_str()), (1, Some("up")));
+    assert_eq!(ac["outages"][0]["direction"], "up");
+    assert_eq!(ac["outages"][0]["from_s"].as_f64(), Some(10.0));
+    assert_eq!(ac["outages"][0]["until_s"].as_f64(), Some(20.0));
+    // The ground saw NAV, HOME after the loss (and through the end of the cut), and NAV
+    // only after 25 s.
+    assert_eq!(ap_modes(ac), ["NAV", "HOME", "NAV"], "{ac:#}");
+    let failsafe = &ac["failsafes"][0];
+    let home = failsafe["home_s"].as_f64().unwrap();
+    let nav = failsafe["nav_s"].as_f64().unwrap();
+    assert!(home > lost && home < lost + 1.5, "HOME at {home}: {ac:#}");
+    assert!(nav > 25.0 && nav < 27.0, "NAV at {nav}: {ac:#}");
+    assert_eq!(link["resume_nav_s"].as_f64(), Some(25.0));
+    // Ten PINGs went into the cut, nothing of the downlink.
+    assert!(uint(link, "/lost_bytes_up") >= 10 * 8, "{link:#}");
+    assert_eq!(uint(link, "/lost_bytes_down"), 0, "{link:#}");
+    assert!(
+        out.contains("aircraft 7 failsafe, as the ground saw it: HOME at "),
+        "{out}"
+    );
+    assert!(
+        out.contains("7 telemetry DL_VALUE index=3 value=13"),
+        "{out}"
+    );
+}
+
+/// The downlink cut from 10 to 20 s: the aircraft still hears the ground's PINGs and
+/// stays Up (no failsafe), and the ground hears nothing from it in the window.
+#[test]
+fn a_downlink_outage_leaves_the_aircraft_up_and_the_ground_deaf() {
+    let (out, json) = run_sitl_json("outage-down", "22", "10", &["--outage", "down:10..20"]);
+    let link = &json["link"];
+    let ac = &link["aircraft"][0];
+    assert_eq!(states(ac), ["up"], "{ac:#}");
+    assert!((1.0..2.0).contains(&times_of(ac, "up")[0]), "{ac:#}");
+    assert_eq!((uint(ac, "/losses"), ac["state"].as_str()), (0, Some("up")));
+    assert_eq!(ap_modes(ac), ["NAV"], "{ac:#}");
+    let silences = ac["silences"].as_array().unwrap();
+    assert_eq!(silences.len(), 1, "{ac:#}");
+    let from = silences[0]["from_s"].as_f64().unwrap();
+    let until = silences[0]["until_s"].as_f64().unwrap();
+    assert!((9.0..10.0).contains(&from), "silent from {from}: {ac:#}");
+    assert!(
+        (20.0..21.0).contains(&until),
+        "silent until {until}: {ac:#}"
+    );
+    assert!(uint(link, "/lost_bytes_down") > 1000, "{link:#}");
+    assert_eq!(uint(link, "/lost_bytes_up"), 0, "{link:#}");
+    assert!(
+        out.contains("aircraft 7: the ground heard nothing from it from "),
+        "{out}"
+    );
+}
+
+/// `--fleet 2`: the outage cuts aircraft 7's radio to the ground, which is aircraft 8's
+/// only way to the ground too (7 relays): both lose the ground's PINGs, go Lost (with
+/// a 2 s timeout, straight from Up) and fly home; both are Up again after the cut, and
+/// stay in HOME.
+#[test]
+fn an_uplink_outage_cuts_both_aircraft_of_a_fleet() {
+    let (_, json) = run_sitl_json(
+        "outage-fleet",
+        "10",
+        "6",
+        &["--fleet", "2", "--outage", "up:4..8", "--lost-timeout", "2"],
+    );
+    let aircraft = json["link"]["aircraft"].as_array().unwrap();
+    assert_eq!(aircraft.len(), 2);
+    for (ac, id) in aircraft.iter().zip([7, 8]) {
+        assert_eq!(uint(ac, "/ac_id"), id);
+        assert_eq!(states(ac), ["up", "lost", "up"], "{ac:#}");
+        let lost = times_of(ac, "lost")[0];
+        assert!((5.0..6.0).contains(&lost), "{id} lost at {lost}: {ac:#}");
+        let back = times_of(ac, "up")[1];
+        assert!((8.0..9.0).contains(&back), "{id} up at {back}: {ac:#}");
+        assert_eq!(ac["outages"][0]["from_s"].as_f64(), Some(4.0), "{ac:#}");
+        assert_eq!(ap_modes(ac), ["NAV", "HOME"], "{ac:#}");
+        assert_eq!(ac["failsafes"][0]["nav_s"], Value::Null, "{ac:#}");
+    }
 }
 
 /// The number that follows `label` in `out`.

@@ -4,6 +4,7 @@ use embassy_sync::waitqueue::WakerRegistration;
 
 use super::SimStats;
 use super::modem::{InModem, MODEM_FRAMES, Parser};
+use super::outage::Outages;
 use super::timing::Timing;
 use crate::rng::SplitMix64;
 
@@ -36,6 +37,8 @@ pub(super) struct Dir<const N: usize> {
     pub(super) parser: Parser,
     pub(super) rng: SplitMix64,
     pub(super) stats: SimStats,
+    /// When this direction delivers nothing.
+    pub(super) outages: Outages,
     pub(super) rx_waker: WakerRegistration,
     pub(super) tx_waker: WakerRegistration,
 }
@@ -76,7 +79,10 @@ impl<const N: usize> Dir<N> {
                 frames_lost: 0,
                 statuses: 0,
                 statuses_lost: 0,
+                outage_bytes: 0,
+                outage_attempts: 0,
             },
+            outages: Outages::NONE,
             rx_waker: WakerRegistration::new(),
             tx_waker: WakerRegistration::new(),
         }
@@ -179,8 +185,8 @@ mod tests {
 
     #[test]
     pub(super) fn memory_per_direction_is_as_documented() {
-        assert!(core::mem::size_of::<Dir<1>>() <= 9 + 1300);
-        assert!(core::mem::size_of::<Dir<4096>>() <= 9 * 4096 + 1300);
+        assert!(core::mem::size_of::<Dir<1>>() <= 9 + 1536);
+        assert!(core::mem::size_of::<Dir<4096>>() <= 9 * 4096 + 1536);
     }
 
     #[test]

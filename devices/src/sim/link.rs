@@ -11,6 +11,7 @@ use embassy_time::{Instant, Timer};
 
 use super::dir::Dir;
 use super::modem::{MODEM_FRAMES, rx_frame_len};
+use super::outage::OutageError;
 use super::timing::Timing;
 use super::transmit::{Modem, Status};
 use super::{Overflow, SimConfig, SimStats, XBeeModem};
@@ -108,6 +109,29 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
             };
             stats.air_busy_us = t.micros(d.air_total.saturating_sub(ahead));
             stats
+        })
+    }
+
+    /// Cuts `direction` from `from` until `until`: what the modem sends on the air in
+    /// that window is lost. The modem does not know: it keeps taking bytes from the UART
+    /// and sending them at its air rate, so flow control and the modem buffer behave as
+    /// without the outage. A transparent modem loses each byte whose transmission ends
+    /// in the window ([`SimStats::outage_bytes`]); an XBee modem's transmissions that
+    /// end in the window fail ([`SimStats::outage_attempts`]), so an acknowledged frame
+    /// is retried, and lost (status "no ACK") if every attempt falls in the window.
+    /// Windows may overlap; bytes already on their way when a window opens arrive.
+    ///
+    /// # Errors
+    /// [`OutageError::Empty`] if `until` is not after `from`, [`OutageError::Full`] if
+    /// the direction already has [`MAX_OUTAGES`](super::MAX_OUTAGES) windows.
+    pub fn add_outage(
+        &self,
+        direction: Direction,
+        from: Instant,
+        until: Instant,
+    ) -> Result<(), OutageError> {
+        self.with(direction, |d| {
+            d.outages.add(from.as_ticks(), until.as_ticks())
         })
     }
 
@@ -275,6 +299,15 @@ impl<M: RawMutex, const N: usize> SimLink<M, N> {
             s.dropped_bytes = s.dropped_bytes.wrapping_add(1);
             return;
         }
+        let sent_at = d.tx_end.max(at) + t.air_byte;
+        if d.outages.cover(sent_at, t.scale) {
+            // Sent into the void: it takes its air time, and nobody receives it.
+            d.tx_end = sent_at;
+            d.air_total += t.air_byte;
+            d.stats.outage_bytes = d.stats.outage_bytes.wrapping_add(1);
+            return;
+        }
+        let s = &mut d.stats;
         if d.len >= N {
             s.overrun_bytes = s.overrun_bytes.wrapping_add(1);
             return;

@@ -41,6 +41,10 @@
 //!   direction. If the receiver does not read and the ring fills, further bytes are lost
 //!   as receiver overruns ([`SimStats::overrun_bytes`]) with `Drop`, or the writer waits
 //!   with `Wait`.
+//! * **Outages** ([`SimLink::add_outage`]): windows of time in which a direction
+//!   delivers nothing (the radio out of range). The modem does not know: it sends at its
+//!   air rate as usual, and the bytes whose transmission ends in a window are lost and
+//!   counted ([`SimStats::outage_bytes`]).
 //!
 //! The UART and air time are measured ([`SimStats::serial_busy_us`],
 //! [`SimStats::air_busy_us`]): divided by the elapsed time they give the utilisation of
@@ -134,9 +138,10 @@
 //! writer happened to be polled.
 //!
 //! Memory per direction: `9 * N` bytes for the receiver ring (each byte carries its
-//! arrival time) plus at most 1.3 KiB of state, most of it the XBee modem's (a
-//! 270-byte frame buffer and 16 frame slots of 48 bytes), present whether XBee is used
-//! or not; a [`SimLink`] is twice that. No allocation, no `unsafe`.
+//! arrival time) plus at most 1.5 KiB of state, most of it the XBee modem's (a
+//! 270-byte frame buffer and 16 frame slots of 48 bytes) and the outage windows (16
+//! bytes each), present whether XBee or outages are used or not; a [`SimLink`] is twice
+//! that. No allocation, no `unsafe`.
 //!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::NoopRawMutex;
@@ -179,6 +184,7 @@ mod dir;
 mod end;
 mod link;
 mod modem;
+mod outage;
 mod stats;
 mod timing;
 mod transmit;
@@ -187,4 +193,5 @@ pub mod xbee;
 pub use config::{Overflow, SimConfig, XBeeModem, XBeeVariant};
 pub use end::{SimEnd, SimRx, SimTx};
 pub use link::{Direction, SimLink};
+pub use outage::{MAX_OUTAGES, OutageError};
 pub use stats::SimStats;

@@ -4,7 +4,8 @@ use embassy_time::Duration;
 
 /// Counters of one direction of a [`SimLink`](super::SimLink). The `u32` counters wrap around.
 ///
-/// Transparent modem: `bytes_written == bytes_sent + dropped_bytes + overrun_bytes`.
+/// Transparent modem: `bytes_written == bytes_sent + dropped_bytes + overrun_bytes +
+/// outage_bytes`.
 /// XBee API modem: `bytes_written == bytes_sent + dropped_bytes + overrun_bytes +
 /// discarded_bytes + ` the bytes of a frame still being received, the byte counters
 /// counting the API bytes of whole frames.
@@ -52,6 +53,13 @@ pub struct SimStats {
     pub statuses: u32,
     /// Transmit statuses lost because the writer's receiver ring was full.
     pub statuses_lost: u32,
+    /// Transparent modem: bytes sent on the air during an outage
+    /// ([`SimLink::add_outage`](super::SimLink::add_outage)), never received.
+    pub outage_bytes: u32,
+    /// API modem: transmissions that ended during an outage, and failed (they are
+    /// counted in `failed_attempts` too; a frame whose every attempt failed is in
+    /// `frames_lost`).
+    pub outage_attempts: u32,
 }
 
 impl SimStats {

@@ -145,19 +145,25 @@ impl<const N: usize> Dir<N> {
         } else {
             1
         };
-        let mut attempts = 0;
-        let mut received = false;
-        while attempts < max_attempts && !received {
-            attempts += 1;
-            received = self.attempt(air_bytes, t);
-        }
-        let frame = InModem {
+        let mut frame = InModem {
             start: self.tx_end.max(at),
             air: air_bytes as u128 * t.air_byte,
-            attempts,
+            attempts: 0,
             acked: req.acked,
             weight: bytes as u16,
         };
+        let period = frame.period(t.ack_wait);
+        let mut received = false;
+        while frame.attempts < max_attempts && !received {
+            let ends = frame.start + u128::from(frame.attempts) * period + frame.air;
+            frame.attempts += 1;
+            received = self.attempt(air_bytes, t);
+            if self.outages.cover(ends, t.scale) {
+                received = false;
+                self.stats.outage_attempts = self.stats.outage_attempts.wrapping_add(1);
+            }
+        }
+        let attempts = frame.attempts;
         let end = frame.end(t.ack_wait);
         self.tx_end = end;
         self.air_total += u128::from(attempts) * frame.air;
