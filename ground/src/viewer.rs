@@ -15,7 +15,7 @@
 //!   trip, the fields of the latest DATALINK_REPORT, and the link quality the monitor
 //!   keeps ([`Monitor::link_quality`]): live or stale, seconds since heard, the
 //!   aircraft's uplink silence, its RSSI and the ground modem's, the downlink loss
-//!   estimate and the autopilot mode. Published by [`Viewer::link_stats_at`].
+//!   estimate and the autopilot mode. Published by [`Viewer::link_stats`].
 //!
 //! Settings: with [`Viewer::serve`]'s `settings` on, the Parameters panel reads and
 //! writes the aircraft's settings ([`settings`]).
@@ -621,24 +621,12 @@ impl Viewer {
         self.warn(warnings);
     }
 
-    /// Publishes the link statistics of every aircraft the monitor tracks and heard, as
-    /// [`link_stats_at`](Self::link_stats_at) does at the monitor's
-    /// [`clock`](Monitor::clock) (the latest time it was given).
-    pub fn link_stats(
-        &mut self,
-        time_ns: u64,
-        monitor: &Monitor,
-        aircraft_side: impl Fn(u8) -> Option<[LevelFigures; 3]>,
-    ) {
-        self.link_stats_at(time_ns, monitor, monitor.clock(), aircraft_side);
-    }
-
     /// Publishes the link statistics of every aircraft the monitor tracks and heard at
     /// `time_ns` (an aircraft only addressed takes no place among the
     /// [`MAX_AIRCRAFT`] with topics), with its [`Monitor::link_quality`] at `now` (the
     /// monitor's time, in seconds); `aircraft_side` gives, when known, the aircraft's
     /// own figures per priority level (high, normal, low).
-    pub fn link_stats_at(
+    pub fn link_stats(
         &mut self,
         time_ns: u64,
         monitor: &Monitor,

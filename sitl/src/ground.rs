@@ -147,6 +147,8 @@ impl Ground<'_> {
             self.resume_nav(t);
             self.serve_viewer_requests(t);
             self.receive(&mut buf, &sim_now);
+            // Stale aircraft and expired requests, also while nothing arrives.
+            self.monitor.tick(sim_now());
             self.show(t, aircraft_side);
         }
         if let Some(v) = self.viewer {
@@ -294,7 +296,7 @@ impl Ground<'_> {
         if let Some(v) = self.viewer.as_mut()
             && t >= self.next_link
         {
-            v.link_stats(unix_ns(), &self.monitor, aircraft_side);
+            v.link_stats(unix_ns(), &self.monitor, t, aircraft_side);
             self.next_link = t + self.args.speed;
         }
     }

@@ -169,7 +169,7 @@ impl Output {
             self.last_ns
         };
         if let Some(v) = self.viewer.as_mut() {
-            v.link_stats_at(ns, monitor, now, |_| None);
+            v.link_stats(ns, monitor, now, |_| None);
             if self.viewer_error.is_none()
                 && let Err(e) = v.flush()
             {
