@@ -9,6 +9,7 @@ pub mod error;
 pub mod message;
 pub mod roles;
 pub mod schedule;
+pub mod settings;
 pub mod wire;
 
 pub use descriptor::{BaseType, FieldDescriptor, FieldType, MessageDescriptor, MessageSet};

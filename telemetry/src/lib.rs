@@ -16,6 +16,7 @@ pub mod relay;
 pub mod route;
 pub mod scheduler;
 pub mod services;
+pub mod settings;
 pub mod stats;
 pub mod writer;
 

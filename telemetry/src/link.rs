@@ -68,7 +68,8 @@ use crate::health::{HealthConfig, LinkHealth};
 use crate::layer::{LinkLayer, Plain};
 use crate::reader::{Datalink, Inbox, Layered, Reader, UplinkStats};
 use crate::registry::{Filter, Received, RegistryFull, Subscriber};
-use crate::services::{ServiceStats, Services, Settings};
+use crate::services::{ServiceStats, Services};
+use crate::settings::Settings;
 use crate::stats::DeviceStats;
 use crate::writer::{Port, PortsTaken, run_writer_with};
 

@@ -372,7 +372,7 @@ impl<'a, const P: usize> Modes<'a, P> {
 
     /// The active mode of `process` as a setting, for the settings table of the
     /// datalink services
-    /// ([`Settings::add_mode`](crate::services::Settings::add_mode)).
+    /// ([`Settings::add_mode`](crate::settings::Settings::add_mode)).
     ///
     /// # Errors
     /// [`ModeError::UnknownProcess`].

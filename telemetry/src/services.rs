@@ -37,7 +37,6 @@
 //! entry.
 
 use core::cell::RefCell;
-use core::fmt;
 use core::marker::PhantomData;
 
 use embassy_sync::blocking_mutex::Mutex;
@@ -50,181 +49,8 @@ use pprz_messages::roles::{
 
 use crate::reader::{Handler, UplinkStats};
 use crate::registry::{Filter, Received, Registry, RegistryFull, Subscriber};
-use crate::scheduler::ModeSetting;
+use crate::settings::{Refusal, Settings};
 use crate::stats::DeviceStats;
-
-/// How a setting is read and written.
-#[derive(Clone, Copy)]
-enum Access<'a> {
-    /// Application closures or functions.
-    Fns(&'a (dyn Fn() -> f32 + Sync), &'a (dyn Fn(f32) + Sync)),
-    /// The active telemetry mode of a process.
-    Mode(ModeSetting<'a>),
-}
-
-/// One entry of the settings table: a name and typed access through `f32`, the type
-/// `SETTING` and `DL_VALUE` carry.
-#[derive(Clone, Copy)]
-pub struct SettingEntry<'a> {
-    /// Name, for display.
-    pub name: &'a str,
-    access: Access<'a>,
-}
-
-impl SettingEntry<'_> {
-    /// The current value.
-    pub fn get(&self) -> f32 {
-        match self.access {
-            Access::Fns(get, _) => get(),
-            Access::Mode(mode) => mode.get(),
-        }
-    }
-
-    /// Sets the value and returns the value read back. A value the setting refuses
-    /// leaves it unchanged: a non-finite one (NaN, infinities: never a setting's value,
-    /// and `clamp` lets NaN through) for every setting, an unknown telemetry mode for a
-    /// mode setting.
-    pub fn set(&self, value: f32) -> f32 {
-        if !value.is_finite() {
-            return self.get();
-        }
-        match self.access {
-            Access::Fns(_, set) => set(value),
-            Access::Mode(mode) => {
-                // Refused values leave the mode in force, which the read-back reports.
-                let _ = mode.set(value);
-            }
-        }
-        self.get()
-    }
-}
-
-impl fmt::Debug for SettingEntry<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("SettingEntry")
-            .field("name", &self.name)
-            .finish_non_exhaustive()
-    }
-}
-
-/// The settings table is full.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SettingsFull {
-    /// Capacity of the table.
-    pub capacity: usize,
-}
-
-impl fmt::Display for SettingsFull {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "settings table full ({} settings)", self.capacity)
-    }
-}
-
-impl core::error::Error for SettingsFull {}
-
-/// The settings the ground can read and write, by index (the index is the position of
-/// registration, as the ground's settings file numbers them). Up to `N` (at most 256)
-/// settings, added through `&self`, so the table can be a `static` or part of one.
-pub struct Settings<'a, M: RawMutex, const N: usize> {
-    inner: Mutex<M, RefCell<Table<'a, N>>>,
-}
-
-/// (A plain array: no drop glue, so a setting may borrow the structure holding it.)
-struct Table<'a, const N: usize> {
-    len: usize,
-    entries: [Option<SettingEntry<'a>>; N],
-}
-
-impl<'a, M: RawMutex, const N: usize> Settings<'a, M, N> {
-    /// An empty table.
-    pub const fn new() -> Self {
-        Self {
-            inner: Mutex::new(RefCell::new(Table {
-                len: 0,
-                entries: [None; N],
-            })),
-        }
-    }
-
-    fn push(&self, entry: SettingEntry<'a>) -> Result<u8, SettingsFull> {
-        self.inner.lock(|t| {
-            let mut t = t.borrow_mut();
-            let len = t.len;
-            let index = u8::try_from(len).map_err(|_| SettingsFull { capacity: N })?;
-            let slot = t.entries.get_mut(len).ok_or(SettingsFull { capacity: N })?;
-            *slot = Some(entry);
-            t.len = len + 1;
-            Ok(index)
-        })
-    }
-
-    /// Registers a setting read by `get` and written by `set` (closures or functions);
-    /// returns its index.
-    ///
-    /// # Errors
-    /// [`SettingsFull`] when the table holds `N` settings (or 256, the most an index
-    /// byte can address).
-    pub fn add(
-        &self,
-        name: &'a str,
-        get: &'a (dyn Fn() -> f32 + Sync),
-        set: &'a (dyn Fn(f32) + Sync),
-    ) -> Result<u8, SettingsFull> {
-        self.push(SettingEntry {
-            name,
-            access: Access::Fns(get, set),
-        })
-    }
-
-    /// Registers the active telemetry mode of a process as a setting (see
-    /// [`Modes::setting`](crate::scheduler::Modes::setting)), so the ground switches
-    /// telemetry modes with SETTING; returns its index.
-    ///
-    /// # Errors
-    /// [`SettingsFull`], as [`add`](Self::add).
-    pub fn add_mode(&self, name: &'a str, mode: ModeSetting<'a>) -> Result<u8, SettingsFull> {
-        self.push(SettingEntry {
-            name,
-            access: Access::Mode(mode),
-        })
-    }
-
-    /// The entry at `index` (a copy: calling it holds no lock).
-    pub fn entry(&self, index: u8) -> Option<SettingEntry<'a>> {
-        self.inner.lock(|t| {
-            let t = t.borrow();
-            t.entries.get(..t.len)?.get(usize::from(index)).copied()?
-        })
-    }
-
-    /// The value of setting `index`.
-    pub fn get(&self, index: u8) -> Option<f32> {
-        self.entry(index).map(|e| e.get())
-    }
-
-    /// Sets setting `index`, returning the value read back (what the ground is told);
-    /// see [`SettingEntry::set`] for the values refused.
-    pub fn set(&self, index: u8, value: f32) -> Option<f32> {
-        self.entry(index).map(|e| e.set(value))
-    }
-
-    /// Number of settings.
-    pub fn len(&self) -> usize {
-        self.inner.lock(|t| t.borrow().len)
-    }
-
-    /// Whether the table is empty.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-}
-
-impl<M: RawMutex, const N: usize> Default for Settings<'_, M, N> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
 
 /// What the services did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -237,6 +63,9 @@ pub struct ServiceStats {
     /// SETTINGs with a non-finite value (NaN, infinities): not applied, acknowledged with
     /// the value in force.
     pub non_finite: u32,
+    /// SETTINGs outside the setting's bounds: not applied, acknowledged with the value in
+    /// force.
+    pub out_of_bounds: u32,
     /// GET_SETTINGs answered.
     pub get_settings: u32,
     /// Requests for another aircraft id (no action).
@@ -272,6 +101,7 @@ impl<'a, S, M: RawMutex, const N: usize> Services<'a, S, M, N> {
                 pings: 0,
                 settings: 0,
                 non_finite: 0,
+                out_of_bounds: 0,
                 get_settings: 0,
                 wrong_ac_id: 0,
                 unknown_index: 0,
@@ -355,15 +185,24 @@ impl<'d, S: ServiceSet, M: RawMutex + Sync, const N: usize> Handler<'d> for Serv
             match rx.decode::<S::Setting>() {
                 Ok(req) => {
                     // Applied only when the request is for us (and the index exists).
-                    let value = (req.ac_id() == self.ac_id)
-                        .then(|| self.settings.set(req.index(), req.value()))
-                        .flatten();
-                    if self.value_reply(rx, req.index(), req.ac_id(), value) {
-                        if req.value().is_finite() {
-                            self.count(|s| s.settings = s.settings.wrapping_add(1));
-                        } else {
-                            self.count(|s| s.non_finite = s.non_finite.wrapping_add(1));
+                    let outcome = (req.ac_id() == self.ac_id)
+                        .then(|| self.settings.try_set(req.index(), req.value()));
+                    let value = match outcome {
+                        Some(Ok(v) | Err(Refusal::NonFinite(v) | Refusal::OutOfBounds(v))) => {
+                            Some(v)
                         }
+                        Some(Err(Refusal::UnknownIndex)) | None => None,
+                    };
+                    if self.value_reply(rx, req.index(), req.ac_id(), value) {
+                        self.count(|s| match outcome {
+                            Some(Err(Refusal::NonFinite(_))) => {
+                                s.non_finite = s.non_finite.wrapping_add(1);
+                            }
+                            Some(Err(Refusal::OutOfBounds(_))) => {
+                                s.out_of_bounds = s.out_of_bounds.wrapping_add(1);
+                            }
+                            _ => s.settings = s.settings.wrapping_add(1),
+                        });
                     }
                 }
                 Err(_) => self.malformed(),

@@ -52,7 +52,8 @@ use pprz_telemetry::health::{Health, HealthConfig, LinkHealth};
 use pprz_telemetry::reader::{Datalink, Inbox, Reader};
 use pprz_telemetry::registry::{Received, RegistryFull};
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
-use pprz_telemetry::services::{LinkReporter, Services, SettingsFull};
+use pprz_telemetry::services::{LinkReporter, Services};
+use pprz_telemetry::settings::SettingsError;
 use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, RelayStats, Sender};
 use pprz_transports::PprzV2;
 
@@ -598,7 +599,7 @@ const fn id<T: Message>() -> (u8, u8) {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SetupError {
     /// The settings table is too small.
-    Settings(SettingsFull),
+    Settings(SettingsError),
     /// The subscriber registry is too small.
     Registry(RegistryFull),
     /// The scheduler has too few callback slots.
@@ -623,8 +624,8 @@ impl fmt::Display for SetupError {
 
 impl core::error::Error for SetupError {}
 
-impl From<SettingsFull> for SetupError {
-    fn from(e: SettingsFull) -> Self {
+impl From<SettingsError> for SetupError {
+    fn from(e: SettingsError) -> Self {
         Self::Settings(e)
     }
 }
