@@ -7,12 +7,12 @@
 #![no_std]
 #![no_main]
 
+use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_executor::Spawner;
 use embassy_stm32::peripherals::USART1;
 use embassy_stm32::usart::{
     self, BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx,
 };
-use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_time::{Duration, Ticker};
 use panic_halt as _;
 use pprz_default::messages::{Set, telemetry::Attitude};
@@ -22,8 +22,9 @@ use static_cell::ConstStaticCell;
 embassy_stm32::bind_interrupts!(struct Irqs { USART1 => BufferedInterruptHandler<USART1>; });
 
 static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
-static LINK: Link<'static, Set> = Link::new(&ARENA, 7) // aircraft 7
-    .health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
+/// Aircraft 7; the ground is lost after 5 s of silence.
+static LINK: Link<'static, Set> =
+    Link::new(&ARENA, 7).health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
 /// Set when the ground has been silent for 5 s: your autopilot flies home.
 static GO_HOME: AtomicBool = AtomicBool::new(false);
 static TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
