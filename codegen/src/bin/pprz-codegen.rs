@@ -140,9 +140,33 @@ fn telemetry(args: &Args, generator: Generator) -> Result<(), pprz_codegen::Erro
     Ok(())
 }
 
-/// One line of `--list --settings`: a column, or `-` when empty.
-fn or_dash(s: Option<&str>) -> &str {
-    s.filter(|s| !s.is_empty()).unwrap_or("-")
+/// A column of `--list --settings`: the text with control characters escaped (one line
+/// per setting), or `-` when empty.
+fn or_dash(s: Option<&str>) -> String {
+    match s.filter(|s| !s.is_empty()) {
+        Some(s) => s
+            .chars()
+            .flat_map(|c| {
+                let escaped: Vec<char> = if c.is_control() {
+                    c.escape_default().collect()
+                } else {
+                    vec![c]
+                };
+                escaped
+            })
+            .collect(),
+        None => "-".to_owned(),
+    }
+}
+
+/// A number for reading: `10`, `0.5`, `1e-6`, `3.4e38`.
+fn number(x: f32) -> String {
+    let debug = format!("{x:?}");
+    if debug.contains('e') {
+        debug
+    } else {
+        x.to_string()
+    }
 }
 
 fn list_settings(set: &SettingsSet) {
@@ -161,22 +185,26 @@ fn list_settings(set: &SettingsSet) {
     );
     for s in &set.settings {
         let unit = match (&s.unit, &s.alt_unit) {
-            (Some(u), Some(a)) => format!("{u} ({a} x{})", s.alt_unit_coef as f32),
-            (None, Some(a)) => format!("- ({a} x{})", s.alt_unit_coef as f32),
-            (u, None) => or_dash(u.as_deref()).to_owned(),
+            (u, Some(a)) => format!(
+                "{} ({} x{})",
+                or_dash(u.as_deref()),
+                or_dash(Some(a)),
+                s.alt_unit_coef as f32
+            ),
+            (u, None) => or_dash(u.as_deref()),
         };
         let handler = match (&s.handler, &s.module) {
-            (Some(h), Some(m)) => format!("{m}.{h}"),
-            (h, _) => or_dash(h.as_deref()).to_owned(),
+            (Some(h), Some(m)) => or_dash(Some(&format!("{m}.{h}"))),
+            (h, _) => or_dash(h.as_deref()),
         };
         println!(
             "{:>3}  {:<16} {:<32} {:<16} {:<24} {:>6}  {:<6} {:<10} {:<24} {:<10}  {handler}",
             s.index,
             or_dash(Some(&s.group)),
-            s.var,
+            or_dash(Some(&s.var)),
             or_dash(s.shortname.as_deref()),
-            format!("[{}, {}]", s.min, s.max),
-            s.step,
+            format!("[{}, {}]", number(s.min), number(s.max)),
+            number(s.step),
             s.ty.name(),
             unit,
             or_dash(Some(&s.values.join("|"))),

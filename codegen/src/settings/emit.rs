@@ -149,11 +149,21 @@ fn emit_index(out: &mut String, set: &SettingsSet, vars: &[Variable<'_>]) {
     out!(out, "pub mod index {{");
     for v in vars {
         let s = &set.settings[usize::from(v.indices[0])];
-        let doc = format!(" `{}`: setting {}.", v.var.replace('`', "'"), s.index);
+        let doc = format!(" `{}`: setting {}.", plain(v.var), s.index);
         out!(out, "    #[doc = {doc:?}]");
         out!(out, "    pub const {}: u8 = {};", s.index_const(), s.index);
     }
     out!(out, "}}\n");
+}
+
+/// A number for reading: `10`, `0.5`, `1e-6`, `3.4e38` (the shortest that reads back).
+fn number(x: impl std::fmt::Display + std::fmt::Debug) -> String {
+    let debug = format!("{x:?}");
+    if debug.contains('e') {
+        debug
+    } else {
+        x.to_string()
+    }
 }
 
 /// A value in the aircraft's units, and as displayed when the display differs.
@@ -163,7 +173,12 @@ fn bounds_text(s: &SettingDef) -> String {
         .as_deref()
         .map(|u| format!(" {u}"))
         .unwrap_or_default();
-    let mut text = format!("{} to {}{unit}, step {}", s.min, s.max, s.step);
+    let mut text = format!(
+        "{} to {}{unit}, step {}",
+        number(s.min),
+        number(s.max),
+        number(s.step)
+    );
     if s.alt_unit_coef != 1.0 || s.alt_unit.is_some() {
         let alt = s
             .alt_unit
@@ -173,32 +188,46 @@ fn bounds_text(s: &SettingDef) -> String {
         let _ = write!(
             text,
             " (shown as {} to {}{alt}, step {})",
-            s.written_min, s.written_max, s.written_step
+            number(s.written_min),
+            number(s.written_max),
+            number(s.written_step)
         );
     }
     text
+}
+
+/// Text from a file for a doc comment: no line break or other control character, and
+/// no backtick (which would end a code span).
+fn plain(text: &str) -> String {
+    text.chars()
+        .map(|c| match c {
+            '`' => '\'',
+            c if c.is_control() => ' ',
+            c => c,
+        })
+        .collect()
 }
 
 /// The description of setting `s` in the doc comment of its binding.
 fn setting_text(s: &SettingDef) -> String {
     let mut text = format!("setting {}", s.index);
     if !s.group.is_empty() {
-        let _ = write!(text, " in `{}`", s.group);
+        let _ = write!(text, " in `{}`", plain(&s.group));
     }
     if let Some(short) = &s.shortname {
-        let _ = write!(text, " (\"{short}\")");
+        let _ = write!(text, " (\"{}\")", plain(short));
     }
     let _ = write!(text, ": {}, {}", bounds_text(s), s.ty.name());
     if !s.values.is_empty() {
-        let _ = write!(text, ", labels {}", s.values.join("|"));
+        let _ = write!(text, ", labels {}", plain(&s.values.join("|")));
     }
     if s.persistent {
         text.push_str(", persistent");
     }
     if let Some(handler) = &s.handler {
-        let _ = write!(text, ", handler `{handler}`");
+        let _ = write!(text, ", handler `{}`", plain(handler));
         if let Some(module) = &s.module {
-            let _ = write!(text, " of `{module}`");
+            let _ = write!(text, " of `{}`", plain(module));
         }
     }
     text
@@ -230,7 +259,7 @@ fn emit_bindings(out: &mut String, set: &SettingsSet, vars: &[Variable<'_>], pat
             .iter()
             .map(|&i| setting_text(&set.settings[usize::from(i)]))
             .collect();
-        let doc = format!(" `{}`: {}.", v.var.replace('`', "'"), settings.join("; "));
+        let doc = format!(" `{}`: {}.", plain(v.var), settings.join("; "));
         out!(out, "    #[doc = {doc:?}]");
         out!(
             out,
