@@ -191,7 +191,8 @@ pub enum SettingProblem {
         /// `max` as written.
         max: String,
     },
-    /// A bound or step, converted to the aircraft's units, is not a finite `f32`.
+    /// A bound or step, converted to the aircraft's units, is not a finite `f32` (or a
+    /// step rounds to 0).
     ConvertedOutOfRange {
         /// The attribute.
         attribute: &'static str,
@@ -304,7 +305,7 @@ impl fmt::Display for SettingProblem {
                 coef,
             } => write!(
                 f,
-                "`{attribute}` = {value} divided by the display coefficient {coef} is not a finite f32"
+                "`{attribute}` = {value} divided by the display coefficient {coef} does not fit an f32"
             ),
             Self::TooManySettings { max } => {
                 write!(f, "more than {max} settings: a setting's index is one byte")

@@ -463,7 +463,7 @@ impl Reader<'_, '_, '_> {
         positive: bool,
     ) -> Option<f64> {
         match value.parse::<f64>() {
-            Ok(x) if fits_f32(x) && (!positive || x > 0.0) => Some(x),
+            Ok(x) if fits_f32(x) && (!positive || (x as f32) > 0.0) => Some(x),
             _ => {
                 let expected = if positive {
                     "a finite number above 0 that fits an f32"
