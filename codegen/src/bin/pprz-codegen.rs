@@ -21,14 +21,15 @@ struct Args {
     /// Settings files (settings.xml), numbered in this order: generate (or check, list)
     /// their settings table instead of message types.
     #[arg(long, num_args = 1.., value_name = "SETTINGS_XML", conflicts_with_all = [
-        "classes", "messages_sel", "telemetry", "default_priority",
+        "classes", "messages_sel", "default_priority", "telemetry", "skip_unknown_telemetry",
+        "telemetry_class", "tick_frequency", "stagger",
     ])]
     settings: Vec<PathBuf>,
-    /// Path of the pprz-telemetry crate in the generated settings code.
-    #[arg(long, default_value = "::pprz_telemetry", requires = "settings")]
+    /// Path of the pprz-telemetry crate in the generated settings code (with --settings).
+    #[arg(long, default_value = "::pprz_telemetry", conflicts_with = "messages")]
     telemetry_crate: String,
-    /// Path of the embassy-sync crate in the generated settings code.
-    #[arg(long, default_value = "::embassy_sync", requires = "settings")]
+    /// Path of the embassy-sync crate in the generated settings code (with --settings).
+    #[arg(long, default_value = "::embassy_sync", conflicts_with = "messages")]
     embassy_sync_crate: String,
     /// Only these classes (name or id); repeatable.
     #[arg(long = "class", value_name = "CLASS")]
@@ -40,7 +41,7 @@ struct Args {
     #[arg(long)]
     units: Option<PathBuf>,
     /// Path of the pprz-messages crate in the generated code (message types and, with
-    /// --telemetry, schedule tables).
+    /// --telemetry, schedule tables; with --settings, setting descriptions).
     #[arg(long, default_value = "::pprz_messages")]
     runtime_crate: String,
     /// Priority of messages without a `priority` attribute.
