@@ -1,5 +1,5 @@
-//! Generates Rust message types from a Paparazzi `messages.xml`, and periodic telemetry
-//! schedule tables from a `telemetry.xml`.
+//! Generates Rust message types from a Paparazzi `messages.xml`, periodic telemetry
+//! schedule tables from a `telemetry.xml`, and settings tables from `settings.xml` files.
 //!
 //! Pipeline: XML parser -> typed, validated [`Protocol`] model -> emitter -> one Rust
 //! source file that a crate `include!`s. The generated code is `no_std`, allocation-free
@@ -147,6 +147,59 @@
 //! let out = g.skip_unknown_telemetry(true).generate_telemetry().unwrap();
 //! assert_eq!(out.warnings.len(), 1);
 //! assert!(out.code.contains("name: \"ALIVE\", class_id: 1, msg_id: 2, period_ticks: 126"));
+//! ```
+//!
+//! # Settings (`settings.xml`)
+//!
+//! The generator also reads Paparazzi settings files, numbers their settings as Paparazzi
+//! does (every `<dl_setting>` in document order, files in the order given) and emits a
+//! table the aircraft registers in one call: `COUNT`, `SETTINGS` (one
+//! [`pprz_messages::settings::SettingDesc`] per setting, bounds in the aircraft's units),
+//! `index` (a constant per variable), `Bindings` (one field per variable: a forgotten
+//! binding does not compile) and `register`. The code needs the `pprz-messages`,
+//! `pprz-telemetry` and `embassy-sync` crates (paths set by
+//! [`runtime_crate`](Generator::runtime_crate), [`telemetry_crate`](Generator::telemetry_crate)
+//! and [`embassy_sync_crate`](Generator::embassy_sync_crate)). See [`settings`] for what is
+//! read, accepted and refused.
+//!
+//! ```no_run
+//! // build.rs (body of `fn main`)
+//! match pprz_codegen::Generator::for_settings(["settings/basic.xml", "settings/tuning.xml"])
+//!     .write_settings_to_out_dir("settings.rs")
+//! {
+//!     Ok(_warnings) => {} // already printed as `cargo:warning=`
+//!     Err(e) => {
+//!         eprintln!("{e}");
+//!         std::process::exit(1);
+//!     }
+//! }
+//! ```
+//!
+//! ```ignore
+//! pub mod settings {
+//!     include!(concat!(env!("OUT_DIR"), "/settings.rs"));
+//! }
+//! static TABLE: Settings<'static, CriticalSectionRawMutex, { settings::COUNT }> = Settings::new();
+//! settings::register(&TABLE, &settings::Bindings {
+//!     gain: Binding::Fns(&get_gain, &set_gain),
+//!     // ... one field per variable
+//! })?;
+//! ```
+//!
+//! ```
+//! let xml = r#"<settings><dl_settings><dl_settings name="ins">
+//!   <dl_setting var="ins.roll_neutral" min="-15" max="15" step="0.5"
+//!               unit="rad" alt_unit="deg" persistent="true"/>
+//! </dl_settings></dl_settings></settings>"#;
+//! let g = pprz_codegen::Generator::for_settings(Vec::<String>::new())
+//!     .settings_from_str("ins.xml", xml);
+//! let set = g.settings_set().unwrap();
+//! let roll = &set.settings[0];
+//! assert_eq!((roll.index, roll.group.as_str()), (0, "ins"));
+//! assert_eq!(roll.max, 15f64.to_radians() as f32); // degrees shown, radians aboard
+//! let code = g.generate_settings().unwrap().code;
+//! assert!(code.contains("pub const INS_ROLL_NEUTRAL: u8 = 0;"));
+//! assert!(code.contains("pub ins_roll_neutral: ::pprz_telemetry::settings::Binding<'a>,"));
 //! ```
 //!
 //! # What is refused
