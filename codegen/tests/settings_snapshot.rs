@@ -29,6 +29,12 @@ pub mod empty {
     include!("snapshots/settings_empty.rs");
 }
 
+// Private and unused, as in a binary crate that includes the code and uses only part of
+// it: nothing may be reported as dead code.
+mod unused {
+    include!("snapshots/settings_edge.rs");
+}
+
 #[test]
 fn fixtures_match_snapshots() {
     for name in ["three", "edge", "empty"] {
