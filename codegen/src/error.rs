@@ -277,6 +277,13 @@ pub enum SettingProblem {
         /// The type it is read as.
         mapped: &'static str,
     },
+    /// More problems (or warnings) than are reported for one file: how many more.
+    Untold {
+        /// How many were not reported.
+        count: usize,
+        /// `errors` or `warnings`.
+        what: &'static str,
+    },
     /// Warning: `alt_unit` without `alt_unit_coef`, and no known conversion from `unit`;
     /// the coefficient is 1.
     UnknownConversion {
@@ -329,6 +336,9 @@ impl fmt::Display for SettingProblem {
                 f,
                 "storage key {key:#010x} (FNV-1a of the variable) is also that of the persistent `{other}` ({other_at}): rename one"
             ),
+            Self::Untold { count, what } => {
+                write!(f, "{count} more {what} in this file are not shown")
+            }
             Self::PersistentType { ty } => write!(
                 f,
                 "type `{ty}` cannot be stored: a persistent setting is bool, int8, int16, int32, uint8, uint16, uint32 or float"

@@ -766,6 +766,40 @@ fn inputs_beyond_the_limits_are_refused() {
 }
 
 #[test]
+fn floods_of_problems_are_counted_not_kept() {
+    // 100,000 settings: one error, whatever follows the 257th is not read.
+    let many: String = (0..100_000)
+        .map(|i| format!("<dl_setting var=\"v{i}\" min=\"0\" max=\"1\" junk=\"\"/>\n"))
+        .collect();
+    let ds = refused(&many);
+    assert_eq!(ds.len(), 1, "{:?}", &ds[..3.min(ds.len())]);
+    assert_eq!(
+        problem(&ds[0]),
+        &SettingProblem::TooManySettings { max: MAX_SETTINGS }
+    );
+    // 100,000 invalid settings: 1000 errors, then their count.
+    let bad = "<dl_setting/>\n".repeat(100_000);
+    let ds = refused(&bad);
+    assert_eq!(ds.len(), 1001);
+    assert_eq!(
+        ds[1000].to_string(),
+        "t.xml: 99000 more errors in this file are not shown"
+    );
+    // 12,000 unknown attributes: 1000 warnings, then their count.
+    let attrs: String = (0..60).map(|k| format!(" x{k}=\"\"")).collect();
+    let noisy: String = (0..200)
+        .map(|i| format!("<dl_setting var=\"v{i}\" min=\"0\" max=\"1\"{attrs}/>\n"))
+        .collect();
+    let set = ok(&noisy);
+    assert_eq!(set.len(), 200);
+    assert_eq!(set.warnings.len(), 1001);
+    assert_eq!(
+        set.warnings[1000].to_string(),
+        "t.xml: 11000 more warnings in this file are not shown"
+    );
+}
+
+#[test]
 fn huge_attributes_and_many_repairs_are_read() {
     let long = "s".repeat(8 << 20);
     let set = ok(&format!(
@@ -789,12 +823,22 @@ fn huge_attributes_and_many_repairs_are_read() {
         .collect();
     let set = ok(&body);
     assert_eq!(set.len(), MAX_SETTINGS);
-    let spaces = set
-        .warnings
-        .iter()
-        .filter(|w| matches!(problem(w), SettingProblem::MissingSpace { .. }))
-        .count();
-    assert_eq!(spaces, MAX_SETTINGS * (MAX_ATTRIBUTES - 2));
+    // Each missing space, then each unknown attribute: the first 1000 are reported.
+    let spaces = MAX_SETTINGS * (MAX_ATTRIBUTES - 2);
+    let unknown = MAX_SETTINGS * (MAX_ATTRIBUTES - 4);
+    assert_eq!(set.warnings.len(), 1001);
+    assert!(
+        set.warnings[..1000]
+            .iter()
+            .all(|w| matches!(problem(w), SettingProblem::MissingSpace { .. }))
+    );
+    assert_eq!(
+        problem(&set.warnings[1000]),
+        &SettingProblem::Untold {
+            count: spaces + unknown - 1000,
+            what: "warnings"
+        }
+    );
 }
 
 // ----------------------------------------------------------------------------------------

@@ -65,6 +65,10 @@
 //! holding both settings and groups (Paparazzi's generator refuses it); a second
 //! top-level `<dl_settings>` (Paparazzi reads only the first).
 //!
+//! At most [`MAX_REPORTED`] problems and as many warnings are reported per file; the
+//! others are counted. Past the 257th setting of a file, the rest of it is not read:
+//! the set is refused for its size.
+//!
 //! The same `var` may appear several times (Paparazzi allows it): each occurrence has
 //! its index, and the variable has one binding.
 
@@ -88,6 +92,10 @@ pub const MAX_GROUP_DEPTH: usize = 64;
 
 /// Largest number of settings (an index is one byte).
 pub const MAX_SETTINGS: usize = 256;
+
+/// The most problems, and the most warnings, reported for one file; the others are
+/// counted in one last diagnostic (a hostile file could make millions).
+pub const MAX_REPORTED: usize = 1000;
 
 /// One `<dl_setting>`, numbered and checked.
 #[derive(Debug, Clone, PartialEq)]

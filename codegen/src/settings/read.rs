@@ -6,7 +6,7 @@ use roxmltree::{Children, Node};
 
 use pprz_messages::settings::SettingType;
 
-use super::{MAX_GROUP_DEPTH, SettingDef};
+use super::{MAX_GROUP_DEPTH, MAX_REPORTED, MAX_SETTINGS, SettingDef};
 use crate::error::{Diagnostic, ErrorKind, SettingProblem};
 use crate::model::Units;
 use crate::names;
@@ -87,32 +87,65 @@ pub(super) fn file(p: &mut Parser<'_, '_>, units: &Units) -> FileRead {
         units,
         read: FileRead::default(),
         too_deep: false,
+        errors: 0,
+        untold: [0, 0],
     };
     r.missing_spaces();
-    let root = r.p.document().root_element();
-    if !tag_is(root, "settings") {
-        r.p.unexpected(root, &Ctx::default(), "<settings> as the root element");
-        return r.read;
-    }
-    let attrs = r.attributes(root, "settings", SETTINGS_ATTRS);
-    r.read.target = attrs.and_then(|a| a.text("target"));
-    let mut groups = 0;
-    for child in root.children().filter(Node::is_element) {
-        if tag_is(child, "dl_settings") {
-            groups += 1;
-            if groups == 2 {
-                r.warn(child, None, SettingProblem::SecondTopLevelGroup);
+    r.root();
+    r.finish()
+}
+
+impl Reader<'_, '_, '_> {
+    /// Reads the root element and its groups.
+    fn root(&mut self) {
+        let root = self.p.document().root_element();
+        if !tag_is(root, "settings") {
+            self.p
+                .unexpected(root, &Ctx::default(), "<settings> as the root element");
+            return;
+        }
+        let attrs = self.attributes(root, "settings", SETTINGS_ATTRS);
+        self.read.target = attrs.and_then(|a| a.text("target"));
+        let mut groups = 0;
+        for child in root.children().filter(Node::is_element) {
+            if tag_is(child, "dl_settings") {
+                groups += 1;
+                if groups == 2 {
+                    self.warn(child, None, SettingProblem::SecondTopLevelGroup);
+                }
+                self.groups(child);
+            } else if tag_is(child, "dl_setting") {
+                let reason = "directly under <settings> (Paparazzi reads settings inside <dl_settings> only)";
+                self.ignore(child, reason);
+            } else if !tag_is(child, "rc_settings") {
+                self.ignore(child, "is not a settings element");
             }
-            r.groups(child);
-        } else if tag_is(child, "dl_setting") {
-            let reason =
-                "directly under <settings> (Paparazzi reads settings inside <dl_settings> only)";
-            r.ignore(child, reason);
-        } else if !tag_is(child, "rc_settings") {
-            r.ignore(child, "is not a settings element");
         }
     }
-    r.read
+
+    /// What was read, with a count of the problems and warnings not reported.
+    fn finish(mut self) -> FileRead {
+        let [errors, warnings] = self.untold;
+        for (count, what) in [(errors, "errors"), (warnings, "warnings")] {
+            if count == 0 {
+                continue;
+            }
+            let d = Diagnostic {
+                file: self.p.file().to_owned(),
+                line: 0,
+                column: 0,
+                message: None,
+                field: None,
+                kind: setting(None, SettingProblem::Untold { count, what }),
+            };
+            if what == "errors" {
+                self.p.push(d);
+            } else {
+                self.read.warnings.push(d);
+            }
+        }
+        self.read
+    }
 }
 
 /// The state of reading one file.
@@ -122,6 +155,10 @@ struct Reader<'r, 'a, 'input> {
     read: FileRead,
     /// Whether groups nested too deep were reported (once per file).
     too_deep: bool,
+    /// Problems reported.
+    errors: usize,
+    /// Problems and warnings not reported (beyond [`MAX_REPORTED`]).
+    untold: [usize; 2],
 }
 
 impl<'a, 'input> Reader<'_, 'a, 'input> {
@@ -132,6 +169,10 @@ impl<'a, 'input> Reader<'_, 'a, 'input> {
 
     /// Records a warning at byte offset `pos` of the parsed text.
     fn warn_at(&mut self, pos: usize, var: Option<&str>, problem: SettingProblem) {
+        if self.read.warnings.len() >= MAX_REPORTED {
+            self.untold[1] += 1;
+            return;
+        }
         let d = self
             .p
             .diagnostic_at(pos, &Ctx::default(), setting(var, problem));
@@ -140,6 +181,11 @@ impl<'a, 'input> Reader<'_, 'a, 'input> {
 
     /// Records a problem at byte offset `pos` of the parsed text.
     fn error_at(&mut self, pos: usize, kind: ErrorKind) {
+        if self.errors >= MAX_REPORTED {
+            self.untold[0] += 1;
+            return;
+        }
+        self.errors += 1;
         let d = self.p.diagnostic_at(pos, &Ctx::default(), kind);
         self.p.push(d);
     }
@@ -226,6 +272,10 @@ impl<'a, 'input> Reader<'_, 'a, 'input> {
                 continue;
             }
             if tag_is(child, "dl_setting") {
+                // One more than the most the set holds shows there are too many.
+                if self.read.settings.len() > MAX_SETTINGS {
+                    continue;
+                }
                 if let Some(s) = self.setting(child, &path) {
                     self.read.settings.push(s);
                 }
