@@ -933,7 +933,7 @@ const DIR_VAR: &str = "PPRZ_SETTINGS_DIR";
 fn real_files(who: &str) -> Option<Vec<PathBuf>> {
     let dir = std::env::var_os(DIR_VAR).map_or_else(
         || {
-            // `<workspace>/../shared/paparazzi/settings`.
+            // `shared/paparazzi/settings` in the directory that holds the workspace.
             let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
             workspace
                 .parent()
