@@ -8,7 +8,9 @@ use std::path::Path;
 fn main() {
     let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
     let xml = Path::new(&manifest).join("settings.xml");
-    if let Err(e) = pprz_codegen::Generator::for_settings([xml]).write_settings_to_out_dir("settings.rs") {
+    if let Err(e) =
+        pprz_codegen::Generator::for_settings([xml]).write_settings_to_out_dir("settings.rs")
+    {
         eprintln!("{e}");
         std::process::exit(1);
     }
