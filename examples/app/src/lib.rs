@@ -13,7 +13,7 @@
 //! The build script generates [`settings`] from the file with `pprz-codegen`; the
 //! application binds each variable and registers the table in one call. The bounds are
 //! the file's: a value outside them is refused and answered with the value in force.
-//! The ground reads the same file to name the indices.
+//! A Paparazzi ground station reads the same file to name the indices.
 //!
 //! [`run_aircraft`] builds everything that is local to the application (telemetry modes,
 //! scheduler, settings, services, datalink, reader) inside one future that never ends, so
