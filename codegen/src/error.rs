@@ -156,6 +156,244 @@ pub enum ErrorKind {
     UnknownSelection(String),
     /// Something else in a telemetry configuration.
     Telemetry(String),
+    /// An input the generation needs was not given (what is missing, and how to give
+    /// it).
+    NoInput(&'static str),
+    /// A problem of a settings file (`settings.xml`), or what was accepted from one with
+    /// a warning (see [`crate::settings`]).
+    Setting {
+        /// The variable of the setting it is about, if it is about one.
+        var: Option<String>,
+        /// What it is.
+        problem: SettingProblem,
+    },
+}
+
+/// What is wrong with a Paparazzi settings file (`settings.xml`), or what was accepted
+/// from one with a warning (see [`crate::settings`] for which is which).
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SettingProblem {
+    /// An attribute is given twice, in two spellings (names are matched without regard
+    /// to case).
+    DuplicateAttribute {
+        /// The attribute (lower case).
+        attribute: &'static str,
+        /// Its first spelling.
+        first: String,
+        /// Its second spelling.
+        second: String,
+    },
+    /// `min` is above `max`.
+    MinAboveMax {
+        /// `min` as written.
+        min: String,
+        /// `max` as written.
+        max: String,
+    },
+    /// A bound or step, converted to the aircraft's units, is not a finite `f32` (or a
+    /// step rounds to 0).
+    ConvertedOutOfRange {
+        /// The attribute.
+        attribute: &'static str,
+        /// Its value as written.
+        value: String,
+        /// The display coefficient it was divided by.
+        coef: String,
+    },
+    /// More settings than an index byte numbers.
+    TooManySettings {
+        /// Largest number of settings.
+        max: usize,
+    },
+    /// Groups (`<dl_settings>`) nested deeper than accepted.
+    TooDeep {
+        /// Largest nesting of groups.
+        max: usize,
+    },
+    /// Two different variables make the same Rust name.
+    NameClash {
+        /// The Rust name.
+        rust: String,
+        /// The other variable.
+        other: String,
+        /// Where the other variable is (`file:line:column`).
+        other_at: String,
+    },
+    /// Two different persistent variables have the same storage key (FNV-1a of the
+    /// variable).
+    KeyCollision {
+        /// The key.
+        key: u32,
+        /// The other variable.
+        other: String,
+        /// Where the other variable is (`file:line:column`).
+        other_at: String,
+    },
+    /// A persistent setting whose `type` is not one a setting is stored as.
+    PersistentType {
+        /// The type as written.
+        ty: String,
+    },
+    /// Warning: no space between an attribute and the one before it; accepted.
+    MissingSpace {
+        /// The attribute after the missing space.
+        attribute: String,
+    },
+    /// Warning: an attribute the generator does not know; ignored.
+    UnknownAttribute {
+        /// The element.
+        element: &'static str,
+        /// The attribute as written.
+        attribute: String,
+    },
+    /// Warning: an element that is not read.
+    IgnoredElement {
+        /// The element.
+        element: String,
+        /// Where it is, and why it is not read.
+        reason: &'static str,
+    },
+    /// Warning: a group holds both settings and groups.
+    MixedGroup,
+    /// Warning: a second `<dl_settings>` under `<settings>`.
+    SecondTopLevelGroup,
+    /// Warning: the number of `values` labels is not `max - min + 1`.
+    LabelCount {
+        /// Number of labels.
+        labels: usize,
+        /// `max - min + 1`.
+        values: String,
+    },
+    /// Warning: `persistent` with a value that reads as false; the setting is persistent.
+    PersistentFalse {
+        /// The value as written.
+        value: String,
+    },
+    /// Warning: a `type` read as another one.
+    TypeMapped {
+        /// The type as written.
+        ty: String,
+        /// The type it is read as.
+        mapped: &'static str,
+    },
+    /// More problems (or warnings) than are reported for one file: how many more.
+    Untold {
+        /// How many were not reported.
+        count: usize,
+        /// `errors` or `warnings`.
+        what: &'static str,
+    },
+    /// Warning: `alt_unit` without `alt_unit_coef`, and no known conversion from `unit`;
+    /// the coefficient is 1.
+    UnknownConversion {
+        /// `unit`, if given.
+        unit: Option<String>,
+        /// `alt_unit`.
+        alt_unit: String,
+    },
+}
+
+impl fmt::Display for SettingProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::DuplicateAttribute {
+                attribute,
+                first,
+                second,
+            } => write!(
+                f,
+                "attribute `{attribute}` is given twice, as `{first}` and `{second}` (names are matched without regard to case)"
+            ),
+            Self::MinAboveMax { min, max } => write!(f, "min {min} is above max {max}"),
+            Self::ConvertedOutOfRange {
+                attribute,
+                value,
+                coef,
+            } => write!(
+                f,
+                "`{attribute}` = {value} divided by the display coefficient {coef} does not fit an f32"
+            ),
+            Self::TooManySettings { max } => {
+                write!(f, "more than {max} settings: a setting's index is one byte")
+            }
+            Self::TooDeep { max } => {
+                write!(f, "<dl_settings> nested more than {max} deep: refused")
+            }
+            Self::NameClash {
+                rust,
+                other,
+                other_at,
+            } => write!(
+                f,
+                "makes the Rust name `{rust}`, as `{other}` does ({other_at})"
+            ),
+            Self::KeyCollision {
+                key,
+                other,
+                other_at,
+            } => write!(
+                f,
+                "storage key {key:#010x} (FNV-1a of the variable) is also that of the persistent `{other}` ({other_at}): rename one"
+            ),
+            Self::Untold { count, what } => {
+                write!(f, "{count} more {what} in this file are not shown")
+            }
+            Self::PersistentType { ty } => write!(
+                f,
+                "type `{ty}` cannot be stored: a persistent setting is bool, int8, int16, int32, uint8, uint16, uint32 or float"
+            ),
+            _ => self.fmt_warning(f),
+        }
+    }
+}
+
+impl SettingProblem {
+    /// The text of the kinds that are warnings; the others are written by
+    /// `Display::fmt`.
+    fn fmt_warning(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::MissingSpace { attribute } => write!(
+                f,
+                "no space before attribute `{attribute}`: accepted, as Paparazzi accepts it"
+            ),
+            Self::UnknownAttribute { element, attribute } => {
+                write!(f, "<{element}> attribute `{attribute}` is not known: ignored")
+            }
+            Self::IgnoredElement { element, reason } => {
+                write!(f, "<{element}> {reason}: ignored")
+            }
+            Self::MixedGroup => f.write_str(
+                "this group holds both <dl_setting> and <dl_settings>: Paparazzi's generator refuses that; numbered here in document order",
+            ),
+            Self::SecondTopLevelGroup => f.write_str(
+                "a second <dl_settings> under <settings>: Paparazzi reads only the first; read here too, in document order",
+            ),
+            Self::LabelCount { labels, values } => write!(
+                f,
+                "{labels} `values` labels for {values} values (max - min + 1): the labels name min, min + 1, ... in order"
+            ),
+            Self::PersistentFalse { value } => write!(
+                f,
+                "persistent=\"{value}\" makes the setting persistent, as in Paparazzi (any value does): remove the attribute for a setting that is not stored"
+            ),
+            Self::TypeMapped { ty, mapped } => write!(
+                f,
+                "type `{ty}` is not a setting type here: read as `{mapped}`"
+            ),
+            Self::UnknownConversion { unit, alt_unit } => match unit {
+                Some(unit) => write!(
+                    f,
+                    "alt_unit `{alt_unit}` without alt_unit_coef, and no known conversion from `{unit}`: coefficient 1 (bounds taken as written)"
+                ),
+                None => write!(
+                    f,
+                    "alt_unit `{alt_unit}` without alt_unit_coef nor unit: coefficient 1 (bounds taken as written)"
+                ),
+            },
+            _ => Ok(()),
+        }
+    }
 }
 
 impl fmt::Display for ErrorKind {
@@ -234,6 +472,11 @@ impl fmt::Display for ErrorKind {
             ),
             Self::UnknownSelection(n) => write!(f, "selected `{n}` does not exist in the input"),
             Self::Telemetry(e) => f.write_str(e),
+            Self::NoInput(what) => f.write_str(what),
+            Self::Setting { var, problem } => match var {
+                Some(var) => write!(f, "setting `{var}`: {problem}"),
+                None => write!(f, "{problem}"),
+            },
         }
     }
 }

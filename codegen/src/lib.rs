@@ -1,5 +1,5 @@
-//! Generates Rust message types from a Paparazzi `messages.xml`, and periodic telemetry
-//! schedule tables from a `telemetry.xml`.
+//! Generates Rust message types from a Paparazzi `messages.xml`, periodic telemetry
+//! schedule tables from a `telemetry.xml`, and settings tables from `settings.xml` files.
 //!
 //! Pipeline: XML parser -> typed, validated [`Protocol`] model -> emitter -> one Rust
 //! source file that a crate `include!`s. The generated code is `no_std`, allocation-free
@@ -149,6 +149,59 @@
 //! assert!(out.code.contains("name: \"ALIVE\", class_id: 1, msg_id: 2, period_ticks: 126"));
 //! ```
 //!
+//! # Settings (`settings.xml`)
+//!
+//! The generator also reads Paparazzi settings files, numbers their settings as Paparazzi
+//! does (every `<dl_setting>` in document order, files in the order given) and emits a
+//! table the aircraft registers in one call: `COUNT`, `SETTINGS` (one
+//! [`pprz_messages::settings::SettingDesc`] per setting, bounds in the aircraft's units),
+//! `index` (a constant per variable), `Bindings` (one field per variable: a forgotten
+//! binding does not compile) and `register`. The code needs the `pprz-messages`,
+//! `pprz-telemetry` and `embassy-sync` crates (paths set by
+//! [`runtime_crate`](Generator::runtime_crate), [`telemetry_crate`](Generator::telemetry_crate)
+//! and [`embassy_sync_crate`](Generator::embassy_sync_crate)). See [`settings`] for what is
+//! read, accepted and refused.
+//!
+//! ```no_run
+//! // build.rs (body of `fn main`)
+//! match pprz_codegen::Generator::for_settings(["settings/basic.xml", "settings/tuning.xml"])
+//!     .write_settings_to_out_dir("settings.rs")
+//! {
+//!     Ok(_warnings) => {} // already printed as `cargo:warning=`
+//!     Err(e) => {
+//!         eprintln!("{e}");
+//!         std::process::exit(1);
+//!     }
+//! }
+//! ```
+//!
+//! ```ignore
+//! pub mod settings {
+//!     include!(concat!(env!("OUT_DIR"), "/settings.rs"));
+//! }
+//! static TABLE: Settings<'static, CriticalSectionRawMutex, { settings::COUNT }> = Settings::new();
+//! settings::register(&TABLE, &settings::Bindings {
+//!     gain: Binding::Fns(&get_gain, &set_gain),
+//!     // ... one field per variable
+//! })?;
+//! ```
+//!
+//! ```
+//! let xml = r#"<settings><dl_settings><dl_settings name="ins">
+//!   <dl_setting var="ins.roll_neutral" min="-15" max="15" step="0.5"
+//!               unit="rad" alt_unit="deg" persistent="true"/>
+//! </dl_settings></dl_settings></settings>"#;
+//! let g = pprz_codegen::Generator::for_settings(Vec::<String>::new())
+//!     .settings_from_str("ins.xml", xml);
+//! let set = g.settings_set().unwrap();
+//! let roll = &set.settings[0];
+//! assert_eq!((roll.index, roll.group.as_str()), (0, "ins"));
+//! assert_eq!(roll.max, 15f64.to_radians() as f32); // degrees shown, radians aboard
+//! let code = g.generate_settings().unwrap().code;
+//! assert!(code.contains("pub const INS_ROLL_NEUTRAL: u8 = 0;"));
+//! assert!(code.contains("pub ins_roll_neutral: ::pprz_telemetry::settings::Binding<'a>,"));
+//! ```
+//!
 //! # What is refused
 //!
 //! Besides malformed XML and wrong types, sizes or ids, the generator refuses, each with
@@ -179,13 +232,15 @@ pub mod limits;
 pub mod model;
 mod names;
 mod roles;
+pub mod settings;
 pub mod telemetry;
 mod xml;
 
 use std::path::{Path, PathBuf};
 
-pub use error::{Diagnostic, Error, ErrorKind};
+pub use error::{Diagnostic, Error, ErrorKind, SettingProblem};
 pub use model::{Class, FieldDef, MessageDef, Protocol, Units};
+pub use settings::{SettingDef, SettingsSet};
 pub use telemetry::{Schedule, ScheduleOptions, TelemetryConfig};
 
 /// Writes generated `code` to `path`.
@@ -207,7 +262,8 @@ enum Source {
 /// Configures and runs the generator.
 #[derive(Debug, Clone)]
 pub struct Generator {
-    source: Source,
+    /// The `messages.xml` (none for a generator of settings only).
+    source: Option<Source>,
     units: Option<PathBuf>,
     classes: Vec<String>,
     messages: Vec<String>,
@@ -215,6 +271,18 @@ pub struct Generator {
     default_priority: u8,
     telemetry: Option<Source>,
     schedule: ScheduleOptions,
+    settings: Vec<Source>,
+    telemetry_crate: String,
+    embassy_sync_crate: String,
+}
+
+/// A generated settings table (see [`Generator::generate_settings`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneratedSettings {
+    /// The Rust source.
+    pub code: String,
+    /// What was accepted with a warning (see [`SettingsSet::warnings`]).
+    pub warnings: Vec<Diagnostic>,
 }
 
 /// Generated schedule tables (see [`Generator::generate_telemetry`]).
@@ -229,18 +297,24 @@ pub struct GeneratedTelemetry {
 impl Generator {
     /// A generator for a `messages.xml` file.
     pub fn new(messages_xml: impl Into<PathBuf>) -> Self {
-        Self::with_source(Source::File(messages_xml.into()))
+        Self::with_source(Some(Source::File(messages_xml.into())))
     }
 
     /// A generator for `messages.xml` text; `name` names it in diagnostics.
     pub fn from_str(name: &str, xml: &str) -> Self {
-        Self::with_source(Source::Text {
+        Self::with_source(Some(Source::Text {
             name: name.to_owned(),
             xml: xml.to_owned(),
-        })
+        }))
     }
 
-    fn with_source(source: Source) -> Self {
+    /// A generator for settings files only (no `messages.xml`), read in the order given
+    /// (see [`settings`](Self::settings)).
+    pub fn for_settings<P: Into<PathBuf>>(files: impl IntoIterator<Item = P>) -> Self {
+        Self::with_source(None).settings(files)
+    }
+
+    fn with_source(source: Option<Source>) -> Self {
         Self {
             source,
             units: None,
@@ -250,6 +324,9 @@ impl Generator {
             default_priority: pprz_messages::priority::DEFAULT,
             telemetry: None,
             schedule: ScheduleOptions::default(),
+            settings: Vec::new(),
+            telemetry_crate: "::pprz_telemetry".to_owned(),
+            embassy_sync_crate: "::embassy_sync".to_owned(),
         }
     }
 
@@ -295,15 +372,26 @@ impl Generator {
     /// Every problem of the inputs, with file, line, message and field.
     pub fn protocol(&self) -> Result<Protocol, Error> {
         let mut protocol = match &self.source {
-            Source::File(path) => Protocol::from_file(path)?,
-            Source::Text { name, xml } => Protocol::parse(name, xml)?,
+            Some(Source::File(path)) => Protocol::from_file(path)?,
+            Some(Source::Text { name, xml }) => Protocol::parse(name, xml)?,
+            None => {
+                return Err(Error::single(
+                    "messages.xml",
+                    ErrorKind::NoInput("no messages.xml given (see `Generator::new`)"),
+                ));
+            }
         };
+        protocol.apply_units(&self.unit_conversions()?);
+        protocol.select(&self.classes, &self.messages)
+    }
+
+    /// The built-in unit conversions, with those of the [`units`](Self::units) file.
+    fn unit_conversions(&self) -> Result<Units, Error> {
         let mut units = Units::builtin();
         if let Some(file) = &self.units {
             units.extend(&Units::from_file(file)?);
         }
-        protocol.apply_units(&units);
-        protocol.select(&self.classes, &self.messages)
+        Ok(units)
     }
 
     /// Generates the Rust source.
@@ -334,9 +422,10 @@ impl Generator {
     /// `$OUT_DIR/<file_name>`, after telling Cargo to rerun the build script when an
     /// input file changes.
     fn out_dir_file(&self, file_name: &str) -> Result<PathBuf, Error> {
-        for source in [Some(&self.source), self.telemetry.as_ref()]
+        for source in [self.source.as_ref(), self.telemetry.as_ref()]
             .into_iter()
             .flatten()
+            .chain(&self.settings)
         {
             if let Source::File(path) = source {
                 println!("cargo:rerun-if-changed={}", path.display());
@@ -464,6 +553,106 @@ impl Generator {
     /// As [`write_telemetry_to`](Self::write_telemetry_to), or `OUT_DIR` is not set.
     pub fn write_telemetry_to_out_dir(&self, file_name: &str) -> Result<Vec<Diagnostic>, Error> {
         let warnings = self.write_telemetry_to(self.out_dir_file(file_name)?)?;
+        for w in &warnings {
+            println!("cargo:warning={w}");
+        }
+        Ok(warnings)
+    }
+
+    /// Settings files (Paparazzi `settings.xml`) to generate a settings table from, with
+    /// [`generate_settings`](Self::generate_settings) and friends; added after those
+    /// already given: the files are numbered in this order (see [`settings`]).
+    pub fn settings<P: Into<PathBuf>>(mut self, files: impl IntoIterator<Item = P>) -> Self {
+        self.settings
+            .extend(files.into_iter().map(|f| Source::File(f.into())));
+        self
+    }
+
+    /// A settings file as text, after those already given; `name` names it in
+    /// diagnostics.
+    pub fn settings_from_str(mut self, name: &str, xml: &str) -> Self {
+        self.settings.push(Source::Text {
+            name: name.to_owned(),
+            xml: xml.to_owned(),
+        });
+        self
+    }
+
+    /// Path of the `pprz-telemetry` crate as seen from the generated settings code
+    /// (default `::pprz_telemetry`).
+    pub fn telemetry_crate(mut self, path: impl Into<String>) -> Self {
+        self.telemetry_crate = path.into();
+        self
+    }
+
+    /// Path of the `embassy-sync` crate as seen from the generated settings code (default
+    /// `::embassy_sync`): `register` is generic over its `RawMutex`.
+    pub fn embassy_sync_crate(mut self, path: impl Into<String>) -> Self {
+        self.embassy_sync_crate = path.into();
+        self
+    }
+
+    /// Reads, numbers and checks the settings files, without generating code. Conversions
+    /// from `unit` to `alt_unit` are the built-in ones and those of the
+    /// [`units`](Self::units) file.
+    ///
+    /// # Errors
+    /// No settings file was given, or the problems of the files (see [`settings`]), each
+    /// with file, line and column.
+    pub fn settings_set(&self) -> Result<SettingsSet, Error> {
+        if self.settings.is_empty() {
+            return Err(Error::single(
+                "settings.xml",
+                ErrorKind::NoInput("no settings file given (see `Generator::settings`)"),
+            ));
+        }
+        let inputs: Vec<settings::Input<'_>> = self
+            .settings
+            .iter()
+            .map(|s| match s {
+                Source::File(path) => settings::Input::File(path),
+                Source::Text { name, xml } => settings::Input::Text(name, xml),
+            })
+            .collect();
+        settings::read(&inputs, &self.unit_conversions()?)
+    }
+
+    /// Generates the Rust source of the settings table: `SETTINGS`, `index`, `Bindings`
+    /// and `register` (see [`settings`]).
+    ///
+    /// # Errors
+    /// As [`settings_set`](Self::settings_set).
+    pub fn generate_settings(&self) -> Result<GeneratedSettings, Error> {
+        let set = self.settings_set()?;
+        let paths = settings::Paths {
+            messages: self.runtime.clone(),
+            telemetry: self.telemetry_crate.clone(),
+            embassy_sync: self.embassy_sync_crate.clone(),
+        };
+        Ok(GeneratedSettings {
+            code: settings::emit(&set, &paths),
+            warnings: set.warnings,
+        })
+    }
+
+    /// Generates the settings table into `path`, returning the warnings.
+    ///
+    /// # Errors
+    /// As [`settings_set`](Self::settings_set), or the file cannot be written.
+    pub fn write_settings_to(&self, path: impl AsRef<Path>) -> Result<Vec<Diagnostic>, Error> {
+        let generated = self.generate_settings()?;
+        write_output(path.as_ref(), &generated.code)?;
+        Ok(generated.warnings)
+    }
+
+    /// For a `build.rs`: generates the settings table into `$OUT_DIR/<file_name>`, tells
+    /// Cargo to rerun when an input changes, prints each warning as `cargo:warning=`, and
+    /// returns the warnings.
+    ///
+    /// # Errors
+    /// As [`write_settings_to`](Self::write_settings_to), or `OUT_DIR` is not set.
+    pub fn write_settings_to_out_dir(&self, file_name: &str) -> Result<Vec<Diagnostic>, Error> {
+        let warnings = self.write_settings_to(self.out_dir_file(file_name)?)?;
         for w in &warnings {
             println!("cargo:warning={w}");
         }

@@ -124,17 +124,27 @@ pub(crate) struct Parser<'a, 'input> {
     file: &'a str,
     doc: &'a Document<'input>,
     positions: Positions<'input>,
+    /// Offsets, in the parsed text, of the bytes a [`Repaired`] text inserted (sorted);
+    /// empty when the text was parsed as written.
+    inserted: Vec<usize>,
     diagnostics: Vec<Diagnostic>,
 }
 
 impl<'a, 'input> Parser<'a, 'input> {
     /// A parser of `doc`, which `file` names in diagnostics, with no diagnostics yet;
-    /// `positions` are those of the document's text.
-    fn new(file: &'a str, doc: &'a Document<'input>, positions: Positions<'input>) -> Self {
+    /// `positions` are those of the text as written, and `inserted` the offsets in the
+    /// parsed text of the bytes a repair inserted into it.
+    fn new(
+        file: &'a str,
+        doc: &'a Document<'input>,
+        positions: Positions<'input>,
+        inserted: Vec<usize>,
+    ) -> Self {
         Self {
             file,
             doc,
             positions,
+            inserted,
             diagnostics: Vec::new(),
         }
     }
@@ -163,20 +173,44 @@ impl<'a, 'input> Parser<'a, 'input> {
 
     /// Line and column (1-based) where `node` starts.
     pub(crate) fn line_col(&self, node: Node<'_, '_>) -> (u32, u32) {
-        self.positions.line_col(node.range().start)
+        self.line_col_at(node.range().start)
     }
 
-    /// Records a problem at `node`, about the message and field of `ctx`.
-    pub(crate) fn report(&mut self, node: Node<'_, '_>, ctx: &Ctx, kind: ErrorKind) {
-        let (line, column) = self.line_col(node);
-        self.diagnostics.push(Diagnostic {
+    /// Line and column (1-based), in the text as written, of byte offset `pos` of the
+    /// parsed text (which differs when a repair inserted bytes).
+    pub(crate) fn line_col_at(&self, pos: usize) -> (u32, u32) {
+        let before = self.inserted.partition_point(|&at| at < pos);
+        self.positions.line_col(pos - before)
+    }
+
+    /// Offsets, in the parsed text, of the bytes a repair inserted (sorted).
+    pub(crate) fn inserted(&self) -> &[usize] {
+        &self.inserted
+    }
+
+    /// A diagnostic at byte offset `pos` of the parsed text, about the message and field
+    /// of `ctx`, without recording it (a warning, or a problem reported later).
+    pub(crate) fn diagnostic_at(&self, pos: usize, ctx: &Ctx, kind: ErrorKind) -> Diagnostic {
+        let (line, column) = self.line_col_at(pos);
+        Diagnostic {
             file: self.file.to_owned(),
             line,
             column,
             message: ctx.message.clone(),
             field: ctx.field.clone(),
             kind,
-        });
+        }
+    }
+
+    /// Records `diagnostic` as a problem.
+    pub(crate) fn push(&mut self, diagnostic: Diagnostic) {
+        self.diagnostics.push(diagnostic);
+    }
+
+    /// Records a problem at `node`, about the message and field of `ctx`.
+    pub(crate) fn report(&mut self, node: Node<'_, '_>, ctx: &Ctx, kind: ErrorKind) {
+        let d = self.diagnostic_at(node.range().start, ctx, kind);
+        self.diagnostics.push(d);
     }
 
     /// The trimmed value of `attribute` of `node` (an `element`); reports it if absent.
@@ -377,16 +411,70 @@ pub(crate) fn parse<T>(
     text: &str,
     run: impl FnOnce(&mut Parser<'_, '_>) -> T,
 ) -> Result<T, Error> {
+    parse_repaired(file, text, |_| None, run)
+}
+
+/// A text with bytes inserted before parsing, so that the XML parser accepts what a more
+/// lenient reader accepts (a space between two attributes).
+pub(crate) struct Repaired {
+    /// The text to parse.
+    pub(crate) text: String,
+    /// Offsets in the text as written before which one byte was inserted, sorted: the
+    /// `k`-th inserted byte is at offset `at[k] + k` of [`text`](Self::text).
+    pub(crate) at: Vec<usize>,
+}
+
+/// [`parse`], parsing the text `repair` returns, if it returns one, instead of `text`;
+/// positions in diagnostics (of the XML parser too) are those of `text` as written.
+/// `repair` runs after the [`limits`] are checked.
+///
+/// # Errors
+/// As [`parse`].
+pub(crate) fn parse_repaired<T>(
+    file: &str,
+    text: &str,
+    repair: impl FnOnce(&str) -> Option<Repaired>,
+    run: impl FnOnce(&mut Parser<'_, '_>) -> T,
+) -> Result<T, Error> {
     let size = text.len() as u64;
     if size > limits::MAX_INPUT_BYTES {
         return Err(too_large(file, size));
     }
     let positions = Positions::new(text);
     limits::check(text).map_err(|(pos, kind)| at(file, positions.line_col(pos), kind))?;
-    let doc = parse_xml(file, text)?;
-    let mut p = Parser::new(file, &doc, positions);
+    let repaired = repair(text).filter(|r| !r.at.is_empty());
+    let (parsed, original_at) = match &repaired {
+        Some(r) => (r.text.as_str(), r.at.as_slice()),
+        None => (text, &[][..]),
+    };
+    let doc = parse_xml(file, parsed, |row, col| {
+        written_line_col(&positions, original_at, row, col)
+    })?;
+    let inserted = original_at
+        .iter()
+        .enumerate()
+        .map(|(k, &o)| o + k)
+        .collect();
+    let mut p = Parser::new(file, &doc, positions, inserted);
     let value = run(&mut p);
     p.finish(value)
+}
+
+/// The line and column in the text as written of line `row`, column `col` of the text
+/// parsed, into which one byte was inserted before each offset of `at` (sorted). An
+/// inserted byte never is a line break, so only the column changes.
+fn written_line_col(positions: &Positions<'_>, at: &[usize], row: u32, col: u32) -> (u32, u32) {
+    let (mut shift, mut line_before, mut on_line) = (0, 0, 0);
+    for &o in at {
+        let (line, column) = positions.line_col(o);
+        on_line = if line == line_before { on_line + 1 } else { 0 };
+        line_before = line;
+        // The inserted byte's column in the parsed text.
+        if line == row && column + on_line < col {
+            shift += 1;
+        }
+    }
+    (row, col - shift)
 }
 
 /// An input of `size` bytes, more than [`limits::MAX_INPUT_BYTES`].
@@ -436,8 +524,13 @@ fn read_file(path: &Path) -> Result<(String, String), Error> {
 
 /// Parses XML, allowing the `<!DOCTYPE ...>` line Paparazzi files carry (its entities
 /// were checked against the [`limits`]), with at most [`limits::MAX_NODES`] nodes; a
-/// syntax error is reported at its position in `file`.
-fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
+/// syntax error is reported at its position in `file` (`written` maps a line and column
+/// of the text parsed to the text as written).
+fn parse_xml<'t>(
+    file: &str,
+    text: &'t str,
+    written: impl Fn(u32, u32) -> (u32, u32),
+) -> Result<Document<'t>, Error> {
     Document::parse_with_options(
         text,
         ParsingOptions {
@@ -456,7 +549,14 @@ fn parse_xml<'t>(file: &str, text: &'t str) -> Result<Document<'t>, Error> {
             );
         }
         let pos = e.pos();
-        at(file, (pos.row, pos.col), ErrorKind::Xml(e.to_string()))
+        let (row, col) = written(pos.row, pos.col);
+        // The parser's message ends with the position in the text it parsed.
+        let message = e.to_string();
+        let message = match message.strip_suffix(&format!(" at {}:{}", pos.row, pos.col)) {
+            Some(rest) if (row, col) != (pos.row, pos.col) => format!("{rest} at {row}:{col}"),
+            _ => message,
+        };
+        at(file, (row, col), ErrorKind::Xml(message))
     })
 }
 

@@ -1,20 +1,36 @@
 //! `pprz-codegen`: generate Rust message types from a Paparazzi `messages.xml`, or check
 //! and list one; with `--telemetry`, the same for the periodic telemetry schedule of a
-//! `telemetry.xml` resolved against it.
+//! `telemetry.xml` resolved against it; with `--settings`, the same for the settings
+//! table of `settings.xml` files (no `messages.xml` then).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use pprz_codegen::{Generator, Schedule};
+use pprz_codegen::{Generator, Schedule, SettingsSet};
 
 /// Generate Rust message types from a Paparazzi messages.xml (or, with --telemetry, the
-/// periodic telemetry schedule tables of a telemetry.xml).
+/// periodic telemetry schedule tables of a telemetry.xml; with --settings, the settings
+/// table of settings.xml files).
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Args {
-    /// The messages.xml to read.
-    messages: PathBuf,
+    /// The messages.xml to read (not with --settings).
+    #[arg(required_unless_present = "settings", conflicts_with = "settings")]
+    messages: Option<PathBuf>,
+    /// Settings files (settings.xml), numbered in this order: generate (or check, list)
+    /// their settings table instead of message types.
+    #[arg(long, num_args = 1.., value_name = "SETTINGS_XML", conflicts_with_all = [
+        "classes", "messages_sel", "default_priority", "telemetry", "skip_unknown_telemetry",
+        "telemetry_class", "tick_frequency", "stagger",
+    ])]
+    settings: Vec<PathBuf>,
+    /// Path of the pprz-telemetry crate in the generated settings code (with --settings).
+    #[arg(long, default_value = "::pprz_telemetry", conflicts_with = "messages")]
+    telemetry_crate: String,
+    /// Path of the embassy-sync crate in the generated settings code (with --settings).
+    #[arg(long, default_value = "::embassy_sync", conflicts_with = "messages")]
+    embassy_sync_crate: String,
     /// Only these classes (name or id); repeatable.
     #[arg(long = "class", value_name = "CLASS")]
     classes: Vec<String>,
@@ -25,7 +41,7 @@ struct Args {
     #[arg(long)]
     units: Option<PathBuf>,
     /// Path of the pprz-messages crate in the generated code (message types and, with
-    /// --telemetry, schedule tables).
+    /// --telemetry, schedule tables; with --settings, setting descriptions).
     #[arg(long, default_value = "::pprz_messages")]
     runtime_crate: String,
     /// Priority of messages without a `priority` attribute.
@@ -37,8 +53,9 @@ struct Args {
     /// Only validate; print a summary.
     #[arg(long, conflicts_with = "list")]
     check: bool,
-    /// Only validate; list every selected message (class, id, name, priority, size), or
-    /// with --telemetry every scheduled message (process, mode, period, phase).
+    /// Only validate; list every selected message (class, id, name, priority, size),
+    /// with --telemetry every scheduled message (process, mode, period, phase), or with
+    /// --settings every setting.
     #[arg(long)]
     list: bool,
     /// A telemetry.xml: generate (or check, list) its schedule tables instead of the
@@ -124,9 +141,119 @@ fn telemetry(args: &Args, generator: Generator) -> Result<(), pprz_codegen::Erro
     Ok(())
 }
 
+/// A column of `--list --settings`: the text with control characters escaped (one line
+/// per setting), or `-` when empty.
+fn or_dash(s: Option<&str>) -> String {
+    match s.filter(|s| !s.is_empty()) {
+        Some(s) => s
+            .chars()
+            .flat_map(|c| {
+                let escaped: Vec<char> = if c.is_control() {
+                    c.escape_default().collect()
+                } else {
+                    vec![c]
+                };
+                escaped
+            })
+            .collect(),
+        None => "-".to_owned(),
+    }
+}
+
+/// A number for reading: `10`, `0.5`, `1e-6`, `3.4e38`.
+fn number(x: f32) -> String {
+    let debug = format!("{x:?}");
+    if debug.contains('e') {
+        debug
+    } else {
+        x.to_string()
+    }
+}
+
+fn list_settings(set: &SettingsSet) {
+    println!(
+        "{:>3}  {:<16} {:<32} {:<16} {:<24} {:>6}  {:<6} {:<10} {:<24} {:<10}  handler",
+        "idx",
+        "group",
+        "var",
+        "shortname",
+        "bounds",
+        "step",
+        "type",
+        "unit",
+        "labels",
+        "persistent"
+    );
+    for s in &set.settings {
+        let unit = match (&s.unit, &s.alt_unit) {
+            (u, Some(a)) => format!(
+                "{} ({} x{})",
+                or_dash(u.as_deref()),
+                or_dash(Some(a)),
+                s.alt_unit_coef as f32
+            ),
+            (u, None) => or_dash(u.as_deref()),
+        };
+        let handler = match (&s.handler, &s.module) {
+            (Some(h), Some(m)) => or_dash(Some(&format!("{m}.{h}"))),
+            (h, _) => or_dash(h.as_deref()),
+        };
+        println!(
+            "{:>3}  {:<16} {:<32} {:<16} {:<24} {:>6}  {:<6} {:<10} {:<24} {:<10}  {handler}",
+            s.index,
+            or_dash(Some(&s.group)),
+            or_dash(Some(&s.var)),
+            or_dash(s.shortname.as_deref()),
+            format!("[{}, {}]", number(s.min), number(s.max)),
+            number(s.step),
+            s.ty.name(),
+            unit,
+            or_dash(Some(&s.values.join("|"))),
+            if s.persistent { "persistent" } else { "-" },
+        );
+    }
+}
+
+fn settings(args: &Args) -> Result<(), pprz_codegen::Error> {
+    let mut generator = Generator::for_settings(&args.settings)
+        .runtime_crate(args.runtime_crate.clone())
+        .telemetry_crate(args.telemetry_crate.clone())
+        .embassy_sync_crate(args.embassy_sync_crate.clone());
+    if let Some(units) = &args.units {
+        generator = generator.units(units);
+    }
+    let warnings = if args.check || args.list {
+        let set = generator.settings_set()?;
+        if args.list {
+            list_settings(&set);
+        }
+        println!(
+            "{} settings ({} variables, {} persistent) from {} files: ok",
+            set.len(),
+            set.variables().len(),
+            set.persistent_count(),
+            set.files.len()
+        );
+        set.warnings
+    } else if let Some(out) = &args.output {
+        generator.write_settings_to(out)?
+    } else {
+        let g = generator.generate_settings()?;
+        print!("{}", g.code);
+        g.warnings
+    };
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
-    let mut generator = Generator::new(&args.messages)
+    let Some(messages) = &args.messages else {
+        return finish(settings(&args));
+    };
+    let mut generator = Generator::new(messages)
         .classes(args.classes.clone())
         .messages(args.messages_sel.clone())
         .runtime_crate(args.runtime_crate.clone())
@@ -162,7 +289,7 @@ fn main() -> ExitCode {
             }
             println!(
                 "{}: {} classes, {} messages: ok",
-                args.messages.display(),
+                messages.display(),
                 p.classes.len(),
                 p.message_count()
             );
@@ -172,6 +299,10 @@ fn main() -> ExitCode {
     } else {
         generator.generate().map(|code| print!("{code}"))
     };
+    finish(result)
+}
+
+fn finish(result: Result<(), pprz_codegen::Error>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
