@@ -118,7 +118,9 @@ pub struct RamFlash<'m, const SIZE: usize, const WRITE: usize, const ERASE: usiz
     mem: &'m mut [u8; SIZE],
 }
 
-impl<'m, const SIZE: usize, const WRITE: usize, const ERASE: usize> RamFlash<'m, SIZE, WRITE, ERASE> {
+impl<'m, const SIZE: usize, const WRITE: usize, const ERASE: usize>
+    RamFlash<'m, SIZE, WRITE, ERASE>
+{
     const GEOMETRY: () = assert!(
         WRITE > 0 && ERASE > 0 && ERASE.is_multiple_of(WRITE) && SIZE.is_multiple_of(ERASE),
         "RamFlash: ERASE must be a multiple of WRITE, and SIZE a multiple of ERASE"

@@ -426,7 +426,10 @@ mod tests {
             assert_eq!((a.key, a.ty), (b.key, b.ty));
             assert_eq!(a.value.to_bits(), b.value.to_bits());
         }
-        assert_eq!(record.find(0xdead_beef).map(|e| e.ty), Some(SettingType::U8));
+        assert_eq!(
+            record.find(0xdead_beef).map(|e| e.ty),
+            Some(SettingType::U8)
+        );
         assert_eq!(record.find(99), None);
     }
 
@@ -536,7 +539,10 @@ mod tests {
         for key in 0..255 {
             w.push(entry(key, 0.0)).unwrap();
         }
-        assert!(matches!(w.push(entry(999, 0.0)), Err(EncodeError::Full { .. })));
+        assert!(matches!(
+            w.push(entry(999, 0.0)),
+            Err(EncodeError::Full { .. })
+        ));
         let len = w.finish();
         assert_eq!(Record::decode(&buf[..len]).unwrap().len(), 255);
     }

@@ -10,12 +10,13 @@
 //! then only in the store's own task ([`run`](crate::task::run)), never in a `select` or
 //! under a timeout.
 
+use core::cell::Cell;
 use core::fmt;
 use core::ops::Range;
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embedded_storage_async::nor_flash::NorFlash;
-use pprz_messages::settings::{SettingDesc, SettingType};
+use pprz_messages::settings::{SettingDesc, SettingType, fnv1a};
 use pprz_telemetry::settings::{SettingEntry, Settings};
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
 use sequential_storage::cache::page_pointers::ArrayPagePointers;
@@ -24,8 +25,8 @@ use sequential_storage::cache::{Cache, CacheImpl};
 use sequential_storage::map::{MapConfig, MapConfigError, MapStorage, SerializationError, Value};
 
 use crate::record::{
-    ENTRY_LEN, EncodeError, Entry, HEADER_LEN, MAX_ENTRIES, Record, RecordError, RecordWriter,
-    record_len,
+    ENTRY_LEN, EncodeError, Entry, HEADER_LEN, MAGIC, MAX_ENTRIES, Record, RecordError,
+    RecordWriter, VERSION, record_len,
 };
 
 /// The map key the snapshot is stored under.
@@ -128,6 +129,10 @@ pub enum StoreError<E> {
     },
     /// The stored snapshot does not decode.
     Record(RecordError),
+    /// The snapshot read back after a store is not the one written (the flash did not
+    /// take it; the previous snapshot is still the stored one). Storing again writes it
+    /// elsewhere.
+    Verify,
     /// sequential-storage reported an internal error, or the table grew during a store.
     Internal,
 }
@@ -143,6 +148,7 @@ impl<E> StoreError<E> {
             StoreError::TooManySettings { .. } => ErrorKind::TooManySettings,
             StoreError::BufferTooSmall { .. } => ErrorKind::BufferTooSmall,
             StoreError::Record(_) => ErrorKind::Record,
+            StoreError::Verify => ErrorKind::Verify,
             StoreError::Internal => ErrorKind::Internal,
         }
     }
@@ -178,6 +184,7 @@ impl<E: fmt::Debug> fmt::Display for StoreError<E> {
                 write!(f, "a stored item needs a {needed}-byte buffer")
             }
             StoreError::Record(e) => write!(f, "stored settings: {e}"),
+            StoreError::Verify => f.write_str("settings snapshot did not read back as written"),
             StoreError::Internal => f.write_str("settings storage internal error"),
         }
     }
@@ -207,6 +214,8 @@ pub enum ErrorKind {
     BufferTooSmall,
     /// [`StoreError::Record`].
     Record,
+    /// [`StoreError::Verify`].
+    Verify,
     /// [`StoreError::Internal`].
     Internal,
 }
@@ -337,7 +346,12 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
     /// [`StoreError`]: the flash failed, the map is corrupted beyond repair, or the
     /// snapshot does not decode ([`StoreError::Record`]).
     pub async fn snapshot(&mut self) -> Result<Option<Record<'_>>, StoreError<S::Error>> {
-        let mut map = open(&mut self.flash, &self.range, &mut self.cache, self.new_cache)?;
+        let mut map = open(
+            &mut self.flash,
+            &self.range,
+            &mut self.cache,
+            self.new_cache,
+        )?;
         let fetched = map
             .fetch_item::<&[u8]>(&mut self.buf.0, &SNAPSHOT_KEY)
             .await;
@@ -373,9 +387,10 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
     ///
     /// # Errors
     /// [`StoreError::TooManySettings`] (nothing written) if the table has more persistent
-    /// settings than [`capacity`](Self::capacity); else a failure of the map or the
-    /// flash, after which the previous snapshot is still the stored one, or the new one
-    /// if the failure came after it was complete.
+    /// settings than [`capacity`](Self::capacity); [`StoreError::Verify`] if the snapshot
+    /// did not read back as written (each store reads it back as a reboot would); else a
+    /// failure of the map or the flash. After an error, the previous snapshot is still
+    /// the stored one, or the new one if the failure came after it was complete.
     pub async fn save<M: RawMutex, const N: usize>(
         &mut self,
         table: &Settings<'_, M, N>,
@@ -386,16 +401,42 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
             .0
             .get_mut(KEY_LEN..KEY_LEN + record_len(capacity))
             .ok_or(StoreError::Internal)?;
-        let record_bytes = encode_table(table, area).map_err(|_| StoreError::TooManySettings {
+        encode_table(table, area).map_err(|_| StoreError::TooManySettings {
             persistent: persistent_count(table),
             capacity,
         })?;
-        let item = TableRecord { table, capacity };
-        let mut map = open(&mut self.flash, &self.range, &mut self.cache, self.new_cache)?;
+        let item = TableRecord {
+            table,
+            capacity,
+            written: Cell::new(None),
+        };
+        let mut map = open(
+            &mut self.flash,
+            &self.range,
+            &mut self.cache,
+            self.new_cache,
+        )?;
         let stored = map.store_item(&mut self.buf.0, &SNAPSHOT_KEY, &item).await;
         close(map, &mut self.cache);
         stored.map_err(StoreError::from_map)?;
-        let entries = (record_bytes - HEADER_LEN) / ENTRY_LEN;
+        // Read back as a reboot would (an empty cache): the flash may not have taken
+        // every byte (sequential-storage does not check), and the map then serves the
+        // previous snapshot.
+        let mut fresh = (self.new_cache)();
+        let mut map = open(&mut self.flash, &self.range, &mut fresh, self.new_cache)?;
+        let read = map
+            .fetch_item::<&[u8]>(&mut self.buf.0, &SNAPSHOT_KEY)
+            .await;
+        // The store keeps the cache that found what a reboot finds.
+        close(map, &mut self.cache);
+        let read = read.map_err(StoreError::from_map)?;
+        let Some((record_bytes, sum)) = item.written.get() else {
+            return Err(StoreError::Internal);
+        };
+        if read.map(|r| (r.len(), fnv1a(r))) != Some((record_bytes, sum)) {
+            return Err(StoreError::Verify);
+        }
+        let entries = record_bytes.saturating_sub(HEADER_LEN) / ENTRY_LEN;
         Ok(SaveReport {
             entries,
             record_bytes,
@@ -403,15 +444,76 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
         })
     }
 
-    /// Erases the whole range: no snapshot any more (settings keep their values until
-    /// the next boot, which keeps the defaults).
+    /// Forgets the stored snapshot: stores an empty one, so the next boot keeps every
+    /// default (settings keep their values until then). As a store, a power cut leaves
+    /// either the previous snapshot or the empty one. If the map cannot be read or take
+    /// a new snapshot (corrupted beyond repair, or an item larger than the buffer), the
+    /// range is [erased](Self::erase) instead.
     ///
     /// # Errors
     /// [`StoreError::Flash`].
     pub async fn clear(&mut self) -> Result<(), StoreError<S::Error>> {
-        let mut map = open(&mut self.flash, &self.range, &mut self.cache, self.new_cache)?;
-        // The erase goes around the cache: the store keeps the empty one `open` left.
-        map.erase_all().await.map_err(StoreError::from_map)
+        const EMPTY: [u8; HEADER_LEN] = [MAGIC[0], MAGIC[1], VERSION, 0];
+        match self.snapshot().await {
+            Ok(_) | Err(StoreError::Record(_)) => {}
+            Err(StoreError::Flash(e)) => return Err(StoreError::Flash(e)),
+            Err(_) => return self.erase().await,
+        }
+        let empty = Record::decode(&EMPTY).map_err(|_| StoreError::Internal)?;
+        let mut map = open(
+            &mut self.flash,
+            &self.range,
+            &mut self.cache,
+            self.new_cache,
+        )?;
+        let stored = map.store_item(&mut self.buf.0, &SNAPSHOT_KEY, &empty).await;
+        close(map, &mut self.cache);
+        match stored.map_err(StoreError::from_map) {
+            Ok(()) => Ok(()),
+            Err(StoreError::Flash(e)) => Err(StoreError::Flash(e)),
+            Err(_) => self.erase().await,
+        }
+    }
+
+    /// Erases the whole range, page by page: the way out of a map corrupted beyond
+    /// repair. Before a page is erased, its last word is written as sequential-storage's
+    /// page marker (if it is erased), so a power cut in the middle of the page's erase
+    /// leaves a page that sequential-storage recognizes as half-erased and erases again.
+    /// A cut during `erase` may leave an older snapshot readable: erase again.
+    ///
+    /// (sequential-storage's own `erase_all` does not mark pages: a cut in the erase of
+    /// the page being written leaves a page that reads as erased and is not, and the
+    /// next store there fails or is lost.)
+    ///
+    /// # Errors
+    /// [`StoreError::Flash`].
+    pub async fn erase(&mut self) -> Result<(), StoreError<S::Error>> {
+        // The cache cannot follow an erase: start again with an empty one.
+        self.cache = (self.new_cache)();
+        let word = word::<S>();
+        let page = S::ERASE_SIZE;
+        let marker = AlignedBuf([0u8; MAX_WORD]);
+        let mut end_word = AlignedBuf([0u8; MAX_WORD]);
+        for start in self.range.clone().step_by(page) {
+            // `new` checked the range: whole pages, words of at most 32 bytes.
+            let end = start + (page - word) as u32;
+            let end_word = &mut end_word.0[..word];
+            self.flash
+                .read(end, end_word)
+                .await
+                .map_err(StoreError::Flash)?;
+            if end_word.iter().all(|b| *b == 0xFF) {
+                self.flash
+                    .write(end, &marker.0[..word])
+                    .await
+                    .map_err(StoreError::Flash)?;
+            }
+            self.flash
+                .erase(start, start + page as u32)
+                .await
+                .map_err(StoreError::Flash)?;
+        }
+        Ok(())
     }
 
     /// The flash range the store uses.
@@ -543,6 +645,9 @@ fn encode_table<M: RawMutex, const N: usize>(
 struct TableRecord<'t, 'a, M: RawMutex, const N: usize> {
     table: &'t Settings<'a, M, N>,
     capacity: usize,
+    /// Length and FNV-1a of the record last serialized (the one written), to check the
+    /// read-back.
+    written: Cell<Option<(usize, u32)>>,
 }
 
 impl<'d, M: RawMutex, const N: usize> Value<'d> for TableRecord<'_, '_, M, N> {
@@ -551,7 +656,10 @@ impl<'d, M: RawMutex, const N: usize> Value<'d> for TableRecord<'_, '_, M, N> {
         let area = buffer
             .get_mut(..len)
             .ok_or(SerializationError::BufferTooSmall)?;
-        encode_table(self.table, area).map_err(|_| SerializationError::BufferTooSmall)
+        let n = encode_table(self.table, area).map_err(|_| SerializationError::BufferTooSmall)?;
+        let record = area.get(..n).ok_or(SerializationError::BufferTooSmall)?;
+        self.written.set(Some((n, fnv1a(record))));
+        Ok(n)
     }
 
     fn deserialize_from(_buffer: &'d [u8]) -> Result<(Self, usize), SerializationError> {

@@ -13,7 +13,8 @@
 //!   whoever tells the ground (an unsolicited DL_VALUE);
 //! * setting it to 0 changes nothing stored; the flag reads 0 unless a store is pending.
 //!
-//! The clear flag works the same way, and erases the store.
+//! The clear flag works the same way, and forgets the stored snapshot
+//! ([`PersistentStore::clear`]): the next boot keeps the defaults.
 //!
 //! ```
 //! use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
@@ -85,7 +86,7 @@ impl FlagState {
 pub enum Request {
     /// Store a snapshot of the persistent settings.
     Store,
-    /// Erase the store.
+    /// Forget the stored snapshot ([`PersistentStore::clear`]).
     Clear,
 }
 
@@ -260,7 +261,7 @@ impl<M: RawMutex> StoreControl<M> {
         self.request(Request::Store)
     }
 
-    /// Asks the store task to erase the store.
+    /// Asks the store task to forget the stored snapshot.
     ///
     /// # Errors
     /// [`Refused`] if `can_store()` refuses (the clear flag then reads 0).
@@ -329,7 +330,13 @@ impl<M: RawMutex> StoreControl<M> {
     ///
     /// # Errors
     /// As [`PersistentStore::load`].
-    pub async fn load<S: NorFlash, C: CacheImpl<u8>, const BUF: usize, TM: RawMutex, const N: usize>(
+    pub async fn load<
+        S: NorFlash,
+        C: CacheImpl<u8>,
+        const BUF: usize,
+        TM: RawMutex,
+        const N: usize,
+    >(
         &self,
         store: &mut PersistentStore<S, C, BUF>,
         table: &Settings<'_, TM, N>,
@@ -342,7 +349,10 @@ impl<M: RawMutex> StoreControl<M> {
                 Ok(report) => {
                     add(&mut stats.entries_applied, report.applied);
                     add(&mut stats.entries_refused, report.refused);
-                    add(&mut stats.entries_unknown, report.unknown + report.mismatched);
+                    add(
+                        &mut stats.entries_unknown,
+                        report.unknown + report.mismatched,
+                    );
                 }
                 Err(_) => add(&mut stats.load_failures, 1),
             }

@@ -6,7 +6,9 @@ mod common;
 use common::*;
 use embassy_futures::block_on;
 use embedded_storage_async::nor_flash::{NorFlash, ReadNorFlash};
-use pprz_settings::{FileFlash, FileFlashError, FlashError, PageCache, PersistentStore, buffer_len};
+use pprz_settings::{
+    FileFlash, FileFlashError, FlashError, PageCache, PersistentStore, buffer_len,
+};
 
 type Flash = FileFlash<4096, 4, 1024>;
 
@@ -63,11 +65,17 @@ fn misaligned_and_outside_operations_change_nothing() {
     let cases = [
         (block_on(flash.write(2, &[0; 4])), FlashError::NotAligned),
         (block_on(flash.write(0, &[0; 3])), FlashError::NotAligned),
-        (block_on(flash.write(4092, &[0; 8])), FlashError::OutOfBounds),
+        (
+            block_on(flash.write(4092, &[0; 8])),
+            FlashError::OutOfBounds,
+        ),
         (block_on(flash.erase(512, 1024)), FlashError::NotAligned),
         (block_on(flash.erase(1024, 0)), FlashError::OutOfBounds),
         (block_on(flash.erase(0, 5120)), FlashError::OutOfBounds),
-        (block_on(flash.read(4093, &mut buf)), FlashError::OutOfBounds),
+        (
+            block_on(flash.read(4093, &mut buf)),
+            FlashError::OutOfBounds,
+        ),
     ];
     for (i, (result, error)) in cases.into_iter().enumerate() {
         assert_eq!(flash_error(result), Some(error), "case {i}");
@@ -100,5 +108,7 @@ fn settings_survive_a_restart() {
     }
     assert_eq!(load(&mut open()).1, loaded(A));
     block_on(open().clear()).unwrap();
+    assert_eq!(load(&mut open()).1, DEFAULTS);
+    block_on(open().erase()).unwrap();
     assert!(!load(&mut open()).0.unwrap().found);
 }

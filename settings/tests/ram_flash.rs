@@ -54,21 +54,36 @@ fn misaligned_and_outside_operations_change_nothing() {
     let cases = [
         (block_on(flash.write(2, &[0; 4])), FlashError::NotAligned),
         (block_on(flash.write(0, &[0; 3])), FlashError::NotAligned),
-        (block_on(flash.write(4092, &[0; 8])), FlashError::OutOfBounds),
-        (block_on(flash.write(u32::MAX - 3, &[0; 4])), FlashError::OutOfBounds),
+        (
+            block_on(flash.write(4092, &[0; 8])),
+            FlashError::OutOfBounds,
+        ),
+        (
+            block_on(flash.write(u32::MAX - 3, &[0; 4])),
+            FlashError::OutOfBounds,
+        ),
         (block_on(flash.erase(512, 1024)), FlashError::NotAligned),
         (block_on(flash.erase(0, 1000)), FlashError::NotAligned),
         (block_on(flash.erase(1024, 0)), FlashError::OutOfBounds),
         (block_on(flash.erase(0, 5120)), FlashError::OutOfBounds),
-        (block_on(flash.read(4093, &mut buf)), FlashError::OutOfBounds),
-        (block_on(flash.read(u32::MAX, &mut buf)), FlashError::OutOfBounds),
+        (
+            block_on(flash.read(4093, &mut buf)),
+            FlashError::OutOfBounds,
+        ),
+        (
+            block_on(flash.read(u32::MAX, &mut buf)),
+            FlashError::OutOfBounds,
+        ),
     ];
     for (i, (result, error)) in cases.into_iter().enumerate() {
         assert_eq!(result, Err(error), "case {i}");
     }
     assert!(flash.as_bytes().iter().all(|b| *b == 0xFF));
     assert_eq!(FlashError::NotAligned.kind(), NorFlashErrorKind::NotAligned);
-    assert_eq!(FlashError::OutOfBounds.kind(), NorFlashErrorKind::OutOfBounds);
+    assert_eq!(
+        FlashError::OutOfBounds.kind(),
+        NorFlashErrorKind::OutOfBounds
+    );
 }
 
 #[test]
@@ -76,12 +91,11 @@ fn new_keeps_the_contents_as_a_kept_region_does() {
     let mut mem = [0u8; 4096];
     {
         let mut flash = Flash::erased(&mut mem);
-        let mut store =
-            PersistentStore::<_, PageCache<4>, { buffer_len(8) }>::with_page_cache(
-                &mut flash,
-                0..4096,
-            )
-            .unwrap();
+        let mut store = PersistentStore::<_, PageCache<4>, { buffer_len(8) }>::with_page_cache(
+            &mut flash,
+            0..4096,
+        )
+        .unwrap();
         save(&mut store, &A).unwrap();
         save(&mut store, &B).unwrap();
     }

@@ -143,12 +143,11 @@ fn a_variable_bound_twice_is_stored_once() {
 #[test]
 fn too_many_settings_for_the_buffer_writes_nothing() {
     let mut mem = [0xFF; SIZE];
-    let mut small =
-        PersistentStore::<Flash<'_>, PageCache<3>, { buffer_len(2) }>::with_page_cache(
-            Flash::new(&mut mem),
-            0..SIZE as u32,
-        )
-        .unwrap();
+    let mut small = PersistentStore::<Flash<'_>, PageCache<3>, { buffer_len(2) }>::with_page_cache(
+        Flash::new(&mut mem),
+        0..SIZE as u32,
+    )
+    .unwrap();
     // buffer_len(2) = 32 bytes: 32 - 5 = 27 = three entries.
     assert_eq!(
         PersistentStore::<Flash<'_>, PageCache<3>, { buffer_len(2) }>::capacity(),
@@ -169,17 +168,26 @@ fn too_many_settings_for_the_buffer_writes_nothing() {
 fn a_snapshot_larger_than_the_buffer_is_a_typed_error() {
     let mut mem = [0xFF; SIZE];
     save(&mut store(&mut mem), &A).unwrap();
-    let mut small =
-        PersistentStore::<Flash<'_>, PageCache<3>, { buffer_len(2) }>::with_page_cache(
-            Flash::new(&mut mem),
-            0..SIZE as u32,
-        )
-        .unwrap();
+    let mut small = PersistentStore::<Flash<'_>, PageCache<3>, { buffer_len(2) }>::with_page_cache(
+        Flash::new(&mut mem),
+        0..SIZE as u32,
+    )
+    .unwrap();
     let (report, values) = load(&mut small);
-    assert!(matches!(report, Err(StoreError::BufferTooSmall { needed: 52 })));
+    assert!(matches!(
+        report,
+        Err(StoreError::BufferTooSmall { needed: 52 })
+    ));
     assert_eq!(values, DEFAULTS);
+    // Clearing erases the range: the map cannot take an empty snapshot it cannot read.
     block_on(small.clear()).unwrap();
-    assert!(load(&mut small).0.unwrap() == LoadReport { missing: 5, ..LoadReport::default() });
+    assert_eq!(
+        load(&mut small).0.unwrap(),
+        LoadReport {
+            missing: 5,
+            ..LoadReport::default()
+        }
+    );
 }
 
 #[test]
@@ -206,7 +214,7 @@ fn stored_bytes_that_are_not_a_record_are_a_typed_error() {
 }
 
 #[test]
-fn clear_forgets_and_the_store_keeps_working_with_its_cache() {
+fn clear_forgets_and_the_store_keeps_working() {
     let mut mem = [0xFF; SIZE];
     let mut s = store(&mut mem);
     // Fill part of a page so the cache points into it.
@@ -215,7 +223,17 @@ fn clear_forgets_and_the_store_keeps_working_with_its_cache() {
     }
     assert!(load(&mut s).0.unwrap().found);
     block_on(s.clear()).unwrap();
-    assert!(!load(&mut s).0.unwrap().found);
+    let (report, values) = load(&mut s);
+    assert_eq!(
+        report.unwrap(),
+        LoadReport {
+            found: true,
+            entries: 0,
+            missing: 5,
+            ..LoadReport::default()
+        }
+    );
+    assert_eq!(values, DEFAULTS);
     // After a clear, the same store (same cache) stores where a reboot finds it.
     save(&mut s, &B).unwrap();
     save(&mut s, &C).unwrap();
@@ -242,7 +260,9 @@ fn bad_configurations_are_refused() {
     let mut mem = [0xFF; SIZE];
     assert!(matches!(
         Store::with_page_cache(Flash::new(&mut mem), 512..SIZE as u32),
-        Err(ConfigError::Map(MapConfigError::StartRangeNotAtPageBoundary))
+        Err(ConfigError::Map(
+            MapConfigError::StartRangeNotAtPageBoundary
+        ))
     ));
     assert!(matches!(
         Store::with_page_cache(Flash::new(&mut mem), 0..1024),
@@ -304,4 +324,24 @@ fn a_32_byte_word_flash_works() {
     }
     save(&mut make(&mut mem), &C).unwrap();
     assert_eq!(load(&mut make(&mut mem)).1, loaded(C));
+}
+
+#[test]
+fn erase_empties_the_range_and_the_store_keeps_working_with_its_cache() {
+    let mut mem = [0xFF; SIZE];
+    let mut s = store(&mut mem);
+    // Fill part of a page so the cache points into it.
+    for _ in 0..5 {
+        save(&mut s, &A).unwrap();
+    }
+    block_on(s.erase()).unwrap();
+    assert!(!load(&mut s).0.unwrap().found);
+    // After an erase, the same store (its cache renewed) stores where a reboot finds it.
+    save(&mut s, &B).unwrap();
+    save(&mut s, &C).unwrap();
+    drop(s);
+    assert_eq!(load(&mut store(&mut mem)).1, loaded(C));
+    // The range holds the last two snapshots only.
+    let used = mem.iter().filter(|b| **b != 0xFF).count();
+    assert!(used < 2 * 64, "{used} bytes used");
 }

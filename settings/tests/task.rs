@@ -172,9 +172,13 @@ fn clear_erases_and_requests_run_in_order() {
     let outcome = with_task(store(&mut mem), &control, &A, async |c| {
         until(c, Request::Clear).await
     });
-    assert_eq!((outcome.request, outcome.state), (Request::Clear, FlagState::Done));
+    assert_eq!(
+        (outcome.request, outcome.state),
+        (Request::Clear, FlagState::Done)
+    );
     assert_eq!(control.clear_flag(), 1.0);
-    assert!(!load(&mut store(&mut mem)).0.unwrap().found);
+    let (report, values) = load(&mut store(&mut mem));
+    assert_eq!((report.unwrap().entries, values), (0, DEFAULTS));
     // Clear, then store: stored.
     control.request_clear().unwrap();
     control.request_store().unwrap();
@@ -201,7 +205,10 @@ fn a_load_through_the_control_is_counted() {
         SettingDesc::new(1, "trim", -1.0, 1.0).persistent(true),
     ];
     let vars = Vars::new(&[0.0, 0.0]);
-    with_table_of(&OTHER, &vars, |t| block_on(control.load(&mut store(&mut mem), t))).unwrap();
+    with_table_of(&OTHER, &vars, |t| {
+        block_on(control.load(&mut store(&mut mem), t))
+    })
+    .unwrap();
     assert_eq!(
         control.stats(),
         StoreStats {

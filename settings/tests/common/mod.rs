@@ -54,12 +54,7 @@ pub struct Vars(Vec<AtomicU32>);
 
 impl Vars {
     pub fn new(values: &[f32]) -> Self {
-        Vars(
-            values
-                .iter()
-                .map(|v| AtomicU32::new(v.to_bits()))
-                .collect(),
-        )
+        Vars(values.iter().map(|v| AtomicU32::new(v.to_bits())).collect())
     }
 
     pub fn get(&self, i: usize) -> f32 {
