@@ -395,7 +395,7 @@ impl<M: RawMutex> Default for StoreControl<M> {
 /// operations are not cancel-safe, and a store dropped mid-way leaves the flash to be
 /// repaired and the outcome unknown. While it waits for a request, nothing is in flight.
 pub async fn run<S, C, const BUF: usize, M, TM, const N: usize>(
-    mut store: PersistentStore<S, C, BUF>,
+    store: &mut PersistentStore<S, C, BUF>,
     control: &StoreControl<M>,
     table: &Settings<'_, TM, N>,
 ) -> !

@@ -27,7 +27,7 @@ fn store(mem: &mut [u8; 3072]) -> Store<'_> {
 /// Runs the store task with `store` until `body` finishes (the task is then waiting for
 /// a request: nothing of the store is in flight when it is dropped).
 fn with_task<S, C, const BUF: usize, R>(
-    store: PersistentStore<S, C, BUF>,
+    mut store: PersistentStore<S, C, BUF>,
     control: &Control,
     values: &[f32; K],
     body: impl AsyncFnOnce(&Control) -> R,
@@ -39,7 +39,7 @@ where
     let vars = Vars::new(values);
     with_table(&vars, |table| {
         block_on(async {
-            match select(run(store, control, table), body(control)).await {
+            match select(run(&mut store, control, table), body(control)).await {
                 Either::First(never) => never,
                 Either::Second(r) => r,
             }
