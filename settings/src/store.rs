@@ -61,7 +61,6 @@ pub fn page_cache<const PAGES: usize>() -> PageCache<PAGES> {
 
 /// Why a store could not be set up.
 #[derive(Debug, Clone, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
     /// The flash range does not suit a sequential-storage map (page-aligned, at least
     /// two pages, flash word at most 32 bytes).
@@ -97,6 +96,21 @@ impl fmt::Display for ConfigError {
 }
 
 impl core::error::Error for ConfigError {}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for ConfigError {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        match self {
+            ConfigError::Map(e) => defmt::write!(f, "Map({})", defmt::Debug2Format(e)),
+            ConfigError::PageCount { pages, cache } => {
+                defmt::write!(f, "PageCount {{ pages: {}, cache: {} }}", pages, cache)
+            }
+            ConfigError::Buffer { len, min } => {
+                defmt::write!(f, "Buffer {{ len: {}, min: {} }}", len, min)
+            }
+        }
+    }
+}
 
 /// A store, load or clear that failed; `E` is the flash's error.
 #[derive(Debug, Clone, PartialEq, Eq)]

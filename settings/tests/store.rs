@@ -68,7 +68,7 @@ fn the_newest_snapshot_wins_across_many_pages() {
         save(&mut s, &v).unwrap();
     }
     save(&mut s, &B).unwrap();
-    drop(s);
+    let _ = s.into_flash();
     assert_eq!(load(&mut store(&mut mem)).1, loaded(B));
 }
 
@@ -160,7 +160,7 @@ fn too_many_settings_for_the_buffer_writes_nothing() {
             capacity: 3
         })
     );
-    drop(small);
+    let _ = small.into_flash();
     assert!(mem.iter().all(|b| *b == 0xFF));
 }
 
@@ -201,7 +201,7 @@ fn stored_bytes_that_are_not_a_record_are_a_typed_error() {
     let mut buf = [0u8; 64];
     let garbage: &[u8] = b"XY\x01\x00";
     block_on(map.store_item(&mut buf, &0u8, &garbage)).unwrap();
-    drop(map);
+    let _ = map.destroy();
     let (report, values) = load(&mut store(&mut mem));
     assert_eq!(
         report,
@@ -237,7 +237,7 @@ fn clear_forgets_and_the_store_keeps_working() {
     // After a clear, the same store (same cache) stores where a reboot finds it.
     save(&mut s, &B).unwrap();
     save(&mut s, &C).unwrap();
-    drop(s);
+    let _ = s.into_flash();
     assert_eq!(load(&mut store(&mut mem)).1, loaded(C));
 }
 
@@ -339,7 +339,7 @@ fn erase_empties_the_range_and_the_store_keeps_working_with_its_cache() {
     // After an erase, the same store (its cache renewed) stores where a reboot finds it.
     save(&mut s, &B).unwrap();
     save(&mut s, &C).unwrap();
-    drop(s);
+    let _ = s.into_flash();
     assert_eq!(load(&mut store(&mut mem)).1, loaded(C));
     // The range holds the last two snapshots only.
     let used = mem.iter().filter(|b| **b != 0xFF).count();
