@@ -313,7 +313,7 @@ fn close<S: NorFlash, C: CacheImpl<u8>>(map: MapStorage<u8, &mut S, C>, cache: &
 impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF> {
     /// A store over `range` of `flash` (page-aligned, at least two pages). `new_cache`
     /// makes an empty cache, now and whenever the cache cannot follow the flash (after
-    /// [`clear`](Self::clear), or an operation dropped mid-way): e.g.
+    /// [`erase`](Self::erase), or an operation dropped mid-way): e.g.
     /// [`page_cache::<PAGES>`](page_cache) with `PAGES` the range's page count (a cache
     /// for fewer pages panics in sequential-storage, which
     /// [`with_page_cache`](Self::with_page_cache) rules out), or
@@ -560,13 +560,15 @@ impl<S: NorFlash, const PAGES: usize, const BUF: usize> PersistentStore<S, PageC
     }
 }
 
-/// The flash word sequential-storage writes in: the larger of the read and write sizes.
+/// The flash word sequential-storage writes in: the larger of the read and write sizes
+/// (at least 1).
 const fn word<S: NorFlash>() -> usize {
-    if S::WRITE_SIZE > S::READ_SIZE {
+    let word = if S::WRITE_SIZE > S::READ_SIZE {
         S::WRITE_SIZE
     } else {
         S::READ_SIZE
-    }
+    };
+    if word > 0 { word } else { 1 }
 }
 
 /// The description of `entry` if it is persistent.
