@@ -37,7 +37,7 @@ use pprz_messages::BaseType;
 mod sweep;
 mod table;
 
-pub use sweep::{MAX_NAMED_FAILURES, Sweep, SweepConfig};
+pub use sweep::{MAX_NAMED_FAILURES, Sweep, SweepConfig, progress_line};
 pub(crate) use table::text;
 pub use table::{NameError, SettingsTable, ValueError, display_unit, from_display, to_display};
 

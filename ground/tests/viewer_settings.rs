@@ -171,7 +171,9 @@ fn a_value_that_does_not_fit_a_float_is_refused_answered_and_counted() {
         );
     }
     assert!(
-        err.contains("settings from viewers not sent: 2 refused (not a float)"),
+        err.contains(
+            "settings from viewers not sent: 2 refused (not a float, or outside the bounds)"
+        ),
         "{err}"
     );
 }

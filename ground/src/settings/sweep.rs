@@ -230,33 +230,49 @@ impl Sweep {
     /// 4.2 s`, with the settings that failed (named from `table` when given, the first
     /// [`MAX_NAMED_FAILURES`]).
     pub fn line(&self, table: Option<&SettingsTable>) -> String {
-        let (read, total) = (self.read, self.states.len());
-        let Some(seconds) = self.duration() else {
-            return format!("settings: {read}/{total} read");
-        };
-        let mut s = format!("settings: {read}/{total} read in {seconds:.1} s");
-        let failed = self.failed();
-        if !failed.is_empty() {
-            let names: Vec<String> = failed
-                .iter()
-                .take(MAX_NAMED_FAILURES)
-                .map(|&i| match table {
-                    Some(t) => t.describe(i),
-                    None => format!("index {i}"),
-                })
-                .collect();
-            s.push_str(&format!(
-                "; {} failed (no answer to {} GET_SETTING): {}",
-                failed.len(),
-                self.config.attempts,
-                names.join(", ")
-            ));
-            if failed.len() > MAX_NAMED_FAILURES {
-                s.push_str(&format!(" and {} more", failed.len() - MAX_NAMED_FAILURES));
-            }
-        }
-        s
+        progress_line(
+            self.read,
+            self.states.len(),
+            self.duration(),
+            &self.failed(),
+            table,
+        )
     }
+}
+
+/// The line of a sweep: `settings: READ/TOTAL read`, and at its end (`seconds` known)
+/// ` in S s`, then the failed settings (the first [`MAX_NAMED_FAILURES`], named from
+/// `table` when given).
+pub fn progress_line(
+    read: usize,
+    total: usize,
+    seconds: Option<f64>,
+    failed: &[u8],
+    table: Option<&SettingsTable>,
+) -> String {
+    let Some(seconds) = seconds else {
+        return format!("settings: {read}/{total} read");
+    };
+    let mut s = format!("settings: {read}/{total} read in {seconds:.1} s");
+    if !failed.is_empty() {
+        let names: Vec<String> = failed
+            .iter()
+            .take(MAX_NAMED_FAILURES)
+            .map(|&i| match table {
+                Some(t) => t.describe(i),
+                None => format!("index {i}"),
+            })
+            .collect();
+        s.push_str(&format!(
+            "; {} failed (no answer): {}",
+            failed.len(),
+            names.join(", ")
+        ));
+        if failed.len() > MAX_NAMED_FAILURES {
+            s.push_str(&format!(" and {} more", failed.len() - MAX_NAMED_FAILURES));
+        }
+    }
+    s
 }
 
 #[cfg(test)]
@@ -308,7 +324,7 @@ mod tests {
         assert_eq!(s.sends(), 5);
         assert_eq!(
             s.line(None),
-            "settings: 2/3 read in 3.5 s; 1 failed (no answer to 3 GET_SETTING): index 1"
+            "settings: 2/3 read in 3.5 s; 1 failed (no answer): index 1"
         );
         // The answer comes after all: read.
         assert!(s.answered(14.0, 1));

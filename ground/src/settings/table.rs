@@ -289,6 +289,17 @@ impl SettingsTable {
             };
             return Err(self.refusal(s, &format!("`{}` {what}", self::text(text))));
         };
+        self.display_value(index, display)
+    }
+
+    /// The aircraft's value of setting `index` for a number in its display unit,
+    /// checked against its bounds.
+    ///
+    /// # Errors
+    /// [`ValueError`] (with the bounds): no such setting, NaN, an infinity, or a value
+    /// outside the bounds.
+    pub fn display_value(&self, index: u8, display: f64) -> Result<f32, ValueError> {
+        let s = self.def(index)?;
         if !display.is_finite() {
             return Err(self.refusal(s, &format!("{display} is not a finite number")));
         }
@@ -296,7 +307,7 @@ impl SettingsTable {
         if v.is_finite() && v >= s.min && v <= s.max {
             Ok(v)
         } else {
-            let unit = display_unit(s).map_or_else(String::new, |u| format!(" {}", self::text(u)));
+            let unit = display_unit(s).map_or_else(String::new, |u| format!(" {}", text(u)));
             Err(self.refusal(s, &format!("{display}{unit} is outside its bounds")))
         }
     }
