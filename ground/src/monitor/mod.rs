@@ -87,6 +87,8 @@ mod link_tests;
 mod render;
 mod requests;
 mod state;
+#[cfg(test)]
+mod sweep_tests;
 mod sweeps;
 #[cfg(test)]
 mod tests;
