@@ -578,4 +578,155 @@ mod tests {
         assert_eq!(with(&["--secure", "k", "--ac-id", "254"]).check(), Ok(()));
         assert_eq!(with(&["--secure", "k", "--ac-id", "1"]).check(), Ok(()));
     }
+
+    const FILE: &str = r#"<settings><dl_settings>
+      <dl_setting var="telemetry_mode" min="0" max="2" values="default|debug|minimal"/>
+      <dl_setting var="payload_flood" min="0" max="1" values="OFF|ON"/>
+      <dl_setting var="gain" min="0" max="10"/>
+      <dl_setting var="ap_mode" min="0" max="13" values="KILL|FAILSAFE|HOME|RATE_DIRECT|ATTITUDE_DIRECT|RATE_RC_CLIMB|ATTITUDE_RC_CLIMB|ATTITUDE_CLIMB|RATE_Z_HOLD|ATTITUDE_Z_HOLD|HOVER_DIRECT|HOVER_CLIMB|HOVER_Z_HOLD|NAV"/>
+      <dl_setting var="guidance_h_kp" shortname="kp" min="0" max="400"/>
+      <dl_setting var="guidance_v_kp" shortname="kp" min="0" max="600"/>
+      <dl_setting var="ins.roll_neutral" shortname="roll" min="-15" max="15" unit="rad" alt_unit="deg"/>
+    </dl_settings></settings>"#;
+
+    fn resolve(setting: &str, table: Option<&SettingsTable>) -> Result<SettingValue, String> {
+        parse(&["--tcp", "127.0.0.1:1", "--setting", setting])
+            .unwrap()
+            .setting[0]
+            .resolve(table)
+    }
+
+    #[test]
+    fn settings_by_name_label_and_display_unit() {
+        let a = parse(&[
+            "--tcp",
+            "127.0.0.1:1",
+            "--settings",
+            "a.xml",
+            "b.xml",
+            "--settings=c.xml",
+            "--read-settings",
+        ])
+        .unwrap();
+        let files: Vec<_> = a
+            .settings_files
+            .iter()
+            .map(|p| p.to_str().unwrap())
+            .collect();
+        assert_eq!(files, ["a.xml", "b.xml", "c.xml"], "in order");
+        assert!(a.read_settings);
+        assert_eq!(a.check(), Ok(()));
+        let t = SettingsTable::parse(&[("s.xml", FILE)]).unwrap();
+        let ok = |s: &str| resolve(s, Some(&t)).unwrap();
+        assert_eq!(
+            ok("gain=2.5"),
+            SettingValue {
+                index: 2,
+                value: 2.5
+            }
+        );
+        assert_eq!(
+            ok("ap_mode=HOME"),
+            SettingValue {
+                index: 3,
+                value: 2.0
+            }
+        );
+        assert_eq!(
+            ok("ap_mode=NAV"),
+            SettingValue {
+                index: 3,
+                value: 13.0
+            }
+        );
+        assert_eq!(
+            ok("1=ON"),
+            SettingValue {
+                index: 1,
+                value: 1.0
+            }
+        );
+        assert_eq!(
+            ok("telemetry_mode=1"),
+            SettingValue {
+                index: 0,
+                value: 1.0
+            }
+        );
+        let roll = ok("roll=10");
+        assert_eq!(roll.index, 6);
+        assert_eq!(
+            roll.value,
+            (10.0f64 / (180.0 / std::f64::consts::PI)) as f32
+        );
+        assert_eq!(ok("ins.roll_neutral=-15").index, 6);
+    }
+
+    #[test]
+    fn settings_refused_before_anything_is_sent() {
+        let t = SettingsTable::parse(&[("s.xml", FILE)]).unwrap();
+        let refused = |s: &str| resolve(s, Some(&t)).unwrap_err();
+        assert_eq!(
+            refused("gain=12"),
+            "--setting gain=12: setting gain (index 2): 12 is outside its bounds [0, 10]"
+        );
+        assert_eq!(
+            refused("2=-1"),
+            "--setting 2=-1: setting gain (index 2): -1 is outside its bounds [0, 10]",
+            "the index form is bound-checked too"
+        );
+        assert_eq!(
+            refused("roll=16"),
+            "--setting roll=16: setting roll (index 6): 16 deg is outside its bounds [-15, 15] deg"
+        );
+        let e = refused("kp=1");
+        assert!(
+            e.contains("`kp` is ambiguous: guidance_h_kp (index 4), guidance_v_kp (index 5)"),
+            "{e}"
+        );
+        let e = refused("ap_mode=WARP");
+        assert!(
+            e.contains("`WARP` is neither a number nor a label (KILL|"),
+            "{e}"
+        );
+        assert!(e.ends_with("(bounds [0, 13])"), "{e}");
+        assert!(refused("nope=1").contains("no setting is named `nope`"));
+        assert!(
+            refused("7=1").contains("no setting has index 7: the settings files have 7 (0 to 6)")
+        );
+        let e = parse(&["--tcp", "127.0.0.1:1", "--setting", "gain=inf"]).unwrap_err();
+        assert!(e.contains("not a finite number"), "caught when parsed: {e}");
+        // Without the files: indices and numbers only.
+        assert!(
+            resolve("gain=1", None)
+                .unwrap_err()
+                .contains("a name needs the settings files")
+        );
+        assert!(
+            resolve("3=HOME", None)
+                .unwrap_err()
+                .contains("a label needs the settings files")
+        );
+        assert_eq!(
+            resolve("3=13", None),
+            Ok(SettingValue {
+                index: 3,
+                value: 13.0
+            })
+        );
+        // Reading the settings needs the files and a link.
+        let e = parse(&["--tcp", "127.0.0.1:1", "--read-settings"])
+            .unwrap()
+            .check()
+            .unwrap_err();
+        assert!(
+            e.contains("--read-settings reads the settings of the --settings files"),
+            "{e}"
+        );
+        let e = parse(&["--stdin", "--settings", "a.xml", "--read-settings"])
+            .unwrap()
+            .check()
+            .unwrap_err();
+        assert!(e.contains("need a link"), "{e}");
+    }
 }

@@ -59,7 +59,10 @@ fn feed(m: &mut Monitor, now: f64, bytes: &[u8]) -> Vec<String> {
 fn settings_are_named_labelled_and_shown_in_their_display_unit() {
     let mut m = monitor(APP);
     let lines = feed(&mut m, 0.1, &dl_value(3, 13.0));
-    assert_eq!(lines, ["7 telemetry DL_VALUE index=3 value=13 setting=ap_mode"]);
+    assert_eq!(
+        lines,
+        ["7 telemetry DL_VALUE index=3 value=13 setting=ap_mode"]
+    );
     let roll = (10.0f64 / (180.0 / std::f64::consts::PI)) as f32;
     m.setting_sent(Some(7), 0.2, 4, f64::from(roll));
     feed(&mut m, 0.25, &dl_value(4, roll));
@@ -88,7 +91,10 @@ fn settings_are_named_labelled_and_shown_in_their_display_unit() {
         assert!(view.contains(expected), "{expected}\n{view}");
     }
     let summary = m.summary(1.0);
-    assert!(summary.contains("    2 gain                     ?"), "{summary}");
+    assert!(
+        summary.contains("    2 gain                     ?"),
+        "{summary}"
+    );
     // A SETTING the aircraft does not apply is named, its values shown.
     m.setting_sent(Some(7), 2.0, 2, 12.0);
     feed(&mut m, 2.1, &dl_value(2, 2.5));
@@ -180,7 +186,10 @@ fn a_sweep_reads_every_setting_paced_and_retries_lost_requests() {
     let seconds = s.duration().unwrap();
     assert!((seconds - 3.11).abs() < 1e-9, "{seconds}");
     assert_eq!(progress[0], "settings: 0/40 read");
-    assert!(progress.contains(&"settings: 7/40 read".to_owned()), "{progress:?}");
+    assert!(
+        progress.contains(&"settings: 7/40 read".to_owned()),
+        "{progress:?}"
+    );
     assert!(progress.contains(&"settings: 39/40 read".to_owned()));
     assert_eq!(progress.last().unwrap(), "settings: 40/40 read in 3.1 s");
     assert_eq!(a.setting_values().len(), 40);
@@ -213,6 +222,12 @@ fn a_sweep_names_the_settings_that_never_answer() {
         "settings: 18/20 read in 15.1 s; 2 failed (no answer): s5 (index 5), s17 (index 17)"
     );
     let summary = m.summary(16.0);
-    assert!(summary.contains("settings: 18/20 read in 15.1 s; 2 failed"), "{summary}");
-    assert!(summary.contains("    5 s5                       ?"), "{summary}");
+    assert!(
+        summary.contains("settings: 18/20 read in 15.1 s; 2 failed"),
+        "{summary}"
+    );
+    assert!(
+        summary.contains("    5 s5                       ?"),
+        "{summary}"
+    );
 }

@@ -922,4 +922,107 @@ mod tests {
         // Nothing left to time out.
         assert!(s.expire(100.0).is_empty());
     }
+
+    fn named() -> Naming {
+        let table = SettingsTable::parse(&[(
+            "s.xml",
+            r#"<settings><dl_settings>
+              <dl_setting var="gain" min="0" max="10"/>
+              <dl_setting var="ins.roll_neutral" shortname="roll" min="-15" max="15" unit="rad" alt_unit="deg"/>
+              <dl_setting var="ap_mode" min="0" max="19" values="KILL|FAILSAFE|HOME|RATE_DIRECT|ATTITUDE_DIRECT|RATE_RC_CLIMB|ATTITUDE_RC_CLIMB|ATTITUDE_CLIMB|RATE_Z_HOLD|ATTITUDE_Z_HOLD|HOVER_DIRECT|HOVER_CLIMB|HOVER_Z_HOLD|NAV"/>
+              <dl_setting var="gain" min="0" max="5"/>
+            </dl_settings></settings>"#,
+        )])
+        .unwrap();
+        Naming::new(Some(Arc::new(table)))
+    }
+
+    #[test]
+    fn parameters_are_named_after_the_settings_files() {
+        let n = named();
+        assert_eq!(n.name(7, 0), "/ac/7/settings/gain");
+        assert_eq!(n.name(7, 1), "/ac/7/settings/ins.roll_neutral");
+        assert_eq!(n.name(8, 3), "/ac/8/settings/gain@3", "unique per aircraft");
+        assert_eq!(
+            n.name(7, 9),
+            "/ac/7/settings/9",
+            "beyond the files: the index"
+        );
+        assert_eq!(n.parse("/ac/7/settings/ins.roll_neutral"), Some((7, 1)));
+        assert_eq!(n.parse("/ac/7/settings/gain@3"), Some((7, 3)));
+        assert_eq!(n.parse("/ac/7/settings/roll"), None, "the unique name only");
+        assert_eq!(n.parse("/ac/7/settings/1"), None, "names, not indices");
+        assert_eq!(n.parse("/ac/300/settings/gain"), None);
+        // Without files: by index, as before.
+        let plain = Naming::default();
+        assert_eq!(plain.name(7, 1), "/ac/7/settings/1");
+        assert_eq!(plain.parse("/ac/7/settings/1"), Some((7, 1)));
+        assert_eq!(plain.parse("/ac/7/settings/gain"), None);
+    }
+
+    /// A named parameter is set in its display unit or by label, checked against the
+    /// bounds (refused with a clear status, nothing sent), and published in its display
+    /// unit.
+    #[test]
+    fn named_parameters_are_bound_checked_and_in_display_units() {
+        let (mut s, handler) = Settings::new(named());
+        let answers = Answers::default();
+        let params = [
+            Parameter::float64("/ac/7/settings/ins.roll_neutral", 10.0),
+            Parameter::string("/ac/7/settings/ap_mode", "NAV"),
+            Parameter::float64("/ac/7/settings/gain", 12.0),
+            Parameter::float64("/ac/7/settings/gain@3", f64::NAN),
+            Parameter::string("/ac/7/settings/ap_mode", "WARP"),
+        ];
+        handler
+            .tx
+            .try_send(set_call(&handler.naming, &params, respond(&answers)))
+            .unwrap();
+        let roll = (10.0f64 / (180.0 / std::f64::consts::PI)) as f32;
+        assert_eq!(
+            s.poll(0.0),
+            [
+                SettingRequest::Set {
+                    ac_id: 7,
+                    index: 1,
+                    value: f64::from(roll)
+                },
+                SettingRequest::Set {
+                    ac_id: 7,
+                    index: 2,
+                    value: 13.0
+                },
+            ]
+        );
+        assert_eq!(s.not_sent_counts().refused, 3);
+        let (p, warnings) = s.dl_value(7, 1, f64::from(roll), BaseType::F32);
+        assert!(warnings.is_empty());
+        assert_eq!(p.name, "/ac/7/settings/ins.roll_neutral");
+        assert_eq!(p.value, Some(ParameterValue::Float64(10.0)));
+        let (_, warnings) = s.dl_value(7, 2, 2.0, BaseType::F32);
+        assert_eq!(
+            warnings,
+            [Warning(
+                "setting ap_mode (index 2) of aircraft 7 not applied: asked NAV (13), the aircraft reports HOME (2)".to_owned()
+            )]
+        );
+        let errors = answers.errors.lock().unwrap().clone();
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        for expected in [
+            "/ac/7/settings/gain refused: setting gain (index 0): 12 is outside its bounds [0, 10]",
+            "/ac/7/settings/gain@3 refused: setting gain (index 3): NaN is not a finite number (bounds [0, 5])",
+            "/ac/7/settings/ap_mode refused: setting ap_mode (index 2): `WARP` is neither a number nor a label",
+        ] {
+            assert!(errors[0].contains(expected), "{expected}\n{errors:?}");
+        }
+        assert_eq!(
+            answers.values.lock().unwrap()[0],
+            [
+                ("/ac/7/settings/ins.roll_neutral".to_owned(), 10.0),
+                ("/ac/7/settings/ap_mode".to_owned(), 2.0),
+                // The refused label: answered with the value known.
+                ("/ac/7/settings/ap_mode".to_owned(), 2.0)
+            ]
+        );
+    }
 }
