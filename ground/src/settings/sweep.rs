@@ -1,11 +1,15 @@
 //! Reading every setting of an aircraft: one GET_SETTING per index, paced.
 //!
 //! A [`Sweep`] decides which GET_SETTINGs to send, on explicit time: at most
-//! [`SweepConfig::outstanding`] wait for their DL_VALUE at once, in index order. A request
-//! without an answer after [`SweepConfig::retry_after`] seconds is sent again, the wait
-//! doubling each time, at most [`SweepConfig::attempts`] sends in all; then the index has
-//! failed. Any DL_VALUE of an index reads it (a periodic one too: it carries the value in
-//! force), even after it failed.
+//! [`SweepConfig::outstanding`] wait for their DL_VALUE at once, in index order, and at
+//! most [`SweepConfig::rate`] go out per second (a few at once, [`SweepConfig::burst`]).
+//! The rate matters: an aircraft bounds its replies (our telemetry stack answers 20
+//! requests per second by default, 10 at once, PINGs included, and refuses the others),
+//! so requests sent faster are lost and cost a retry. A request without an answer after
+//! [`SweepConfig::retry_after`] seconds is sent again, the wait doubling each time, at
+//! most [`SweepConfig::attempts`] sends in all; then the index has failed. Any DL_VALUE
+//! of an index reads it (a periodic one too: it carries the value in force), even after
+//! it failed.
 //!
 //! The monitor runs one sweep per aircraft ([`Monitor::read_settings`]) and passes the
 //! requests through its request tracking ([`Monitor::get_setting_sent`]), which matches
@@ -13,7 +17,7 @@
 //!
 //! ```
 //! use pprz_ground::settings::{Sweep, SweepConfig};
-//! let mut sweep = Sweep::new(3, SweepConfig::default().outstanding(2));
+//! let mut sweep = Sweep::new(3, SweepConfig::default().outstanding(2).rate(100.0));
 //! assert_eq!(sweep.due(0.0), [0, 1]);
 //! sweep.answered(0.05, 0);
 //! assert_eq!(sweep.due(0.05), [2]);
@@ -44,15 +48,23 @@ pub struct SweepConfig {
     pub retry_after: f64,
     /// Sends of one index at most, the first included (at least 1).
     pub attempts: u32,
+    /// GET_SETTINGs sent per second at most, on average (first sends and retries).
+    pub rate: f64,
+    /// GET_SETTINGs that may go out at once within the rate (at least 1).
+    pub burst: u32,
 }
 
 impl Default for SweepConfig {
-    /// 8 outstanding, sent again after 1 s, 2 s, 4 s: 4 sends at most.
+    /// 8 outstanding, 15 per second, 4 at once, sent again after 1 s, 2 s, 4 s: 4 sends
+    /// at most. 15 per second leaves room for a PING or a SETTING within the 20 replies
+    /// per second an aircraft of this stack sends by default.
     fn default() -> Self {
         Self {
             outstanding: 8,
             retry_after: 1.0,
             attempts: 4,
+            rate: 15.0,
+            burst: 4,
         }
     }
 }
@@ -80,6 +92,36 @@ impl SweepConfig {
         self.attempts = n.max(1);
         self
     }
+
+    /// At most `per_second` GET_SETTINGs per second (a finite number above 0;
+    /// otherwise unchanged).
+    #[must_use]
+    pub fn rate(mut self, per_second: f64) -> Self {
+        if per_second.is_finite() && per_second > 0.0 {
+            self.rate = per_second;
+        }
+        self
+    }
+
+    /// At most `n` GET_SETTINGs at once within the rate (at least 1).
+    #[must_use]
+    pub fn burst(mut self, n: u32) -> Self {
+        self.burst = n.max(1);
+        self
+    }
+
+    /// Whether a request may go out at `now`, given `next`, the theoretical time of the
+    /// next one (generic cell rate algorithm); advances `next` if so.
+    fn admit(&self, next: &mut f64, now: f64) -> bool {
+        let interval = 1.0 / self.rate;
+        let tolerance = interval * f64::from(self.burst.max(1) - 1);
+        let at = next.max(now);
+        if at - now > tolerance + 1e-9 {
+            return false;
+        }
+        *next = at + interval;
+        true
+    }
 }
 
 /// Where one index stands.
@@ -104,6 +146,8 @@ pub struct Sweep {
     read: usize,
     failed: usize,
     sends: u64,
+    /// The theoretical time of the next request, for the rate.
+    next: f64,
     started: Option<f64>,
     ended: Option<f64>,
 }
@@ -118,6 +162,7 @@ impl Sweep {
             read: 0,
             failed: 0,
             sends: 0,
+            next: f64::NEG_INFINITY,
             started: None,
             ended: None,
         }
@@ -125,8 +170,10 @@ impl Sweep {
 
     /// The GET_SETTINGs to send at `now`, in index order: lost ones again (or given up
     /// after the last attempt), and new ones while fewer than
-    /// [`outstanding`](SweepConfig::outstanding) wait. Each is counted as sent at `now`
-    /// (a send that fails is a request lost).
+    /// [`outstanding`](SweepConfig::outstanding) wait and the
+    /// [`rate`](SweepConfig::rate) allows. Each is counted as sent at `now` (a send that
+    /// fails is a request lost). Call it often (every 10 to 50 ms): the rate sends at
+    /// most [`burst`](SweepConfig::burst) at once.
     pub fn due(&mut self, now: f64) -> Vec<u8> {
         self.started.get_or_insert(now);
         for state in &mut self.states {
@@ -150,6 +197,9 @@ impl Sweep {
                 break;
             }
             if let State::Waiting { sends } = *state {
+                if !self.config.admit(&mut self.next, now) {
+                    break;
+                }
                 *state = State::Outstanding {
                     at: now,
                     sends: sends + 1,
@@ -281,7 +331,7 @@ mod tests {
 
     #[test]
     fn paced_by_the_outstanding_bound() {
-        let mut s = Sweep::new(20, SweepConfig::default().outstanding(4));
+        let mut s = Sweep::new(20, SweepConfig::default().outstanding(4).rate(1e3).burst(8));
         assert_eq!(s.due(0.0), [0, 1, 2, 3]);
         assert!(s.due(0.01).is_empty(), "four wait");
         for i in 0..3 {
@@ -337,7 +387,12 @@ mod tests {
         let mut s = Sweep::new(0, SweepConfig::default());
         assert!(s.due(1.0).is_empty());
         assert_eq!(s.line(None), "settings: 0/0 read in 0.0 s");
-        let mut s = Sweep::new(12, SweepConfig::default().outstanding(256).attempts(1));
+        let config = SweepConfig::default()
+            .outstanding(256)
+            .attempts(1)
+            .rate(1e6)
+            .burst(100);
+        let mut s = Sweep::new(12, config);
         assert_eq!(s.due(0.0).len(), 12);
         assert!(s.due(1.0).is_empty());
         let line = s.line(None);
@@ -345,13 +400,40 @@ mod tests {
         assert!(line.contains("12 failed"), "{line}");
     }
 
+    /// At 15 per second, 4 at once: the aircraft's reply limit (20 per second, 10 at
+    /// once) is never exceeded, however often the sweep is asked.
+    #[test]
+    fn paced_by_the_rate() {
+        let mut s = Sweep::new(100, SweepConfig::default().outstanding(100));
+        let mut sent = Vec::new();
+        for step in 0..1000 {
+            let now = f64::from(step) * 0.01;
+            for i in s.due(now) {
+                sent.push(now);
+                s.answered(now, i);
+            }
+        }
+        assert_eq!(sent.len(), 100);
+        assert_eq!(&sent[..5], &[0.0, 0.0, 0.0, 0.0, 0.07]);
+        // In any second, at most 15 + 3 (the burst beyond the rate).
+        for (i, &t) in sent.iter().enumerate() {
+            let within = sent[i..].iter().take_while(|&&u| u < t + 1.0).count();
+            assert!(within <= 18, "{within} in the second from {t}");
+        }
+        let last = *sent.last().unwrap();
+        assert!((6.3..6.5).contains(&last), "{last}");
+    }
+
     #[test]
     fn the_config_stays_sane() {
         let c = SweepConfig::default()
             .outstanding(0)
             .retry_after(f64::NAN)
-            .attempts(0);
+            .attempts(0)
+            .rate(-1.0)
+            .burst(0);
         assert_eq!((c.outstanding, c.retry_after, c.attempts), (1, 1.0, 1));
+        assert_eq!((c.rate, c.burst), (15.0, 1));
         assert_eq!(SweepConfig::default().outstanding(1000).outstanding, 256);
     }
 }
