@@ -1096,6 +1096,38 @@ mod tests {
         );
     }
 
+    /// With the settings files, the JSON of DL_VALUE names its setting, and its schema
+    /// describes the key; an index beyond the files gets no key.
+    #[test]
+    fn dl_value_json_names_its_setting() {
+        let set =
+            crate::set::RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))
+                .unwrap();
+        let desc = set.find_by_name("telemetry", "DL_VALUE").unwrap();
+        assert!(is_dl_value(desc));
+        let table = SettingsTable::parse(&[(
+            "s.xml",
+            r#"<settings><dl_settings><dl_setting var="ins.gain" min="0" max="10"/></dl_settings></settings>"#,
+        )])
+        .unwrap();
+        let schema: serde_json::Value =
+            serde_json::from_str(&with_setting_key(&json::schema(desc))).unwrap();
+        let json = |index: u8| {
+            let mut payload = vec![index];
+            payload.extend(2.5f32.to_le_bytes());
+            let mut body = json::message(desc, &payload).unwrap();
+            name_dl_value(&mut body, desc, &payload, Some(&table));
+            serde_json::from_str::<serde_json::Value>(&body).unwrap()
+        };
+        let named = json(0);
+        assert_eq!(named[SETTING_KEY], "ins.gain");
+        assert_eq!(named["value"], 2.5);
+        conforms(&schema, &named, "named");
+        let beyond = json(4);
+        assert!(beyond.get(SETTING_KEY).is_none(), "{beyond}");
+        conforms(&schema, &beyond, "beyond");
+    }
+
     #[test]
     fn gps_int_gives_a_fix_and_no_fix_gives_none() {
         let set = crate::set::RuntimeSet::parse(
