@@ -30,14 +30,14 @@ impl Monitor {
     /// # let set = RuntimeSet::parse("m.xml", "<protocol></protocol>").unwrap();
     /// let mut monitor = Monitor::new(set, PprzV2::new().into());
     /// monitor.read_settings(7, 100, SweepConfig::default());
+    /// // 4 at once, then 15 per second.
     /// let first = monitor.sweep_requests(0.0);
-    /// assert_eq!(first.len(), 8);
-    /// assert_eq!(first[0], (7, 0));
+    /// assert_eq!(first, [(7, 0), (7, 1), (7, 2), (7, 3)]);
     /// // Send each, then tell the monitor:
     /// for &(ac, index) in &first {
     ///     monitor.get_setting_sent(Some(ac), 0.0, index);
     /// }
-    /// assert_eq!(monitor.aircraft_state(7).unwrap().settings().pending(), 8);
+    /// assert_eq!(monitor.aircraft_state(7).unwrap().settings().pending(), 4);
     /// ```
     pub fn read_settings(&mut self, ac_id: u8, count: usize, config: SweepConfig) {
         self.addressed(ac_id).sweep = Some(Sweep::new(count, config));
