@@ -1,37 +1,4 @@
-//! Reading every setting of an aircraft: one GET_SETTING per index, paced.
-//!
-//! A [`Sweep`] decides which GET_SETTINGs to send, on explicit time: at most
-//! [`SweepConfig::outstanding`] wait for their DL_VALUE at once, in index order, and at
-//! most [`SweepConfig::rate`] go out per second (a few at once, [`SweepConfig::burst`]).
-//! The rate matters: an aircraft bounds its replies (our telemetry stack answers 20
-//! requests per second by default, 10 at once, PINGs included, and refuses the others),
-//! so requests sent faster are lost and cost a retry. A request without an answer after
-//! [`SweepConfig::retry_after`] seconds is sent again, the wait doubling each time, at
-//! most [`SweepConfig::attempts`] sends in all; then the index has failed. Any DL_VALUE
-//! of an index reads it (a periodic one too: it carries the value in force), even after
-//! it failed.
-//!
-//! The monitor runs one sweep per aircraft ([`Monitor::read_settings`]) and passes the
-//! requests through its request tracking ([`Monitor::get_setting_sent`]), which matches
-//! the answers.
-//!
-//! ```
-//! use pprz_ground::settings::{Sweep, SweepConfig};
-//! let mut sweep = Sweep::new(3, SweepConfig::default().outstanding(2).rate(100.0));
-//! assert_eq!(sweep.due(0.0), [0, 1]);
-//! sweep.answered(0.05, 0);
-//! assert_eq!(sweep.due(0.05), [2]);
-//! sweep.answered(0.1, 2);
-//! assert!(sweep.due(0.5).is_empty());
-//! // Index 1 was lost: sent again after a second.
-//! assert_eq!(sweep.due(1.0), [1]);
-//! sweep.answered(1.1, 1);
-//! assert!(sweep.done());
-//! assert_eq!(sweep.line(None), "settings: 3/3 read in 1.1 s");
-//! ```
-//!
-//! [`Monitor::read_settings`]: crate::monitor::Monitor::read_settings
-//! [`Monitor::get_setting_sent`]: crate::monitor::Monitor::get_setting_sent
+//! Reading every setting of an aircraft ([`Sweep`]).
 
 use super::SettingsTable;
 
@@ -137,7 +104,40 @@ enum State {
     Failed,
 }
 
-/// The reading of every setting of one aircraft; see the [module docs](self).
+/// The reading of every setting of an aircraft: one GET_SETTING per index, paced.
+///
+/// A [`Sweep`] decides which GET_SETTINGs to send, on explicit time: at most
+/// [`SweepConfig::outstanding`] wait for their DL_VALUE at once, in index order, and at
+/// most [`SweepConfig::rate`] go out per second (a few at once, [`SweepConfig::burst`]).
+/// The rate matters: an aircraft bounds its replies (our telemetry stack answers 20
+/// requests per second by default, 10 at once, PINGs included, and refuses the others),
+/// so requests sent faster are lost and cost a retry. A request without an answer after
+/// [`SweepConfig::retry_after`] seconds is sent again, the wait doubling each time, at
+/// most [`SweepConfig::attempts`] sends in all; then the index has failed. Any DL_VALUE
+/// of an index reads it (a periodic one too: it carries the value in force), even after
+/// it failed.
+///
+/// The monitor runs one sweep per aircraft ([`Monitor::read_settings`]) and passes the
+/// requests through its request tracking ([`Monitor::get_setting_sent`]), which matches
+/// the answers.
+///
+/// ```
+/// use pprz_ground::settings::{Sweep, SweepConfig};
+/// let mut sweep = Sweep::new(3, SweepConfig::default().outstanding(2).rate(100.0));
+/// assert_eq!(sweep.due(0.0), [0, 1]);
+/// sweep.answered(0.05, 0);
+/// assert_eq!(sweep.due(0.05), [2]);
+/// sweep.answered(0.1, 2);
+/// assert!(sweep.due(0.5).is_empty());
+/// // Index 1 was lost: sent again after a second.
+/// assert_eq!(sweep.due(1.0), [1]);
+/// sweep.answered(1.1, 1);
+/// assert!(sweep.done());
+/// assert_eq!(sweep.line(None), "settings: 3/3 read in 1.1 s");
+/// ```
+///
+/// [`Monitor::read_settings`]: crate::monitor::Monitor::read_settings
+/// [`Monitor::get_setting_sent`]: crate::monitor::Monitor::get_setting_sent
 #[derive(Debug, Clone)]
 pub struct Sweep {
     config: SweepConfig,

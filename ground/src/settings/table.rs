@@ -1,34 +1,4 @@
-//! Named settings: the settings files of an aircraft, read with `pprz-codegen`'s parser
-//! (the generator's numbering), give each index a name, bounds, a unit and labels.
-//!
-//! * Names: a setting is found by its variable (`var`), its short name, or its index.
-//!   A variable that appears several times names its first index (as the generator's
-//!   `index` module does). A short name shared by several variables is ambiguous and
-//!   refused, with the candidates; a variable always wins over a short name.
-//! * Each setting also has a name unique in the table ([`SettingsTable::unique_name`]):
-//!   its variable, or `var@index` for the second and later occurrences of a variable.
-//! * Values: a label of the setting's `values`, or a number in its display unit (the
-//!   `alt_unit` when the file gives one, with `alt_unit_coef`). The aircraft's value is
-//!   display / coefficient and the displayed value is value x coefficient, both computed
-//!   in `f64` and rounded to `f32` once, as the generator converts the bounds.
-//! * Bounds: a value outside them (in the aircraft's units, where the aircraft checks
-//!   them), NaN, an infinity or an unknown label is refused, with the bounds in the
-//!   message (in the display unit, as the file writes them).
-//!
-//! ```
-//! use pprz_ground::settings::SettingsTable;
-//! let table = SettingsTable::parse(&[("s.xml", r#"<settings><dl_settings>
-//!     <dl_setting var="gain" min="0" max="10"/>
-//!     <dl_setting var="ins.roll" shortname="roll" min="-90" max="90" unit="rad" alt_unit="deg"/>
-//!     <dl_setting var="ap_mode" min="0" max="2" values="KILL|NAV|HOME"/>
-//!     </dl_settings></settings>"#)]).unwrap();
-//! assert_eq!(table.resolve("roll"), Ok(1));
-//! assert_eq!(table.value(2, "HOME"), Ok(2.0));
-//! assert_eq!(table.value(1, "90"), Ok(std::f32::consts::FRAC_PI_2));
-//! let refused = table.value(0, "12").unwrap_err().to_string();
-//! assert_eq!(refused, "setting gain (index 0): 12 is outside its bounds [0, 10]");
-//! assert_eq!(table.show(2, 1.0), "NAV (1)");
-//! ```
+//! Named settings: the table of the aircraft's settings files ([`SettingsTable`]).
 
 use std::collections::HashMap;
 use std::fmt;
@@ -123,8 +93,38 @@ impl fmt::Display for ValueError {
 
 impl std::error::Error for ValueError {}
 
-/// The settings of one or more settings files, numbered as the generator numbers them,
-/// with what the ground needs to name, show and check them.
+/// The settings of one or more settings files of an aircraft, read with `pprz-codegen`'s
+/// parser and numbered as the generator numbers them: each index gets a name, bounds, a
+/// unit and labels.
+///
+/// * Names: a setting is found by its variable (`var`), its short name, or its index.
+///   A variable that appears several times names its first index (as the generator's
+///   `index` module does). A short name shared by several variables is ambiguous and
+///   refused, with the candidates; a variable always wins over a short name.
+/// * Each setting also has a name unique in the table ([`SettingsTable::unique_name`]):
+///   its variable, or `var@index` for the second and later occurrences of a variable.
+/// * Values: a label of the setting's `values`, or a number in its display unit (the
+///   `alt_unit` when the file gives one, with `alt_unit_coef`). The aircraft's value is
+///   display / coefficient and the displayed value is value x coefficient, both computed
+///   in `f64` and rounded to `f32` once, as the generator converts the bounds.
+/// * Bounds: a value outside them (in the aircraft's units, where the aircraft checks
+///   them), NaN, an infinity or an unknown label is refused, with the bounds in the
+///   message (in the display unit, as the file writes them).
+///
+/// ```
+/// use pprz_ground::settings::SettingsTable;
+/// let table = SettingsTable::parse(&[("s.xml", r#"<settings><dl_settings>
+///     <dl_setting var="gain" min="0" max="10"/>
+///     <dl_setting var="ins.roll" shortname="roll" min="-90" max="90" unit="rad" alt_unit="deg"/>
+///     <dl_setting var="ap_mode" min="0" max="2" values="KILL|NAV|HOME"/>
+///     </dl_settings></settings>"#)]).unwrap();
+/// assert_eq!(table.resolve("roll"), Ok(1));
+/// assert_eq!(table.value(2, "HOME"), Ok(2.0));
+/// assert_eq!(table.value(1, "90"), Ok(std::f32::consts::FRAC_PI_2));
+/// let refused = table.value(0, "12").unwrap_err().to_string();
+/// assert_eq!(refused, "setting gain (index 0): 12 is outside its bounds [0, 10]");
+/// assert_eq!(table.show(2, 1.0), "NAV (1)");
+/// ```
 #[derive(Debug, Clone)]
 pub struct SettingsTable {
     set: SettingsSet,
