@@ -14,6 +14,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
+use crate::settings::SettingsTable;
 use clap::{Parser, ValueEnum};
 use pprz_transports::{
     AnyTransport, BROADCAST_ID, GROUND_ID, PprzLog, PprzV1, PprzV2, XBee24, XBee868,
@@ -110,9 +111,22 @@ pub struct Args {
     /// Send a PING every this many seconds (0.05 to 3600) and show the round-trip time.
     #[arg(long, value_name = "SECONDS", value_parser = parse_ping_period, allow_negative_numbers = true)]
     pub ping: Option<f64>,
-    /// Send SETTING index=value at start (repeatable) and show the DL_VALUE acknowledgement.
-    #[arg(long = "setting", value_name = "INDEX=VALUE", value_parser = parse_setting)]
-    pub settings: Vec<(u8, f32)>,
+    /// The aircraft's settings files (Paparazzi settings.xml), in the order its settings
+    /// were generated from: they name the indices. Settings are then shown by name, with
+    /// their values, bounds and units, and checked against their bounds before they are
+    /// sent.
+    #[arg(long = "settings", value_name = "FILE", num_args = 1..)]
+    pub settings_files: Vec<PathBuf>,
+    /// Send a SETTING at start (repeatable) and show the DL_VALUE acknowledgement. NAME is
+    /// an index, or with --settings a var or a short name; VALUE a number (in the
+    /// setting's display unit, its alt_unit, with --settings) or, with --settings, one of
+    /// its labels. A value outside the bounds is refused before anything is sent.
+    #[arg(long = "setting", value_name = "NAME=VALUE", value_parser = parse_setting)]
+    pub setting: Vec<SettingArg>,
+    /// Read every setting of the --settings files from each aircraft (GET_SETTING,
+    /// paced, lost requests sent again) and show the progress.
+    #[arg(long)]
+    pub read_settings: bool,
     /// One line per message instead of the live table (for scripts).
     #[arg(long)]
     pub lines: bool,
@@ -162,14 +176,19 @@ impl Args {
     /// # Errors
     /// A message naming the problem.
     pub fn check(&self) -> Result<(), String> {
-        let wants_uplink = self.ping.is_some() || !self.settings.is_empty();
+        let wants_uplink = self.ping.is_some() || !self.setting.is_empty() || self.read_settings;
         let has_uplink = self.tcp.is_some()
             || self.serial.is_some()
             || (self.udp.is_some() && self.uplink.is_some());
         if wants_uplink && !has_uplink {
             return Err(
-                "--ping and --setting need a link to the aircraft: --tcp, --serial, or --udp with --uplink"
+                "--ping, --setting and --read-settings need a link to the aircraft: --tcp, --serial, or --udp with --uplink"
                     .into(),
+            );
+        }
+        if self.read_settings && self.settings_files.is_empty() {
+            return Err(
+                "--read-settings reads the settings of the --settings files: give them".into(),
             );
         }
         if self.secure.is_some() {
@@ -289,26 +308,93 @@ pub fn parse_clients(s: &str) -> Result<usize, String> {
     Ok(v)
 }
 
-/// `--setting INDEX=VALUE`: an index 0..=255 and a value that fits a `float`
+/// One `--setting NAME=VALUE`, as written: resolved with the settings files
+/// ([`SettingArg::resolve`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SettingArg {
+    /// An index, a var or a short name.
+    pub name: String,
+    /// A number or a label.
+    pub value: String,
+}
+
+/// A `--setting` resolved: the index and the value to send, in the aircraft's units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SettingValue {
+    /// The setting's index.
+    pub index: u8,
+    /// The value, checked against the setting's bounds when the settings files are
+    /// known.
+    pub value: f32,
+}
+
+impl SettingArg {
+    /// The index and value to send. With `table`, NAME is an index, a var or a short
+    /// name, and VALUE a label or a number in the display unit, checked against the
+    /// bounds; without, NAME must be an index and VALUE a number.
+    ///
+    /// # Errors
+    /// A message for the user naming the option.
+    pub fn resolve(&self, table: Option<&SettingsTable>) -> Result<SettingValue, String> {
+        let fail = |e: &dyn std::fmt::Display| {
+            format!(
+                "--setting {}={}: {e}",
+                crate::settings::text(&self.name),
+                crate::settings::text(&self.value)
+            )
+        };
+        let Some(table) = table else {
+            let index = self
+                .name
+                .parse::<u8>()
+                .map_err(|_| fail(&"a name needs the settings files (--settings FILE)"))?;
+            let value = number(&self.value)
+                .ok_or_else(|| fail(&"a label needs the settings files (--settings FILE)"))?
+                .map_err(|e| fail(&e))?;
+            return Ok(SettingValue { index, value });
+        };
+        let index = table.resolve(&self.name).map_err(|e| fail(&e))?;
+        let value = table.value(index, &self.value).map_err(|e| fail(&e))?;
+        Ok(SettingValue { index, value })
+    }
+}
+
+/// `text` as a SETTING value, if it is a number: a finite number that fits a `float`
+/// ([`setting_value`](crate::settings::setting_value)), or why not.
+fn number(text: &str) -> Option<Result<f32, String>> {
+    let v = text.parse::<f64>().ok()?;
+    Some(crate::settings::setting_value(v).map_err(|e| e.to_string()))
+}
+
+/// `--setting NAME=VALUE`: a name (an index 0..=255, or a var or short name resolved
+/// later with the settings files) and a value: a number that fits a `float`
 /// ([`setting_value`](crate::settings::setting_value), the rule the viewer's settings
-/// follow too).
+/// follow too), or a label, resolved later.
 ///
 /// # Errors
 /// A message for the user.
-pub fn parse_setting(s: &str) -> Result<(u8, f32), String> {
-    let (i, v) = s
+pub fn parse_setting(s: &str) -> Result<SettingArg, String> {
+    let (name, value) = s
         .split_once('=')
-        .ok_or_else(|| format!("expected INDEX=VALUE, got `{s}`"))?;
-    let i = i
-        .trim()
-        .parse::<u8>()
-        .map_err(|e| format!("index `{i}`: {e} (0 to 255)"))?;
-    let text = v.trim();
-    let v = text
-        .parse::<f64>()
-        .map_err(|e| format!("value `{text}`: {e}"))?;
-    let v = crate::settings::setting_value(v).map_err(|e| format!("value `{text}`: {e}"))?;
-    Ok((i, v))
+        .ok_or_else(|| format!("expected NAME=VALUE or INDEX=VALUE, got `{s}`"))?;
+    let (name, value) = (name.trim(), value.trim());
+    if name.is_empty() {
+        return Err(format!("`{s}` has no name or index before `=`"));
+    }
+    if value.is_empty() {
+        return Err(format!("`{s}` has no value after `=`"));
+    }
+    if name.bytes().all(|b| b.is_ascii_digit()) {
+        name.parse::<u8>()
+            .map_err(|e| format!("index `{name}`: {e} (0 to 255)"))?;
+    }
+    if let Some(Err(e)) = number(value) {
+        return Err(format!("value `{value}`: {e}"));
+    }
+    Ok(SettingArg {
+        name: name.to_owned(),
+        value: value.to_owned(),
+    })
 }
 
 #[cfg(test)]
@@ -339,7 +425,7 @@ mod tests {
             assert!(e.contains("--foxglove-clients"), "{bad}: {e}");
         }
         for bad in [
-            "1=NaN", "1=inf", "1=1e39", "1=1e300", "1=-1e39", "256=1", "-1=1", "1", "x=1",
+            "1=NaN", "1=inf", "1=1e39", "1=1e300", "1=-1e39", "256=1", "1", "=1", "1=", "gain=NaN",
         ] {
             let e = parse(&["--tcp", "127.0.0.1:1", &format!("--setting={bad}")]).unwrap_err();
             assert!(e.contains("--setting"), "{bad}: {e}");
@@ -383,7 +469,14 @@ mod tests {
             (a.ping, a.duration, a.baud),
             (Some(0.2), Some(10.0), 115_200)
         );
-        assert_eq!(a.settings, [(3, 1.5)]);
+        let resolved: Vec<_> = a.setting.iter().map(|s| s.resolve(None)).collect();
+        assert_eq!(
+            resolved,
+            [Ok(SettingValue {
+                index: 3,
+                value: 1.5
+            })]
+        );
         assert_eq!(a.check(), Ok(()));
         assert_eq!(parse(&["--ping", "3600"]).unwrap().ping, Some(3600.0));
         assert_eq!(a.foxglove_clients, crate::viewer::DEFAULT_MAX_CLIENTS);
@@ -484,5 +577,156 @@ mod tests {
         }
         assert_eq!(with(&["--secure", "k", "--ac-id", "254"]).check(), Ok(()));
         assert_eq!(with(&["--secure", "k", "--ac-id", "1"]).check(), Ok(()));
+    }
+
+    const FILE: &str = r#"<settings><dl_settings>
+      <dl_setting var="telemetry_mode" min="0" max="2" values="default|debug|minimal"/>
+      <dl_setting var="payload_flood" min="0" max="1" values="OFF|ON"/>
+      <dl_setting var="gain" min="0" max="10"/>
+      <dl_setting var="ap_mode" min="0" max="13" values="KILL|FAILSAFE|HOME|RATE_DIRECT|ATTITUDE_DIRECT|RATE_RC_CLIMB|ATTITUDE_RC_CLIMB|ATTITUDE_CLIMB|RATE_Z_HOLD|ATTITUDE_Z_HOLD|HOVER_DIRECT|HOVER_CLIMB|HOVER_Z_HOLD|NAV"/>
+      <dl_setting var="guidance_h_kp" shortname="kp" min="0" max="400"/>
+      <dl_setting var="guidance_v_kp" shortname="kp" min="0" max="600"/>
+      <dl_setting var="ins.roll_neutral" shortname="roll" min="-15" max="15" unit="rad" alt_unit="deg"/>
+    </dl_settings></settings>"#;
+
+    fn resolve(setting: &str, table: Option<&SettingsTable>) -> Result<SettingValue, String> {
+        parse(&["--tcp", "127.0.0.1:1", "--setting", setting])
+            .unwrap()
+            .setting[0]
+            .resolve(table)
+    }
+
+    #[test]
+    fn settings_by_name_label_and_display_unit() {
+        let a = parse(&[
+            "--tcp",
+            "127.0.0.1:1",
+            "--settings",
+            "a.xml",
+            "b.xml",
+            "--settings=c.xml",
+            "--read-settings",
+        ])
+        .unwrap();
+        let files: Vec<_> = a
+            .settings_files
+            .iter()
+            .map(|p| p.to_str().unwrap())
+            .collect();
+        assert_eq!(files, ["a.xml", "b.xml", "c.xml"], "in order");
+        assert!(a.read_settings);
+        assert_eq!(a.check(), Ok(()));
+        let t = SettingsTable::parse(&[("s.xml", FILE)]).unwrap();
+        let ok = |s: &str| resolve(s, Some(&t)).unwrap();
+        assert_eq!(
+            ok("gain=2.5"),
+            SettingValue {
+                index: 2,
+                value: 2.5
+            }
+        );
+        assert_eq!(
+            ok("ap_mode=HOME"),
+            SettingValue {
+                index: 3,
+                value: 2.0
+            }
+        );
+        assert_eq!(
+            ok("ap_mode=NAV"),
+            SettingValue {
+                index: 3,
+                value: 13.0
+            }
+        );
+        assert_eq!(
+            ok("1=ON"),
+            SettingValue {
+                index: 1,
+                value: 1.0
+            }
+        );
+        assert_eq!(
+            ok("telemetry_mode=1"),
+            SettingValue {
+                index: 0,
+                value: 1.0
+            }
+        );
+        let roll = ok("roll=10");
+        assert_eq!(roll.index, 6);
+        assert_eq!(
+            roll.value,
+            (10.0f64 / (180.0 / std::f64::consts::PI)) as f32
+        );
+        assert_eq!(ok("ins.roll_neutral=-15").index, 6);
+    }
+
+    #[test]
+    fn settings_refused_before_anything_is_sent() {
+        let t = SettingsTable::parse(&[("s.xml", FILE)]).unwrap();
+        let refused = |s: &str| resolve(s, Some(&t)).unwrap_err();
+        assert_eq!(
+            refused("gain=12"),
+            "--setting gain=12: setting gain (index 2): 12 is outside its bounds [0, 10]"
+        );
+        assert_eq!(
+            refused("2=-1"),
+            "--setting 2=-1: setting gain (index 2): -1 is outside its bounds [0, 10]",
+            "the index form is bound-checked too"
+        );
+        assert_eq!(
+            refused("roll=16"),
+            "--setting roll=16: setting roll (index 6): 16 deg is outside its bounds [-15, 15] deg"
+        );
+        let e = refused("kp=1");
+        assert!(
+            e.contains("`kp` is ambiguous: guidance_h_kp (index 4), guidance_v_kp (index 5)"),
+            "{e}"
+        );
+        let e = refused("ap_mode=WARP");
+        assert!(
+            e.contains("`WARP` is neither a number nor a label (KILL|"),
+            "{e}"
+        );
+        assert!(e.ends_with("(bounds [0, 13])"), "{e}");
+        assert!(refused("nope=1").contains("no setting is named `nope`"));
+        assert!(
+            refused("7=1").contains("no setting has index 7: the settings files have 7 (0 to 6)")
+        );
+        let e = parse(&["--tcp", "127.0.0.1:1", "--setting", "gain=inf"]).unwrap_err();
+        assert!(e.contains("not a finite number"), "caught when parsed: {e}");
+        // Without the files: indices and numbers only.
+        assert!(
+            resolve("gain=1", None)
+                .unwrap_err()
+                .contains("a name needs the settings files")
+        );
+        assert!(
+            resolve("3=HOME", None)
+                .unwrap_err()
+                .contains("a label needs the settings files")
+        );
+        assert_eq!(
+            resolve("3=13", None),
+            Ok(SettingValue {
+                index: 3,
+                value: 13.0
+            })
+        );
+        // Reading the settings needs the files and a link.
+        let e = parse(&["--tcp", "127.0.0.1:1", "--read-settings"])
+            .unwrap()
+            .check()
+            .unwrap_err();
+        assert!(
+            e.contains("--read-settings reads the settings of the --settings files"),
+            "{e}"
+        );
+        let e = parse(&["--stdin", "--settings", "a.xml", "--read-settings"])
+            .unwrap()
+            .check()
+            .unwrap_err();
+        assert!(e.contains("need a link"), "{e}");
     }
 }

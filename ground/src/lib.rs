@@ -9,7 +9,9 @@
 //!   values (for all aircraft and per aircraft), link statistics, link quality per
 //!   aircraft (live or stale, RSSI, downlink loss, autopilot mode), PING round trips and
 //!   SETTING acknowledgements per aircraft.
-//! * [`ping`], [`settings`]: matching PONGs to PINGs and DL_VALUEs to SETTINGs.
+//! * [`ping`], [`settings`]: matching PONGs to PINGs and DL_VALUEs to SETTINGs; the
+//!   aircraft's settings files, which name, bound and label the settings; the reading
+//!   of every setting.
 //! * [`input`]: the bounded queue between the reading threads and the decoder.
 //! * [`cli`]: the command line, with every value checked.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.

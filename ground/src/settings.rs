@@ -1,4 +1,6 @@
-//! Acknowledgements of SETTING and answers to GET_SETTING.
+//! Settings on the ground: acknowledgements of SETTING and answers to GET_SETTING
+//! ([`SettingTracker`]), the settings files that name, bound and label the indices
+//! ([`SettingsTable`]), and the reading of every setting ([`Sweep`]).
 //!
 //! An aircraft answers a SETTING with a DL_VALUE carrying the value *in force* for that
 //! index, and also sends DL_VALUEs periodically. A DL_VALUE therefore acknowledges a
@@ -31,6 +33,13 @@
 use std::collections::BTreeMap;
 
 use pprz_messages::BaseType;
+
+mod sweep;
+mod table;
+
+pub use sweep::{MAX_NAMED_FAILURES, Sweep, SweepConfig, progress_line};
+pub(crate) use table::text;
+pub use table::{NameError, SettingsTable, ValueError, display_unit, from_display, to_display};
 
 /// Default time after which an unanswered request is given up, in seconds.
 pub const TIMEOUT: f64 = 5.0;

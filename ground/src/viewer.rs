@@ -54,6 +54,7 @@ use pprz_messages::{MessageDescriptor, priority};
 
 use crate::json;
 use crate::monitor::{Aircraft, Decoded, LinkQuality, LinkState, MAX_AIRCRAFT, Monitor};
+use crate::settings::SettingsTable;
 
 mod gate;
 pub mod settings;
@@ -61,8 +62,8 @@ pub mod settings;
 pub use gate::{
     DEFAULT_MAX_CLIENTS, HANDSHAKE_TIMEOUT, MAX_CLIENT_MESSAGE, MAX_MAX_CLIENTS, MAX_REQUEST_HEAD,
 };
-pub use settings::SettingRequest;
 use settings::Settings;
+pub use settings::{Naming, SettingRequest};
 
 /// Messages each WebSocket client may have queued in the SDK before the oldest ones are
 /// dropped.
@@ -178,7 +179,8 @@ pub struct ViewerCounts {
     /// [`HANDSHAKE_TIMEOUT`].
     pub clients_closed: u64,
     /// Settings set from a viewer to a value a SETTING cannot carry (not a finite
-    /// number that fits a `float`): refused, not sent.
+    /// number that fits a `float`) or, with the settings files, outside the setting's
+    /// bounds or an unknown label: refused, not sent.
     pub settings_refused: u64,
     /// Settings requested from a viewer that the ground could not send (no secure
     /// session yet, or the uplink failed).
@@ -212,7 +214,7 @@ impl std::fmt::Display for ViewerCounts {
         if r + u + b > 0 {
             write!(
                 f,
-                "; settings from viewers not sent: {r} refused (not a float), {u} with no link to send them, {b} with too many waiting"
+                "; settings from viewers not sent: {r} refused (not a float, or outside the bounds), {u} with no link to send them, {b} with too many waiting"
             )?;
         }
         Ok(())
@@ -331,6 +333,8 @@ pub struct Viewer {
     gate: Option<gate::Gate>,
     max_clients: usize,
     settings: Option<Settings>,
+    /// The settings files' table: parameters and DL_VALUEs named after it.
+    table: Option<Arc<SettingsTable>>,
     recording: Option<Recording>,
     counts: ViewerCounts,
 }
@@ -353,9 +357,20 @@ impl Viewer {
             gate: None,
             max_clients: DEFAULT_MAX_CLIENTS,
             settings: None,
+            table: None,
             recording: None,
             counts: ViewerCounts::default(),
         }
+    }
+
+    /// Names the settings after `table` (the aircraft's settings files), for the next
+    /// [`serve`](Self::serve): parameters `/ac/<id>/settings/<name>` in display units,
+    /// checked against the bounds when set ([`settings`]), and a `setting` key with the
+    /// name in the JSON of DL_VALUE (live and recorded).
+    #[must_use]
+    pub fn settings_table(mut self, table: Arc<SettingsTable>) -> Self {
+        self.table = Some(table);
+        self
     }
 
     /// At most `n` WebSocket clients at once ([`DEFAULT_MAX_CLIENTS`] unless set; at
@@ -392,7 +407,7 @@ impl Viewer {
             .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
             .message_backlog_size(CLIENT_BACKLOG);
         if settings {
-            let (state, handler) = Settings::new();
+            let (state, handler) = Settings::new(Naming::new(self.table.clone()));
             server = server.parameter_handler(Arc::new(handler));
             self.settings = Some(state);
         }
@@ -544,10 +559,14 @@ impl Viewer {
             self.counts.undecodable += 1;
             return;
         };
-        let Ok(body) = json::message(desc, d.payload) else {
+        let Ok(mut body) = json::message(desc, d.payload) else {
             self.counts.undecodable += 1;
             return;
         };
+        let named = self.table.is_some() && is_dl_value(desc);
+        if named {
+            name_dl_value(&mut body, desc, d.payload, self.table.as_deref());
+        }
         if self.aircraft(d.source).is_none() {
             self.counts.untracked += 1;
             return;
@@ -560,11 +579,11 @@ impl Viewer {
                     .schemas
                     .entry((desc.class_id, desc.id))
                     .or_insert_with(|| {
-                        Schema::new(
-                            json::schema_name(desc),
-                            "jsonschema",
-                            json::schema(desc).into_bytes(),
-                        )
+                        let mut schema = json::schema(desc);
+                        if named {
+                            schema = with_setting_key(&schema);
+                        }
+                        Schema::new(json::schema_name(desc), "jsonschema", schema.into_bytes())
                     })
                     .clone();
                 let Some(c) = self.channel(json::topic(d.source, desc), schema) else {
@@ -689,6 +708,60 @@ impl Viewer {
         }
         Ok(self.counts)
     }
+}
+
+/// Whether `desc` is Paparazzi's DL_VALUE (telemetry).
+fn is_dl_value(desc: &MessageDescriptor<'_>) -> bool {
+    desc.name == "DL_VALUE" && desc.class_name == "telemetry"
+}
+
+/// The key of a DL_VALUE's JSON that names its setting (with the settings files).
+pub const SETTING_KEY: &str = "setting";
+
+/// Adds the name of the setting (its name unique in `table`) to `body`, the JSON of a
+/// DL_VALUE, when the table has its index.
+fn name_dl_value(
+    body: &mut String,
+    desc: &MessageDescriptor<'_>,
+    payload: &[u8],
+    table: Option<&SettingsTable>,
+) {
+    let index = dynamic::fields(desc, payload)
+        .filter_map(Result::ok)
+        .find(|(f, _)| f.name == "index")
+        .and_then(|(_, v)| v.as_i64())
+        .and_then(|i| u8::try_from(i).ok());
+    let Some(name) = index.and_then(|i| table?.unique_name(i)) else {
+        return;
+    };
+    if body.ends_with('}') && body.len() > 2 {
+        body.pop();
+        body.push_str(&format!(
+            ",{}:{}}}",
+            serde_json::Value::from(SETTING_KEY),
+            serde_json::Value::from(name)
+        ));
+    }
+}
+
+/// The JSON Schema `schema` of DL_VALUE with the key [`SETTING_KEY`] described.
+fn with_setting_key(schema: &str) -> String {
+    let Ok(mut value) = serde_json::from_str::<serde_json::Value>(schema) else {
+        return schema.to_owned();
+    };
+    if let Some(props) = value
+        .get_mut("properties")
+        .and_then(serde_json::Value::as_object_mut)
+    {
+        props.insert(
+            SETTING_KEY.to_owned(),
+            serde_json::json!({
+                "type": "string",
+                "description": "the setting's name in the settings files (its var; var@index for a repeated var); absent for an index the files do not have"
+            }),
+        );
+    }
+    value.to_string()
 }
 
 /// The link statistics of one aircraft ([`LINK_SCHEMA`]): its `state` in the
@@ -1021,6 +1094,38 @@ mod tests {
             &link_json(m.aircraft_state(7).unwrap(), None, None, None),
             "none",
         );
+    }
+
+    /// With the settings files, the JSON of DL_VALUE names its setting, and its schema
+    /// describes the key; an index beyond the files gets no key.
+    #[test]
+    fn dl_value_json_names_its_setting() {
+        let set =
+            crate::set::RuntimeSet::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))
+                .unwrap();
+        let desc = set.find_by_name("telemetry", "DL_VALUE").unwrap();
+        assert!(is_dl_value(desc));
+        let table = SettingsTable::parse(&[(
+            "s.xml",
+            r#"<settings><dl_settings><dl_setting var="ins.gain" min="0" max="10"/></dl_settings></settings>"#,
+        )])
+        .unwrap();
+        let schema: serde_json::Value =
+            serde_json::from_str(&with_setting_key(&json::schema(desc))).unwrap();
+        let json = |index: u8| {
+            let mut payload = vec![index];
+            payload.extend(2.5f32.to_le_bytes());
+            let mut body = json::message(desc, &payload).unwrap();
+            name_dl_value(&mut body, desc, &payload, Some(&table));
+            serde_json::from_str::<serde_json::Value>(&body).unwrap()
+        };
+        let named = json(0);
+        assert_eq!(named[SETTING_KEY], "ins.gain");
+        assert_eq!(named["value"], 2.5);
+        conforms(&schema, &named, "named");
+        let beyond = json(4);
+        assert!(beyond.get(SETTING_KEY).is_none(), "{beyond}");
+        conforms(&schema, &beyond, "beyond");
     }
 
     #[test]

@@ -171,9 +171,56 @@ fn a_value_that_does_not_fit_a_float_is_refused_answered_and_counted() {
         );
     }
     assert!(
-        err.contains("settings from viewers not sent: 2 refused (not a float)"),
+        err.contains(
+            "settings from viewers not sent: 2 refused (not a float, or outside the bounds)"
+        ),
         "{err}"
     );
+}
+
+/// With `--settings`, the parameters are named after the settings files, and a value
+/// outside a setting's bounds is refused with a status naming them; a label is
+/// accepted.
+#[test]
+fn named_parameters_are_bound_checked() {
+    let Some(js) = node_client("named_parameters_are_bound_checked") else {
+        return;
+    };
+    let mut file = tempfile::Builder::new().suffix(".xml").tempfile().unwrap();
+    std::io::Write::write_all(
+        &mut file,
+        br#"<settings><dl_settings>
+          <dl_setting var="telemetry_mode" min="0" max="2" values="default|debug|minimal"/>
+          <dl_setting var="payload_flood" min="0" max="1" values="OFF|ON"/>
+          <dl_setting var="gain" min="0" max="10"/>
+          <dl_setting var="ap_mode" min="0" max="13" values="KILL|FAILSAFE|HOME|RATE_DIRECT|ATTITUDE_DIRECT|RATE_RC_CLIMB|ATTITUDE_RC_CLIMB|ATTITUDE_CLIMB|RATE_Z_HOLD|ATTITUDE_Z_HOLD|HOVER_DIRECT|HOVER_CLIMB|HOVER_Z_HOLD|NAV"/>
+        </dl_settings></settings>"#,
+    )
+    .unwrap();
+    let path = file.path().to_str().unwrap().to_owned();
+    let ground = Ground::start(&["--settings", &path]);
+    let refused = client(
+        &js,
+        &ground.url,
+        &["--params", "/ac/7/settings/gain", "--set", "12"],
+    );
+    let (err, sent) = ground.stop();
+    assert!(!sent.contains(&setting_id()), "a SETTING went out: {err}");
+    assert!(
+        errors(&refused).iter().any(|e| e.contains(
+            "/ac/7/settings/gain refused: setting gain (index 2): 12 is outside its bounds [0, 10]"
+        )),
+        "{refused:?}"
+    );
+    let ground = Ground::start(&["--settings", &path]);
+    let label = client(
+        &js,
+        &ground.url,
+        &["--params", "/ac/7/settings/ap_mode", "--set", "\"HOME\""],
+    );
+    let (err, sent) = ground.stop();
+    assert!(errors(&label).is_empty(), "{label:?}");
+    assert!(sent.contains(&setting_id()), "no SETTING went out: {err}");
 }
 
 /// Issue: getParameters for `/ac/100..139/settings/0` made the ground track 40

@@ -2,18 +2,22 @@
 //! telemetry on UDP, decodes it live, runs the key exchange of `--secure`, PINGs every
 //! aircraft (its PINGs keep their uplink alive), changes a setting at 3 s, sets
 //! `ap_mode` back to NAV at `--resume-nav`, serves `--foxglove`, and shows the live
-//! table or one line per message. Its clock is the simulation's (the aircraft's).
+//! table or one line per message, the settings named after `--settings`. Its clock is
+//! the simulation's (the aircraft's).
 
 use std::net::UdpSocket;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration as StdDuration, Instant as StdInstant};
 
 use embassy_time::Instant;
 use pprz_default::messages::datalink::Ping;
 use pprz_example_app::AC_ID;
+use pprz_ground::escape;
 use pprz_ground::monitor::Monitor;
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
+use pprz_ground::settings::SettingsTable;
 use pprz_ground::uplink;
 use pprz_ground::viewer::{LevelFigures, Viewer, unix_ns};
 use pprz_messages::Message;
@@ -36,15 +40,18 @@ const SETTING_AT_S: f64 = 3.0;
 const SETTING: (u8, f64) = (2, 2.5);
 
 /// What the ground opens before the aircraft starts: its UDP socket (so no telemetry is
-/// missed) and the message set it decodes with.
+/// missed), the message set it decodes with and the settings files' table.
 pub struct Station {
     socket: UdpSocket,
     set: RuntimeSet,
+    table: Option<Arc<SettingsTable>>,
 }
 
 impl Station {
-    /// Listens on `--ground` and loads `--messages`; fails with the message to print.
+    /// Listens on `--ground`, loads `--messages` and the settings files (printing their
+    /// warnings); fails with the message to print.
     pub fn open(args: &Args) -> Result<Self, String> {
+        let table = load_settings(args)?;
         let socket = UdpSocket::bind(args.ground).map_err(|e| {
             format!(
                 "cannot listen on {} ({e}); is another ground station running? Use --ground/--uplink or --headless",
@@ -52,13 +59,16 @@ impl Station {
             )
         })?;
         let set = RuntimeSet::load(&args.messages).map_err(|e| e.to_string())?;
-        Ok(Self { socket, set })
+        Ok(Self { socket, set, table })
     }
 
     /// The monitor (with the ground's end of `--secure`) and the viewer of `--foxglove`,
     /// ready to run; fails with the message to print.
     pub fn start(self, args: &Args, keys: Option<GroundKeys>) -> Result<Ground<'_>, String> {
-        let monitor = Monitor::new(self.set, PprzV2::new().into());
+        let mut monitor = Monitor::new(self.set, PprzV2::new().into());
+        if let Some(table) = &self.table {
+            monitor = monitor.with_settings(table.clone());
+        }
         let monitor = match keys {
             Some(keys) => monitor
                 .with_secure(GroundSecure::new(AC_ID, keys))
@@ -68,6 +78,9 @@ impl Station {
         let viewer = match args.foxglove {
             Some(addr) => {
                 let mut viewer = Viewer::new();
+                if let Some(table) = &self.table {
+                    viewer = viewer.settings_table(table.clone());
+                }
                 let bound = viewer
                     .serve(addr, "pprz sitl", true)
                     .map_err(|e| e.to_string())?;
@@ -92,6 +105,27 @@ impl Station {
             next_link: 0.0,
         })
     }
+}
+
+/// The settings files of the run ([`Args::settings_files`]), their warnings printed;
+/// `None` without files. Fails with every problem, each with file, line and column.
+fn load_settings(args: &Args) -> Result<Option<Arc<SettingsTable>>, String> {
+    let files = args.settings_files();
+    if files.is_empty() {
+        return Ok(None);
+    }
+    let table = SettingsTable::load(&files).map_err(|e| {
+        let lines: Vec<String> = e
+            .diagnostics()
+            .iter()
+            .map(|d| format!("sitl: error: {}", escape::lines(&d.to_string())))
+            .collect();
+        lines.join("\n")
+    })?;
+    for w in table.warnings() {
+        eprintln!("sitl: warning: {}", escape::lines(&w.to_string()));
+    }
+    Ok(Some(Arc::new(table)))
 }
 
 /// Wall-clock seconds between two views of the live table, in simulated seconds.

@@ -120,6 +120,26 @@ pub struct Args {
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))]
     pub messages: PathBuf,
+    /// The aircraft's settings files (Paparazzi settings.xml), in order: the in-process
+    /// ground names the settings after them (live view, `--lines`, Foxglove parameters)
+    /// [default: the example application's examples/app/settings.xml, when it exists].
+    #[arg(long = "settings", value_name = "FILE", num_args = 1..)]
+    pub settings: Vec<PathBuf>,
+}
+
+/// The example application's settings file, the default of `--settings`.
+pub const APP_SETTINGS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/app/settings.xml");
+
+impl Args {
+    /// The settings files of the run: `--settings`, else the example application's
+    /// file when it exists, else none (the ground shows indices).
+    pub fn settings_files(&self) -> Vec<PathBuf> {
+        if !self.settings.is_empty() {
+            return self.settings.clone();
+        }
+        let app = PathBuf::from(APP_SETTINGS);
+        if app.is_file() { vec![app] } else { Vec::new() }
+    }
 }
 
 /// `--flow-control`.

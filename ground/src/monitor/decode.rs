@@ -221,8 +221,17 @@ impl Monitor {
             };
         };
         let body = format::fields(desc, payload);
-        let line = format::known_line(source, desc, &body);
+        let mut line = format::known_line(source, desc, &body);
         let ok = dynamic::check(desc, payload).is_ok();
+        let dl_value = (ok && desc.name == "DL_VALUE")
+            .then(|| dl_value_fields(desc, payload))
+            .flatten();
+        if let Some((index, _, _)) = dl_value
+            && let Some(name) = self.table.as_deref().and_then(|t| t.unique_name(index))
+        {
+            line.push_str(" setting=");
+            line.push_str(&crate::escape::token(name));
+        }
         let report = ok && desc.name == "DATALINK_REPORT";
         if let Some(a) = aircraft {
             if !ok {
@@ -244,25 +253,11 @@ impl Monitor {
         }
         count_message(&mut self.messages, desc, now, body);
         if ok && header.to_ground() {
-            match desc.name {
-                "PONG" => self.pong(now, source),
-                "DL_VALUE" => {
-                    let value = |name| {
-                        dynamic::fields(desc, payload)
-                            .filter_map(Result::ok)
-                            .find(|(f, _)| f.name == name)
-                            .map(|(_, v)| v)
-                    };
-                    let index = value("index").and_then(|v| v.as_i64());
-                    let number = value("value").and_then(|v| v.as_f64());
-                    if let (Some(index), Some(value)) =
-                        (index.and_then(|i| u8::try_from(i).ok()), number)
-                    {
-                        let base = scalar_type(Some(desc), "value").unwrap_or(BaseType::F64);
-                        self.dl_value(now, source, index, value, base);
-                    }
-                }
-                _ => {}
+            if desc.name == "PONG" {
+                self.pong(now, source);
+            }
+            if let Some((index, value, base)) = dl_value {
+                self.dl_value(now, source, index, value, base);
             }
         }
         Handled {
@@ -271,6 +266,20 @@ impl Monitor {
             valid: ok,
         }
     }
+}
+
+/// The index, value and value type of a valid DL_VALUE.
+fn dl_value_fields(desc: &MessageDescriptor<'_>, payload: &[u8]) -> Option<(u8, f64, BaseType)> {
+    let value = |name| {
+        dynamic::fields(desc, payload)
+            .filter_map(Result::ok)
+            .find(|(f, _)| f.name == name)
+            .map(|(_, v)| v)
+    };
+    let index = u8::try_from(value("index")?.as_i64()?).ok()?;
+    let number = value("value")?.as_f64()?;
+    let base = scalar_type(Some(desc), "value").unwrap_or(BaseType::F64);
+    Some((index, number, base))
 }
 
 /// A time in seconds as milliseconds (saturating; NaN and negative times are 0).

@@ -28,6 +28,17 @@ pub enum Event {
         /// What it means for the requests pending on this index.
         answer: Answer,
     },
+    /// The reading of every setting of an aircraft ([`Monitor::read_settings`]) ended.
+    SettingsRead {
+        /// Settings read.
+        read: usize,
+        /// Settings in the sweep.
+        total: usize,
+        /// Seconds from its first request to its end.
+        seconds: f64,
+        /// The indices without an answer, in order.
+        failed: Vec<u8>,
+    },
     /// A secure session was set up with the aircraft (handshake completed).
     SecureSession {
         /// Handshakes completed so far.

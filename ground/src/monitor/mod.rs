@@ -22,6 +22,15 @@
 //! (destination 0, broadcast, or none with PPRZ v1) answer anything: one aircraft's
 //! answer to another, seen on a shared link, does not.
 //!
+//! # Named settings
+//!
+//! With the aircraft's settings files ([`Monitor::with_settings`], a
+//! [`SettingsTable`]), the monitor names the settings in its events and notices, shows
+//! every setting of each aircraft with its latest value (from DL_VALUE, labelled and in
+//! its display unit), bounds and unit, and adds the setting's name to the `--lines` form
+//! of DL_VALUE (`setting=<name>`). [`Monitor::read_settings`] reads them all
+//! ([`Sweep`](crate::settings::Sweep)).
+//!
 //! # Link quality
 //!
 //! Each aircraft's link is tracked ([`Monitor::link_quality`], [`LinkQuality`]): live or
@@ -60,6 +69,7 @@
 //! control character.
 
 use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
 
 use pprz_transports::{AnyTransport, Decoder};
 
@@ -67,7 +77,7 @@ use crate::input::Drops;
 use crate::ping::PingTracker;
 use crate::secure::GroundSecure;
 use crate::set::RuntimeSet;
-use crate::settings::SettingTracker;
+use crate::settings::{SettingTracker, SettingsTable};
 
 mod decode;
 mod events;
@@ -77,6 +87,9 @@ mod link_tests;
 mod render;
 mod requests;
 mod state;
+#[cfg(test)]
+mod sweep_tests;
+mod sweeps;
 #[cfg(test)]
 mod tests;
 
@@ -158,6 +171,8 @@ pub struct Monitor {
     stale_after: f64,
     /// The latest time given.
     clock: f64,
+    /// The settings files' table: names, bounds, units and labels of the indices.
+    table: Option<Arc<SettingsTable>>,
 }
 
 impl Monitor {
@@ -190,6 +205,7 @@ impl Monitor {
             replay: false,
             stale_after: DEFAULT_STALE_AFTER,
             clock: 0.0,
+            table: None,
         }
     }
 

@@ -8,13 +8,15 @@ use super::state::{Aircraft, MessageStats};
 use super::{Event, LinkQuality, LinkState, MAX_AIRCRAFT, Monitor, Notice};
 use crate::format;
 use crate::ping::PingTracker;
-use crate::settings::{Answer, Expired, SettingTracker};
+use crate::settings::{Answer, Expired, SettingTracker, SettingsTable, progress_line};
 
 impl Monitor {
     /// An event as a line of the live view: [`describe_event`], after `aircraft N: `
     /// when [`several_aircraft`](Self::several_aircraft) and the event is about one.
+    /// With a settings table ([`with_settings`](Self::with_settings)), settings are named
+    /// and their values shown with labels and display units.
     pub fn event_line(&self, aircraft: Option<u8>, event: &Event) -> String {
-        self.about(aircraft) + &describe_event(event)
+        self.about(aircraft) + &event_text(event, self.names())
     }
 
     /// A notice as a line of the live view, named after its aircraft as
@@ -23,7 +25,7 @@ impl Monitor {
     pub fn notice_line(&self, aircraft: Option<u8>, notice: &Notice) -> String {
         match notice {
             Notice::LinkStale { .. } | Notice::LinkLive { .. } => describe_notice(notice),
-            _ => self.about(aircraft) + &describe_notice(notice),
+            _ => self.about(aircraft) + &notice_text(notice, self.names()),
         }
     }
 
@@ -44,6 +46,25 @@ impl Monitor {
             self.link_quality(ac_id, now)
                 .map_or_else(|| "not heard".to_owned(), |q| link_text(&q)),
         )
+    }
+
+    /// How settings are named: after the table, if any.
+    fn names(&self) -> Names<'_> {
+        Names(self.table.as_deref())
+    }
+
+    /// The PING and SETTING statistics of aircraft `a`, and its sweep's line.
+    fn aircraft_uplink(&self, a: &Aircraft) -> Vec<String> {
+        let mut out = uplink_lines(&a.pings, &a.settings, self.names());
+        out.extend(a.sweep.as_ref().map(|s| s.line(self.table.as_deref())));
+        out
+    }
+
+    /// The settings of aircraft `a`, one a line, when the monitor has a table.
+    fn settings_section(&self, a: &Aircraft) -> Vec<String> {
+        self.table
+            .as_deref()
+            .map_or_else(Vec::new, |t| settings_lines(t, a))
     }
 
     /// `aircraft N: ` with several aircraft, or nothing.
@@ -74,11 +95,11 @@ impl Monitor {
     /// PING and SETTING statistics of the requests to no particular aircraft and, with
     /// a single aircraft, of those addressed to it, when there were any.
     fn uplink_status(&self) -> Vec<String> {
-        let mut out = uplink_lines(&self.pings, &self.settings);
+        let mut out = uplink_lines(&self.pings, &self.settings, self.names());
         if !self.several_aircraft()
             && let Some(a) = self.aircraft.values().next()
         {
-            out.extend(uplink_lines(&a.pings, &a.settings));
+            out.extend(self.aircraft_uplink(a));
         }
         out
     }
@@ -138,12 +159,17 @@ impl Monitor {
                     let _ = writeln!(s, "{line}");
                 }
                 table(&mut s, &self.messages, now);
+                for a in self.aircraft.values().take(1) {
+                    for line in self.settings_section(a) {
+                        let _ = writeln!(s, "{line}");
+                    }
+                }
             }
             Some(fleet) => {
                 let _ = writeln!(s, "{fleet}");
                 for a in self.aircraft.values() {
                     let _ = writeln!(s, "{}", aircraft_head(a));
-                    for line in uplink_lines(&a.pings, &a.settings) {
+                    for line in self.aircraft_uplink(a) {
                         let _ = writeln!(s, "{line}");
                     }
                     if let Some(report) = &a.last_report {
@@ -153,6 +179,9 @@ impl Monitor {
                         let _ = writeln!(s, "{line}");
                     }
                     table(&mut s, &a.messages, now);
+                    for line in self.settings_section(a) {
+                        let _ = writeln!(s, "{line}");
+                    }
                 }
             }
         }
@@ -171,13 +200,17 @@ impl Monitor {
     }
 
     /// The summary of aircraft `ac_id`: `aircraft N: frames F  unknown U  malformed M`,
-    /// then, indented, its messages per priority level and its PING and SETTING
-    /// statistics; `None` when the aircraft is not tracked.
+    /// then, indented, its messages per priority level, its PING and SETTING
+    /// statistics, its sweep and (with a settings table) its settings; `None` when the
+    /// aircraft is not tracked.
     pub fn aircraft_summary(&self, ac_id: u8) -> Option<String> {
         let a = self.aircraft.get(&ac_id)?;
         let mut s = aircraft_head(a);
         let levels = priority_line(&a.per_priority());
-        for line in std::iter::once(levels).chain(uplink_lines(&a.pings, &a.settings)) {
+        let lines = std::iter::once(levels)
+            .chain(self.aircraft_uplink(a))
+            .chain(self.settings_section(a));
+        for line in lines {
             let _ = write!(s, "\n  {line}");
         }
         Some(s)
@@ -201,6 +234,12 @@ impl Monitor {
             if let Some(line) = self.single_link_line(now) {
                 s.push('\n');
                 s.push_str(&line);
+            }
+            for a in self.aircraft.values().take(1) {
+                for line in self.settings_section(a) {
+                    s.push('\n');
+                    s.push_str(&line);
+                }
             }
             return s;
         };
@@ -260,7 +299,7 @@ fn table(s: &mut String, messages: &BTreeMap<(u8, u8), MessageStats>, now: f64) 
 }
 
 /// PING and SETTING statistics of a pair of trackers, when there were any.
-fn uplink_lines(pings: &PingTracker, settings: &SettingTracker) -> Vec<String> {
+fn uplink_lines(pings: &PingTracker, settings: &SettingTracker, names: Names<'_>) -> Vec<String> {
     let mut out = Vec::new();
     let p = pings;
     if p.sent_count() > 0 || p.unexpected() > 0 {
@@ -287,31 +326,80 @@ fn uplink_lines(pings: &PingTracker, settings: &SettingTracker) -> Vec<String> {
             st.pending()
         ));
         for p in st.pending_requests() {
+            let setting = names.setting(p.index);
             out.push(match p {
                 Expired {
                     index,
                     requested: Some(requested),
                     reported: Some(reported),
                 } => format!(
-                    "  pending: SETTING index={index} to {}: not applied so far, the aircraft reports {}",
-                    number(requested),
-                    number(reported)
+                    "  pending: SETTING {setting} to {}: not applied so far, the aircraft reports {}",
+                    names.value(index, requested),
+                    names.value(index, reported)
                 ),
                 Expired {
                     index,
                     requested: Some(requested),
                     reported: None,
                 } => format!(
-                    "  pending: SETTING index={index} to {}: no answer yet",
-                    number(requested)
+                    "  pending: SETTING {setting} to {}: no answer yet",
+                    names.value(index, requested)
                 ),
-                Expired { index, .. } => {
-                    format!("  pending: request for setting index={index}: no answer yet")
+                Expired { .. } => {
+                    format!("  pending: request for setting {setting}: no answer yet")
                 }
             });
         }
     }
     out
+}
+
+/// The settings of aircraft `a` after `table`: a head line, then per setting its
+/// index, name, latest value (`?` before any) and bounds.
+fn settings_lines(table: &SettingsTable, a: &Aircraft) -> Vec<String> {
+    let known = (0..table.len())
+        .filter(|&i| a.values.contains_key(&(i as u8)))
+        .count();
+    let mut out = vec![format!(
+        "settings: {known} of {} known (index, name, value, bounds)",
+        table.len()
+    )];
+    for def in &table.set().settings {
+        let value = a
+            .values
+            .get(&def.index)
+            .map_or_else(|| "?".to_owned(), |&v| table.show(def.index, v));
+        out.push(format!(
+            "  {:>3} {:<24} {:<20} {}",
+            def.index,
+            crate::settings::text(def.name()),
+            value,
+            table.bounds(def.index).unwrap_or_default()
+        ));
+    }
+    out
+}
+
+/// How settings are named in the text of events, notices and pending requests.
+#[derive(Clone, Copy)]
+struct Names<'a>(Option<&'a SettingsTable>);
+
+impl Names<'_> {
+    /// `index=N`, or `NAME (index N)` with a table that has it.
+    fn setting(self, index: u8) -> String {
+        match self.0.filter(|t| t.get(index).is_some()) {
+            Some(t) => t.describe(index),
+            None => format!("index={index}"),
+        }
+    }
+
+    /// A value of setting `index`: the number, or as the table shows it.
+    fn value(self, index: u8, v: f64) -> String {
+        match self.0.filter(|t| t.get(index).is_some()) {
+            Some(t) => t.show(index, v),
+            None => number(v),
+        }
+    }
 }
 
 /// A link quality as text: the state, then the figures known.
@@ -367,8 +455,13 @@ fn number(v: f64) -> String {
     }
 }
 
-/// An event as a line of the live view.
+/// An event as a line of the live view (settings by index).
 pub fn describe_event(e: &Event) -> String {
+    event_text(e, Names(None))
+}
+
+/// An event as a line, settings named by `names`.
+fn event_text(e: &Event, names: Names<'_>) -> String {
     match e {
         Event::Pong { rtt } => format!("PONG: round trip {:.1} ms", rtt * 1e3),
         Event::DlValue {
@@ -376,7 +469,14 @@ pub fn describe_event(e: &Event) -> String {
             value,
             answer,
         } => {
-            let head = format!("DL_VALUE index={index} value={}", number(*value));
+            let head = match names.0.filter(|t| t.get(*index).is_some()) {
+                Some(_) => format!(
+                    "DL_VALUE {} = {}",
+                    names.setting(*index),
+                    names.value(*index, *value)
+                ),
+                None => format!("DL_VALUE index={index} value={}", number(*value)),
+            };
             match answer {
                 Answer::Unsolicited => head,
                 Answer::Acknowledged { after } => {
@@ -384,7 +484,7 @@ pub fn describe_event(e: &Event) -> String {
                 }
                 Answer::NotApplied { requested, after } => format!(
                     "{head}: SETTING to {} not applied ({:.1} ms after it was sent)",
-                    number(*requested),
+                    names.value(*index, *requested),
                     after * 1e3
                 ),
                 Answer::Answered { after } => {
@@ -392,14 +492,25 @@ pub fn describe_event(e: &Event) -> String {
                 }
             }
         }
+        Event::SettingsRead {
+            read,
+            total,
+            seconds,
+            failed,
+        } => progress_line(*read, *total, Some(*seconds), failed, names.0),
         Event::SecureSession { completed } => {
             format!("secure session established (handshake {completed})")
         }
     }
 }
 
-/// A notice as a line of the live view.
+/// A notice as a line of the live view (settings by index).
 pub fn describe_notice(n: &Notice) -> String {
+    notice_text(n, Names(None))
+}
+
+/// A notice as a line, settings named by `names`.
+fn notice_text(n: &Notice, names: Names<'_>) -> String {
     match n {
         Notice::PingsLost { count } => format!("{count} PING(s) lost: no PONG in time"),
         Notice::UnexpectedPong => "PONG that answers no PING outstanding".into(),
@@ -408,17 +519,22 @@ pub fn describe_notice(n: &Notice) -> String {
             requested: Some(requested),
             reported: Some(reported),
         }) => format!(
-            "SETTING index={index} to {} not applied: the aircraft still reports {}",
-            number(*requested),
-            number(*reported)
+            "SETTING {} to {} not applied: the aircraft still reports {}",
+            names.setting(*index),
+            names.value(*index, *requested),
+            names.value(*index, *reported)
         ),
         Notice::RequestExpired(Expired {
             index,
             requested: Some(requested),
             reported: None,
-        }) => format!("SETTING index={index} to {}: no answer", number(*requested)),
+        }) => format!(
+            "SETTING {} to {}: no answer",
+            names.setting(*index),
+            names.value(*index, *requested)
+        ),
         Notice::RequestExpired(Expired { index, .. }) => {
-            format!("request for setting index={index}: no answer")
+            format!("request for setting {}: no answer", names.setting(*index))
         }
         Notice::InputDropped(d) => format!(
             "input overload: dropped {} bytes in {} reads",

@@ -111,10 +111,18 @@ impl Monitor {
     }
 
     /// A DL_VALUE from `source` at `now`: it answers the request pending on `index` for
-    /// `source`, else the one sent to no particular aircraft.
+    /// `source`, else the one sent to no particular aircraft; it is the latest value of
+    /// the setting for a tracked `source`, and reads it for its sweep.
     pub(super) fn dl_value(&mut self, now: f64, source: u8, index: u8, value: f64, base: BaseType) {
+        let mut ended = false;
         let answer = match self.aircraft.get_mut(&source) {
-            Some(a) => a.settings.dl_value(now, index, value, base),
+            Some(a) => {
+                a.values.insert(index, value);
+                if let Some(sweep) = a.sweep.as_mut() {
+                    ended = sweep.answered(now, index) && sweep.done();
+                }
+                a.settings.dl_value(now, index, value, base)
+            }
             None => Answer::Unsolicited,
         };
         let answer = match answer {
@@ -127,6 +135,9 @@ impl Monitor {
             answer,
         };
         self.event(now, Some(source), event);
+        if ended {
+            self.sweep_ended(now, source);
+        }
     }
 
     /// Counts as lost the PINGs to `aircraft` (or to none) older than their timeout at

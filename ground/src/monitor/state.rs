@@ -13,7 +13,7 @@ use crate::input::Drops;
 use crate::ping::PingTracker;
 use crate::secure::GroundSecure;
 use crate::set::RuntimeSet;
-use crate::settings::SettingTracker;
+use crate::settings::{SettingTracker, Sweep};
 
 /// A count of events per second over the last [`RATE_WINDOW`] seconds, kept in
 /// [`BUCKETS`] fixed time buckets (constant memory, whatever the rate).
@@ -106,6 +106,10 @@ pub struct Aircraft {
     pub(super) last_rtt: Option<f64>,
     pub(super) last_report: Option<String>,
     pub(super) link: LinkTrack,
+    /// The latest value reported for each setting index (DL_VALUE).
+    pub(super) values: BTreeMap<u8, f64>,
+    /// The reading of every setting ([`Monitor::read_settings`]).
+    pub(super) sweep: Option<Sweep>,
 }
 
 impl Aircraft {
@@ -121,6 +125,8 @@ impl Aircraft {
             last_rtt: None,
             last_report: None,
             link: LinkTrack::default(),
+            values: BTreeMap::new(),
+            sweep: None,
         }
     }
 
@@ -160,6 +166,17 @@ impl Aircraft {
         &self.settings
     }
 
+    /// The latest value each setting index reported (DL_VALUE), in the aircraft's units;
+    /// at most one per index.
+    pub fn setting_values(&self) -> &BTreeMap<u8, f64> {
+        &self.values
+    }
+
+    /// The reading of every setting ([`Monitor::read_settings`]), if one was started.
+    pub fn sweep(&self) -> Option<&Sweep> {
+        self.sweep.as_ref()
+    }
+
     /// The latest round-trip time measured with a PONG from this aircraft, in seconds
     /// (of a PING sent to it, or of one sent to no particular aircraft).
     pub fn last_rtt(&self) -> Option<f64> {
@@ -190,6 +207,8 @@ impl Aircraft {
             + self.settings.pending() * 64
             + self.last_report.as_ref().map_or(0, String::capacity)
             + self.link.retained_bytes()
+            + self.values.len() * 48
+            + self.sweep.as_ref().map_or(0, |s| s.total() * 24)
     }
 }
 

@@ -2,6 +2,14 @@
 //! and written from the Parameters panel become GET_SETTING and SETTING requests to the
 //! aircraft, answered with the value its DL_VALUE reports.
 //!
+//! With the aircraft's settings files (a [`SettingsTable`]), the parameters are named
+//! `/ac/<id>/settings/<name>` instead, `<name>` being the setting's name unique in the
+//! table (its var, with its `.`: [`SettingsTable::unique_name`]), and their values are in
+//! the setting's display unit (its `alt_unit`). A value set is checked as `--setting`
+//! checks it: a number in the display unit, or a label as a string; outside the bounds,
+//! NaN, an infinity or an unknown label is refused with an error status naming the
+//! bounds, and nothing is sent.
+//!
 //! * Reading named parameters sends a GET_SETTING per parameter; the answer is the
 //!   reported value. Reading all parameters answers at once with every value reported so
 //!   far (DL_VALUEs, periodic ones included).
@@ -38,7 +46,7 @@ use foxglove::websocket::{
 use pprz_messages::BaseType;
 
 use crate::monitor::Monitor;
-use crate::settings::{quantize, setting_value};
+use crate::settings::{SettingsTable, quantize, setting_value};
 
 /// Parameters per request, at most (further names are ignored).
 pub const MAX_NAMES: usize = 32;
@@ -56,13 +64,106 @@ pub fn parameter_name(ac_id: u8, index: u8) -> String {
 
 /// The aircraft and setting index a parameter name names, if it is one.
 pub fn parse_name(name: &str) -> Option<(u8, u8)> {
-    let rest = name.strip_prefix("/ac/")?;
-    let (ac, index) = rest.split_once("/settings/")?;
-    let digits = |s: &str| !s.is_empty() && s.len() <= 3 && s.bytes().all(|b| b.is_ascii_digit());
-    if !digits(ac) || !digits(index) {
+    let (ac, index) = split_name(name)?;
+    if !digits(index) {
         return None;
     }
-    Some((ac.parse().ok()?, index.parse().ok()?))
+    Some((ac, index.parse().ok()?))
+}
+
+/// Whether `s` is a number of 1 to 3 digits.
+fn digits(s: &str) -> bool {
+    !s.is_empty() && s.len() <= 3 && s.bytes().all(|b| b.is_ascii_digit())
+}
+
+/// The aircraft and the rest of `/ac/<id>/settings/<rest>`.
+fn split_name(name: &str) -> Option<(u8, &str)> {
+    let rest = name.strip_prefix("/ac/")?;
+    let (ac, rest) = rest.split_once("/settings/")?;
+    if !digits(ac) {
+        return None;
+    }
+    Some((ac.parse().ok()?, rest))
+}
+
+/// How parameters are named and valued: by index in the aircraft's units, or, with the
+/// settings files' table, by name in the display units.
+#[derive(Debug, Clone, Default)]
+pub struct Naming(Option<Arc<SettingsTable>>);
+
+impl Naming {
+    /// Parameters named after `table` (or by index without one).
+    pub fn new(table: Option<Arc<SettingsTable>>) -> Self {
+        Self(table)
+    }
+
+    /// The table, if any.
+    fn table(&self) -> Option<&SettingsTable> {
+        self.0.as_deref()
+    }
+
+    /// The parameter of setting `index` of aircraft `ac_id`: `/ac/<id>/settings/<name>`
+    /// with a table that has the index, else `/ac/<id>/settings/<index>`.
+    pub fn name(&self, ac_id: u8, index: u8) -> String {
+        match self.table().and_then(|t| t.unique_name(index)) {
+            Some(name) => format!("/ac/{ac_id}/settings/{name}"),
+            None => parameter_name(ac_id, index),
+        }
+    }
+
+    /// The aircraft and setting index a parameter name names: by name with a table, by
+    /// index without.
+    pub fn parse(&self, name: &str) -> Option<(u8, u8)> {
+        match self.table() {
+            Some(t) => {
+                let (ac, rest) = split_name(name)?;
+                Some((ac, t.by_unique_name(rest)?))
+            }
+            None => parse_name(name),
+        }
+    }
+
+    /// The parameter's value for the aircraft's `value` of setting `index`: in its
+    /// display unit with a table.
+    pub fn shown(&self, index: u8, value: f64) -> f64 {
+        self.table().map_or(value, |t| t.to_display(index, value))
+    }
+
+    /// `gain (index 2)` with a table, else `2`.
+    fn describe(&self, index: u8) -> String {
+        match self.table().filter(|t| t.get(index).is_some()) {
+            Some(t) => t.describe(index),
+            None => index.to_string(),
+        }
+    }
+
+    /// A value of setting `index` for a message: as the table shows it, or the number.
+    fn value_text(&self, index: u8, value: f64) -> String {
+        match self.table().filter(|t| t.get(index).is_some()) {
+            Some(t) => t.show(index, value),
+            None => value.to_string(),
+        }
+    }
+
+    /// The aircraft's value for a parameter of setting `index` set to `value`: a number
+    /// in the display unit (or a label, as a string) checked against the bounds with a
+    /// table; any finite number that fits a float without.
+    ///
+    /// # Errors
+    /// Why it is refused, for the client.
+    pub fn set_value(&self, index: u8, value: Option<&ParameterValue>) -> Result<f64, String> {
+        let Some(t) = self.table() else {
+            return set_value(value);
+        };
+        let checked = match value {
+            Some(ParameterValue::Float64(v)) => t.display_value(index, *v),
+            Some(ParameterValue::Integer(v)) => t.display_value(index, *v as f64),
+            Some(ParameterValue::Bool(b)) => t.display_value(index, f64::from(u8::from(*b))),
+            Some(ParameterValue::String(label)) => t.value(index, label),
+            _ => return Err("not a number".to_owned()),
+        };
+        checked.map(f64::from).map_err(|e| e.to_string())
+    }
 }
 
 /// What the viewer asks of an aircraft: the ground sends it.
@@ -191,6 +292,7 @@ pub(crate) struct Handler {
     tx: SyncSender<Call>,
     /// Requests answered here because the channel was full.
     busy: Arc<AtomicU64>,
+    naming: Naming,
 }
 
 impl Handler {
@@ -233,7 +335,7 @@ impl ParameterHandler for Handler {
     ) {
         let keys = names
             .iter()
-            .filter_map(|n| parse_name(n))
+            .filter_map(|n| self.naming.parse(n))
             .take(MAX_NAMES)
             .collect();
         let client = responder.client();
@@ -250,20 +352,21 @@ impl ParameterHandler for Handler {
     ) {
         let client = responder.client();
         let reply = Reply::new(move |p| responder.respond(p), move |e| client.send_error(e));
-        self.pass(set_call(&parameters, reply));
+        self.pass(set_call(&self.naming, &parameters, reply));
     }
 }
 
-/// The call for setting `parameters` (those named `/ac/<id>/settings/<index>`, the first
-/// [`MAX_NAMES`]): the values a SETTING can carry, and the others refused.
-fn set_call(parameters: &[Parameter], reply: Reply) -> Call {
+/// The call for setting `parameters` (those `naming` knows, the first [`MAX_NAMES`]):
+/// the values a SETTING can carry (within the bounds, with a table), and the others
+/// refused.
+fn set_call(naming: &Naming, parameters: &[Parameter], reply: Reply) -> Call {
     let mut values = Vec::new();
     let mut refused = Vec::new();
     let ours = parameters
         .iter()
-        .filter_map(|p| Some((parse_name(&p.name)?, p.value.as_ref())));
+        .filter_map(|p| Some((naming.parse(&p.name)?, p.value.as_ref())));
     for ((ac_id, index), value) in ours.take(MAX_NAMES) {
-        match set_value(value) {
+        match naming.set_value(index, value) {
             Ok(v) => values.push((ac_id, index, v)),
             Err(why) => refused.push(Refused { ac_id, index, why }),
         }
@@ -331,7 +434,8 @@ pub(crate) struct Warning(pub String);
 /// Settings requested from the viewers and not sent, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub(crate) struct NotSent {
-    /// Values refused: not a finite number that fits a float (or not a number).
+    /// Values refused: not a finite number that fits a float (or not a number), or with
+    /// the settings files outside the bounds or an unknown label.
     pub(crate) refused: u64,
     /// Settings the ground could not send (no secure session yet, or the uplink failed).
     pub(crate) unsent: u64,
@@ -343,6 +447,7 @@ pub(crate) struct NotSent {
 /// The ground's side of the viewer's settings.
 pub(crate) struct Settings {
     rx: Receiver<Call>,
+    naming: Naming,
     known: BTreeMap<(u8, u8), f64>,
     pending: Vec<Pending>,
     counts: NotSent,
@@ -351,18 +456,19 @@ pub(crate) struct Settings {
 }
 
 impl Settings {
-    /// The settings and the handler to give the server.
-    pub(crate) fn new() -> (Self, Handler) {
+    /// The settings, named by `naming`, and the handler to give the server.
+    pub(crate) fn new(naming: Naming) -> (Self, Handler) {
         let (tx, rx) = sync_channel(MAX_PENDING);
         let busy = Arc::new(AtomicU64::new(0));
         let settings = Self {
             rx,
+            naming: naming.clone(),
             known: BTreeMap::new(),
             pending: Vec::new(),
             counts: NotSent::default(),
             handler_busy: busy.clone(),
         };
-        (settings, Handler { tx, busy })
+        (settings, Handler { tx, busy, naming })
     }
 
     /// What was not sent so far.
@@ -381,7 +487,7 @@ impl Settings {
             let v = w
                 .reported
                 .or_else(|| self.known.get(&(w.ac_id, w.index)).copied());
-            values.extend(v.map(|v| Parameter::float64(parameter_name(w.ac_id, w.index), v)));
+            values.extend(v.map(|v| self.parameter(w.ac_id, w.index, v)));
             if let Some(e) = &w.failed
                 && !errors.contains(e)
             {
@@ -389,6 +495,14 @@ impl Settings {
             }
         }
         p.reply.send(values, &errors);
+    }
+
+    /// The parameter of setting `index` of `ac_id` with the aircraft's `value`.
+    fn parameter(&self, ac_id: u8, index: u8, value: f64) -> Parameter {
+        Parameter::float64(
+            self.naming.name(ac_id, index),
+            self.naming.shown(index, value),
+        )
     }
 
     /// Takes the requests the viewers made since the last call: returns what to send to
@@ -402,7 +516,7 @@ impl Settings {
                     let all = self
                         .known
                         .iter()
-                        .map(|(&(ac, i), &v)| Parameter::float64(parameter_name(ac, i), v))
+                        .map(|(&(ac, i), &v)| self.parameter(ac, i, v))
                         .collect();
                     reply.send(all, &[]);
                     continue;
@@ -422,7 +536,7 @@ impl Settings {
                     let refused = refused.into_iter().map(|r| Wait {
                         failed: Some(format!(
                             "{} refused: {}",
-                            parameter_name(r.ac_id, r.index),
+                            self.naming.name(r.ac_id, r.index),
                             r.why
                         )),
                         ..Wait::new(r.ac_id, r.index, None)
@@ -483,7 +597,10 @@ impl Settings {
             })
         });
         if let Some(w) = wait {
-            w.failed = Some(format!("{} not sent: {why}", parameter_name(ac_id, index)));
+            w.failed = Some(format!(
+                "{} not sent: {why}",
+                self.naming.name(ac_id, index)
+            ));
         }
         self.answer_complete();
     }
@@ -510,17 +627,17 @@ impl Settings {
                     let wire = quantize(base, requested);
                     if !(wire == value || (wire.is_nan() && value.is_nan())) {
                         warnings.push(Warning(format!(
-                            "setting {index} of aircraft {ac_id} not applied: asked {requested}, the aircraft reports {value}"
+                            "setting {} of aircraft {ac_id} not applied: asked {}, the aircraft reports {}",
+                            self.naming.describe(index),
+                            self.naming.value_text(index, requested),
+                            self.naming.value_text(index, value)
                         )));
                     }
                 }
             }
         }
         self.answer_complete();
-        (
-            Parameter::float64(parameter_name(ac_id, index), value),
-            warnings,
-        )
+        (self.parameter(ac_id, index, value), warnings)
     }
 
     /// Answers the requests whose settings all reported (or failed).
@@ -546,7 +663,8 @@ impl Settings {
             for w in p.waits.iter().filter(|w| !w.done()) {
                 warnings.push(Warning(format!(
                     "setting {} of aircraft {}: no answer in {ANSWER_TIMEOUT} s",
-                    w.index, w.ac_id
+                    self.naming.describe(w.index),
+                    w.ac_id
                 )));
             }
             self.answer(p);
@@ -596,7 +714,7 @@ mod tests {
     }
 
     fn settings() -> (Settings, SyncSender<Call>) {
-        let (s, handler) = Settings::new();
+        let (s, handler) = Settings::new(Naming::default());
         (s, handler.tx)
     }
 
@@ -704,7 +822,7 @@ mod tests {
         assert_eq!(answers.values.lock().unwrap().len(), 1);
         assert_eq!(*answers.errors.lock().unwrap(), [BUSY]);
         // The channel itself is bounded: the handler answers empty when it is full.
-        let (s2, handler) = Settings::new();
+        let (s2, handler) = Settings::new(Naming::default());
         for _ in 0..MAX_PENDING {
             handler.pass(Call::Get(vec![(7, 1)], respond(&answers)));
         }
@@ -730,7 +848,8 @@ mod tests {
             Parameter::float64("/ac/7/settings/3", -1e39),
             Parameter::string("/ac/7/settings/4", "x"),
         ];
-        tx.try_send(set_call(&bad, respond(&answers))).unwrap();
+        tx.try_send(set_call(&Naming::default(), &bad, respond(&answers)))
+            .unwrap();
         assert_eq!(s.poll(0.0), [], "nothing is sent");
         assert_eq!(s.not_sent_counts().refused, 3);
         // Answered at once: the value known, and why.
@@ -756,7 +875,8 @@ mod tests {
             Parameter::float64("/ac/7/settings/2", 2.5),
             Parameter::float64("/ac/7/settings/5", f64::from(f32::MAX) * 2.0),
         ];
-        tx.try_send(set_call(&mixed, respond(&answers))).unwrap();
+        tx.try_send(set_call(&Naming::default(), &mixed, respond(&answers)))
+            .unwrap();
         assert_eq!(
             s.poll(1.0),
             [SettingRequest::Set {
@@ -801,5 +921,108 @@ mod tests {
         assert_eq!(s.not_sent_counts().unsent, 3);
         // Nothing left to time out.
         assert!(s.expire(100.0).is_empty());
+    }
+
+    fn named() -> Naming {
+        let table = SettingsTable::parse(&[(
+            "s.xml",
+            r#"<settings><dl_settings>
+              <dl_setting var="gain" min="0" max="10"/>
+              <dl_setting var="ins.roll_neutral" shortname="roll" min="-15" max="15" unit="rad" alt_unit="deg"/>
+              <dl_setting var="ap_mode" min="0" max="19" values="KILL|FAILSAFE|HOME|RATE_DIRECT|ATTITUDE_DIRECT|RATE_RC_CLIMB|ATTITUDE_RC_CLIMB|ATTITUDE_CLIMB|RATE_Z_HOLD|ATTITUDE_Z_HOLD|HOVER_DIRECT|HOVER_CLIMB|HOVER_Z_HOLD|NAV"/>
+              <dl_setting var="gain" min="0" max="5"/>
+            </dl_settings></settings>"#,
+        )])
+        .unwrap();
+        Naming::new(Some(Arc::new(table)))
+    }
+
+    #[test]
+    fn parameters_are_named_after_the_settings_files() {
+        let n = named();
+        assert_eq!(n.name(7, 0), "/ac/7/settings/gain");
+        assert_eq!(n.name(7, 1), "/ac/7/settings/ins.roll_neutral");
+        assert_eq!(n.name(8, 3), "/ac/8/settings/gain@3", "unique per aircraft");
+        assert_eq!(
+            n.name(7, 9),
+            "/ac/7/settings/9",
+            "beyond the files: the index"
+        );
+        assert_eq!(n.parse("/ac/7/settings/ins.roll_neutral"), Some((7, 1)));
+        assert_eq!(n.parse("/ac/7/settings/gain@3"), Some((7, 3)));
+        assert_eq!(n.parse("/ac/7/settings/roll"), None, "the unique name only");
+        assert_eq!(n.parse("/ac/7/settings/1"), None, "names, not indices");
+        assert_eq!(n.parse("/ac/300/settings/gain"), None);
+        // Without files: by index, as before.
+        let plain = Naming::default();
+        assert_eq!(plain.name(7, 1), "/ac/7/settings/1");
+        assert_eq!(plain.parse("/ac/7/settings/1"), Some((7, 1)));
+        assert_eq!(plain.parse("/ac/7/settings/gain"), None);
+    }
+
+    /// A named parameter is set in its display unit or by label, checked against the
+    /// bounds (refused with a clear status, nothing sent), and published in its display
+    /// unit.
+    #[test]
+    fn named_parameters_are_bound_checked_and_in_display_units() {
+        let (mut s, handler) = Settings::new(named());
+        let answers = Answers::default();
+        let params = [
+            Parameter::float64("/ac/7/settings/ins.roll_neutral", 10.0),
+            Parameter::string("/ac/7/settings/ap_mode", "NAV"),
+            Parameter::float64("/ac/7/settings/gain", 12.0),
+            Parameter::float64("/ac/7/settings/gain@3", f64::NAN),
+            Parameter::string("/ac/7/settings/ap_mode", "WARP"),
+        ];
+        handler
+            .tx
+            .try_send(set_call(&handler.naming, &params, respond(&answers)))
+            .unwrap();
+        let roll = (10.0f64 / (180.0 / std::f64::consts::PI)) as f32;
+        assert_eq!(
+            s.poll(0.0),
+            [
+                SettingRequest::Set {
+                    ac_id: 7,
+                    index: 1,
+                    value: f64::from(roll)
+                },
+                SettingRequest::Set {
+                    ac_id: 7,
+                    index: 2,
+                    value: 13.0
+                },
+            ]
+        );
+        assert_eq!(s.not_sent_counts().refused, 3);
+        let (p, warnings) = s.dl_value(7, 1, f64::from(roll), BaseType::F32);
+        assert!(warnings.is_empty());
+        assert_eq!(p.name, "/ac/7/settings/ins.roll_neutral");
+        assert_eq!(p.value, Some(ParameterValue::Float64(10.0)));
+        let (_, warnings) = s.dl_value(7, 2, 2.0, BaseType::F32);
+        assert_eq!(
+            warnings,
+            [Warning(
+                "setting ap_mode (index 2) of aircraft 7 not applied: asked NAV (13), the aircraft reports HOME (2)".to_owned()
+            )]
+        );
+        let errors = answers.errors.lock().unwrap().clone();
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        for expected in [
+            "/ac/7/settings/gain refused: setting gain (index 0): 12 is outside its bounds [0, 10]",
+            "/ac/7/settings/gain@3 refused: setting gain (index 3): NaN is not a finite number (bounds [0, 5])",
+            "/ac/7/settings/ap_mode refused: setting ap_mode (index 2): `WARP` is neither a number nor a label",
+        ] {
+            assert!(errors[0].contains(expected), "{expected}\n{errors:?}");
+        }
+        assert_eq!(
+            answers.values.lock().unwrap()[0],
+            [
+                ("/ac/7/settings/ins.roll_neutral".to_owned(), 10.0),
+                ("/ac/7/settings/ap_mode".to_owned(), 2.0),
+                // The refused label: answered with the value known.
+                ("/ac/7/settings/ap_mode".to_owned(), 2.0)
+            ]
+        );
     }
 }

@@ -3,7 +3,7 @@
 //!
 //! Exit status: 0 after a complete run (end of input, `--duration`, Ctrl-C), 1 when
 //! the input, the output or the recording failed, 2 for invalid options (an unusable
-//! `--secure` key file included).
+//! `--secure` key file, a settings file with errors, a `--setting` refused included).
 
 use std::fs::File;
 use std::io::{BufWriter, ErrorKind, Write};
@@ -17,12 +17,13 @@ use std::time::{Duration, Instant};
 mod record;
 
 use clap::Parser;
-use pprz_ground::cli::Args;
+use pprz_ground::cli::{Args, SettingValue};
 use pprz_ground::escape;
 use pprz_ground::input::{self, DEFAULT_CAPACITY, Drops, End, InputQueue, Overflow, Pop};
 use pprz_ground::monitor::{Decoded, IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
+use pprz_ground::settings::{SettingsTable, SweepConfig};
 use pprz_ground::uplink;
 use pprz_ground::viewer::{self, Viewer};
 use pprz_transports::AnyTransport;
@@ -304,12 +305,21 @@ fn send_secure(monitor: &mut Monitor, sink: &mut UplinkSink, t: f64) {
     }
 }
 
-/// Opens `--mcap` (after checking it is no input) and starts `--foxglove`.
-fn open_viewer(args: &Args, inputs: &Inputs, uplink: bool) -> Result<Option<Viewer>, String> {
+/// Opens `--mcap` (after checking it is no input) and starts `--foxglove`, naming the
+/// settings after `table`.
+fn open_viewer(
+    args: &Args,
+    inputs: &Inputs,
+    uplink: bool,
+    table: Option<&Arc<SettingsTable>>,
+) -> Result<Option<Viewer>, String> {
     if args.mcap.is_none() && args.foxglove.is_none() {
         return Ok(None);
     }
     let mut viewer = Viewer::new().max_clients(args.foxglove_clients);
+    if let Some(table) = table {
+        viewer = viewer.settings_table(table.clone());
+    }
     if let Some(path) = &args.mcap {
         let file = record::open_recording(path, inputs).map_err(|e| e.to_string())?;
         viewer
@@ -325,12 +335,54 @@ fn open_viewer(args: &Args, inputs: &Inputs, uplink: bool) -> Result<Option<View
     Ok(Some(viewer))
 }
 
+/// What the options give once checked: the settings files' table (its warnings
+/// printed) and the `--setting`s resolved against it.
+struct Prepared {
+    table: Option<Arc<SettingsTable>>,
+    settings: Vec<SettingValue>,
+}
+
+/// Reads `--settings` and resolves `--setting`, before anything is sent; the error lines
+/// to print otherwise (exit status 2).
+fn prepare(args: &Args) -> Result<Prepared, String> {
+    let table = if args.settings_files.is_empty() {
+        None
+    } else {
+        let table = SettingsTable::load(&args.settings_files).map_err(|e| {
+            let lines: Vec<String> = e
+                .diagnostics()
+                .iter()
+                .map(|d| format!("error: {}", escape::lines(&d.to_string())))
+                .collect();
+            lines.join("\n")
+        })?;
+        for w in table.warnings() {
+            eprintln!("warning: {}", escape::lines(&w.to_string()));
+        }
+        Some(Arc::new(table))
+    };
+    let settings = args
+        .setting
+        .iter()
+        .map(|s| s.resolve(table.as_deref()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| format!("error: {e}"))?;
+    Ok(Prepared { table, settings })
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if let Err(e) = args.check() {
         eprintln!("error: {e}");
         return ExitCode::from(2);
     }
+    let prepared = match prepare(&args) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::from(2);
+        }
+    };
     let secure = match (&args.secure, args.aircraft().as_slice()) {
         (None, _) => None,
         // `check` made sure there is one aircraft.
@@ -346,7 +398,7 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    match run(&args, secure) {
+    match run(&args, secure, prepared) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", escape::lines(&e));
@@ -355,13 +407,13 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
+fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<(), String> {
     let set = load_set(&args.messages)?;
     let transport: AnyTransport = args.transport.any();
     let (source, uplink_sink, mut inputs) = open_input(args)?;
     let recorder = open_recorder(args, &mut inputs, transport)?;
     let has_uplink = !matches!(uplink_sink, UplinkSink::None);
-    let viewer = open_viewer(args, &inputs, has_uplink)?;
+    let viewer = open_viewer(args, &inputs, has_uplink, prepared.table.as_ref())?;
     let queue = start_reading(source);
     let stop = stop_on_ctrl_c();
     let live = queue.overflow() == Overflow::DropOldest;
@@ -374,6 +426,14 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
     }
     if let Some(secure) = secure {
         monitor = monitor.with_secure(secure).map_err(|e| e.to_string())?;
+    }
+    if let Some(table) = &prepared.table {
+        monitor = monitor.with_settings(table.clone());
+        if args.read_settings {
+            for ac_id in args.aircraft() {
+                monitor.read_settings(ac_id, table.len(), SweepConfig::default());
+            }
+        }
     }
     let out = Output {
         lines: args.lines,
@@ -388,6 +448,7 @@ fn run(args: &Args, secure: Option<GroundSecure>) -> Result<(), String> {
         last_ns: 0,
     };
     let mut run = Run::new(args, monitor, out, uplink_sink, transport, live);
+    run.settings = prepared.settings;
     while !stop.load(Ordering::SeqCst) && !run.out.failed() {
         let t = run.now();
         if args.duration.is_some_and(|d| t >= d) {
@@ -468,8 +529,14 @@ struct Run<'a> {
     /// A live link (not a file or standard input).
     live: bool,
     start: Instant,
+    /// `--setting`, resolved.
+    settings: Vec<SettingValue>,
     /// The SETTINGs go at start, or once the secure session is up.
     settings_pending: bool,
+    /// `--read-settings` in `--lines` mode: when the progress is next written, and the
+    /// settings read per aircraft when it was last written.
+    next_sweep_report: f64,
+    sweep_reported: std::collections::BTreeMap<u8, usize>,
     secure_report: SecureReport,
     next_ping: Option<f64>,
     next_render: f64,
@@ -500,7 +567,10 @@ impl<'a> Run<'a> {
             aircraft: args.aircraft(),
             live,
             start: Instant::now(),
+            settings: Vec::new(),
             settings_pending: true,
+            next_sweep_report: 0.0,
+            sweep_reported: std::collections::BTreeMap::new(),
             secure_report: SecureReport::default(),
             next_ping: args.ping.map(|_| 0.0),
             next_render: 0.0,
@@ -532,12 +602,48 @@ impl<'a> Run<'a> {
         }
         self.send_viewer_requests(t);
         self.send_pings(t);
+        if self.monitor.uplink_ready() {
+            self.send_sweeps(t);
+        }
+    }
+
+    /// Sends the GET_SETTINGs of `--read-settings` due at `t`, and in `--lines` mode
+    /// writes the progress (at most once a second, when it changed).
+    fn send_sweeps(&mut self, t: f64) {
+        for (ac_id, index) in self.monitor.sweep_requests(t) {
+            let values = [("index", f64::from(index)), ("ac_id", f64::from(ac_id))];
+            let (monitor, sink) = (&mut self.monitor, &mut self.uplink);
+            if send(monitor, sink, self.transport, ac_id, "GET_SETTING", &values) {
+                monitor.get_setting_sent(Some(ac_id), t, index);
+            }
+        }
+        if !self.args.lines || t < self.next_sweep_report {
+            return;
+        }
+        self.next_sweep_report = t + 1.0;
+        let several = self.aircraft.len() > 1;
+        for &ac_id in &self.aircraft {
+            let Some(sweep) = self.monitor.aircraft_state(ac_id).and_then(|a| a.sweep()) else {
+                continue;
+            };
+            let last = self.sweep_reported.insert(ac_id, sweep.read());
+            if sweep.done() || last == Some(sweep.read()) {
+                continue;
+            }
+            let about = if several {
+                format!("aircraft {ac_id}: ")
+            } else {
+                String::new()
+            };
+            let line = sweep.line(self.monitor.settings_table());
+            eprintln!("[{t:7.1}s] {about}{line}");
+        }
     }
 
     /// Sends `--setting` to every aircraft.
     fn send_settings(&mut self) {
         for &ac_id in &self.aircraft {
-            for &(index, value) in &self.args.settings {
+            for &SettingValue { index, value } in &self.settings {
                 let values = [
                     ("index", f64::from(index)),
                     ("ac_id", f64::from(ac_id)),
