@@ -6,9 +6,10 @@ use std::io::Write as _;
 use std::net::UdpSocket;
 use std::process::Command;
 
+/// The example application's settings file (what the aircraft of the SITL runs).
 const FIXTURE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/tests/fixtures/app-settings.xml"
+    "/../examples/app/settings.xml"
 );
 
 /// A free loopback UDP address (bound then released).
