@@ -7,10 +7,7 @@ use std::net::UdpSocket;
 use std::process::Command;
 
 /// The example application's settings file (what the aircraft of the SITL runs).
-const FIXTURE: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../examples/app/settings.xml"
-);
+const FIXTURE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/app/settings.xml");
 
 /// A free loopback UDP address (bound then released).
 fn free_addr() -> String {
