@@ -16,7 +16,7 @@ use core::ops::Range;
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embedded_storage_async::nor_flash::NorFlash;
-use pprz_messages::settings::{SettingDesc, SettingType, fnv1a};
+use pprz_messages::settings::{SettingDesc, fnv1a};
 use pprz_telemetry::settings::{SettingEntry, Settings};
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
 use sequential_storage::cache::page_pointers::ArrayPagePointers;
