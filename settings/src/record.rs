@@ -258,7 +258,26 @@ impl<'a> Record<'a> {
 
     /// The entry stored under `key`, if any.
     pub fn find(&self, key: u32) -> Option<Entry> {
-        self.entries().find(|e| e.key == key)
+        self.position(key, 0).map(|(_, e)| e)
+    }
+
+    /// The entry at position `i` (stored order).
+    pub fn entry(&self, i: usize) -> Option<Entry> {
+        let start = HEADER_LEN + i.checked_mul(ENTRY_LEN)?;
+        let chunk = self.bytes.get(start..start.checked_add(ENTRY_LEN)?)?;
+        Entry::decode(chunk).ok()
+    }
+
+    /// The position and entry stored under `key`, looking at position `hint` first (a
+    /// record saved by the same table has its entries in the table's order, so a reader
+    /// walking the table finds each entry at once).
+    pub fn position(&self, key: u32, hint: usize) -> Option<(usize, Entry)> {
+        if let Some(e) = self.entry(hint)
+            && e.key == key
+        {
+            return Some((hint, e));
+        }
+        self.entries().enumerate().find(|(_, e)| e.key == key)
     }
 
     /// The record's bytes.

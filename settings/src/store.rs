@@ -16,7 +16,7 @@ use core::ops::Range;
 
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embedded_storage_async::nor_flash::NorFlash;
-use pprz_messages::settings::{SettingDesc, SettingType, fnv1a};
+use pprz_messages::settings::{SettingDesc, fnv1a};
 use pprz_telemetry::settings::{SettingEntry, Settings};
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
 use sequential_storage::cache::page_pointers::ArrayPagePointers;
@@ -583,20 +583,13 @@ fn persistent_count<M: RawMutex, const N: usize>(table: &Settings<'_, M, N>) -> 
     count
 }
 
-/// The first persistent setting of `table` stored under `key`: its index and type.
-fn find_persistent<M: RawMutex, const N: usize>(
-    table: &Settings<'_, M, N>,
-    key: u32,
-) -> Option<(u8, SettingType)> {
-    (0..=u8::MAX).take(table.len()).find_map(|index| {
-        let desc = persistent(&table.entry(index)?)?;
-        (desc.key() == key).then_some((index, desc.ty))
-    })
-}
-
 /// Applies `record` to `table`: each entry goes to the first persistent setting with its
 /// key, if the types match, through [`Settings::try_set`] (bounds apply). Entries of
 /// other keys, or of another type, are counted and ignored.
+///
+/// One walk of the table: each setting finds its entry at the position the walk expects
+/// (a record saved by the same table is in the table's order), else by a search, so
+/// loading a record of the same firmware takes time linear in the settings.
 pub fn apply<M: RawMutex, const N: usize>(
     record: &Record<'_>,
     table: &Settings<'_, M, N>,
@@ -606,23 +599,37 @@ pub fn apply<M: RawMutex, const N: usize>(
         entries: record.len(),
         ..LoadReport::default()
     };
-    for entry in record.entries() {
-        match find_persistent(table, entry.key) {
-            None => report.unknown += 1,
-            Some((_, ty)) if ty != entry.ty => report.mismatched += 1,
-            Some((index, _)) => match table.try_set(index, entry.value) {
-                Ok(_) => report.applied += 1,
-                Err(_) => report.refused += 1,
-            },
-        }
-    }
-    table.for_each(|_, setting| {
-        if let Some(desc) = persistent(&setting)
-            && record.find(desc.key()).is_none()
-        {
+    // Record entries already given to a setting (at most 255 entries).
+    let mut used = [0u32; 8];
+    let mut next = 0;
+    table.for_each(|index, setting| {
+        let Some(desc) = persistent(&setting) else {
+            return;
+        };
+        let Some((at, entry)) = record.position(desc.key(), next) else {
             report.missing += 1;
+            return;
+        };
+        next = at + 1;
+        let (word, bit) = (at / 32, 1u32 << (at % 32));
+        let Some(slot) = used.get_mut(word) else {
+            return;
+        };
+        if *slot & bit != 0 {
+            // A variable bound to a second setting: given to the first only.
+            return;
+        }
+        *slot |= bit;
+        if entry.ty != desc.ty {
+            report.mismatched += 1;
+        } else if table.try_set(index, entry.value).is_ok() {
+            report.applied += 1;
+        } else {
+            report.refused += 1;
         }
     });
+    let matched: u32 = used.iter().map(|w| w.count_ones()).sum();
+    report.unknown = record.len() - matched as usize;
     report
 }
 
