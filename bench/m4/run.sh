@@ -6,7 +6,8 @@
 # downlink workloads of the host benchmarks (issue 16: instructions per message / per
 # byte), the secure link's handshake steps and per-frame work (issue 14), each also in
 # ms on a 168 MHz Cortex-M4 (STM32F405) assuming one instruction per cycle (an
-# approximation: loads, taken branches and flash wait states cost more), then the
+# approximation: loads, taken branches and flash wait states cost more), the persistent
+# settings' boot load and store of 100 settings (per setting, and the total), then the
 # firmware's flash.
 #
 #   bash bench/m4/run.sh          # from anywhere; a few seconds once built

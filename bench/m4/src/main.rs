@@ -8,7 +8,9 @@
 //!   `critical-section-single-core`: an interrupt mask);
 //! * the secure link's costs (issue 14): each handshake step of both ends and the
 //!   per-frame seal and open of a frame with 40 bytes of message fields, with the firmware
-//!   backend of `pprz-secure` (`salty`).
+//!   backend of `pprz-secure` (`salty`);
+//! * the persistent settings' cost ([`settings`]): `pprz-settings` loading 100 persistent
+//!   settings at boot, and storing them, over RAM flash of an STM32F405's geometry.
 //!
 //! Run under QEMU's `mps2-an386` with `-icount shift=0` (`run.sh`): QEMU then advances
 //! its virtual clock by 1 ns per guest instruction, and the board's timers count that
@@ -24,6 +26,7 @@
 #![no_main]
 
 mod hw;
+mod settings;
 mod time_driver;
 
 use core::fmt::Write;
@@ -81,6 +84,7 @@ fn main() -> ! {
     workloads(&mut out, &timer);
     handshakes(&mut out, &timer);
     frames(&mut out, &timer);
+    settings::settings(&mut out, &timer);
     let _ = writeln!(out, "done");
     hw::exit(true)
 }

@@ -1,0 +1,6 @@
+//! A firmware with 0 generated settings, without persistence (see the crate).
+
+#![no_std]
+#![no_main]
+
+pprz_footprint_settings::firmware!(0);
