@@ -307,10 +307,10 @@ pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
     radio_rx: R,
     config: Config,
     secure: &pprz_secure::link::SecureLink<M>,
-    responder: pprz_secure::Responder,
-    rng: G,
+    mut responder: pprz_secure::Responder,
+    mut rng: G,
 ) -> Result<Infallible, SetupError> {
-    let extra = secure_tasks(radio, secure, responder, rng);
+    let extra = secure_tasks(radio, secure, &mut responder, &mut rng);
     run_with_layer(radio, radio_rx, RadioOnly, config, secure, extra, NoStore).await
 }
 
@@ -326,8 +326,8 @@ pub async fn run_secure_aircraft_with_store<R, G, S, C, const BUF: usize>(
     radio_rx: R,
     config: Config,
     secure: &pprz_secure::link::SecureLink<M>,
-    responder: pprz_secure::Responder,
-    rng: G,
+    mut responder: pprz_secure::Responder,
+    mut rng: G,
     store: &mut PersistentStore<S, C, BUF>,
     control: &StoreControl<M>,
 ) -> Result<Infallible, SetupError>
@@ -337,7 +337,7 @@ where
     S: NorFlash,
     C: CacheImpl<u8>,
 {
-    let extra = secure_tasks(radio, secure, responder, rng);
+    let extra = secure_tasks(radio, secure, &mut responder, &mut rng);
     let persistence = WithStore { store, control };
     run_with_layer(
         radio,
@@ -356,13 +356,13 @@ where
 async fn secure_tasks<G: pprz_secure::rand_core::CryptoRng>(
     radio: Device<'_>,
     secure: &pprz_secure::link::SecureLink<M>,
-    mut responder: pprz_secure::Responder,
-    mut rng: G,
+    responder: &mut pprz_secure::Responder,
+    rng: &mut G,
 ) -> Infallible {
     use pprz_default::messages::telemetry::SecureLinkStatus;
     let handshake = secure.run_responder(
-        &mut responder,
-        &mut rng,
+        responder,
+        rng,
         radio.sender(),
         pprz_telemetry::Targets::from(radio),
     );

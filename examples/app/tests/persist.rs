@@ -200,3 +200,33 @@ fn a_failed_store_reads_0() {
     assert_eq!((control.stats().stores, control.stats().failures), (0, 1));
     assert_eq!(control.stats().load_failures, 0);
 }
+
+/// A flash that holds no map (all zeros, as the emulated board's PSRAM without a file):
+/// the boot load fails (counted), the store is cleared, and storing then works.
+#[test]
+fn a_flash_without_a_map_is_cleared_at_boot() {
+    let mut mem = vec![0_u8; FLASH];
+    let mem: &mut [u8; FLASH] = mem.as_mut_slice().try_into().unwrap();
+    let mut store = Store::with_page_cache(Flash::new(mem), 0..FLASH as u32).unwrap();
+    let control = StoreControl::<M>::new();
+    let frames = vec![
+        (1_005, setting_frame(GAIN, 4.5)),
+        (1_505, setting_frame(SETTINGS_STORE_FLAG, 1.0)),
+    ];
+    let values = boot(&mut store, &control, frames, 2_000);
+    let stats = control.stats();
+    assert_eq!((stats.loads, stats.load_failures), (1, 1));
+    assert_eq!((stats.stores, stats.failures), (1, 0), "{values:?}");
+
+    let mem = store.into_flash().into_inner();
+    let mut store = Store::with_page_cache(Flash::new(mem), 0..FLASH as u32).unwrap();
+    let control = StoreControl::<M>::new();
+    let values = boot(
+        &mut store,
+        &control,
+        vec![(505, get_setting_frame(GAIN))],
+        600,
+    );
+    assert_eq!(values_of(&values, GAIN, 505, 600), [4.5], "{values:?}");
+    assert_eq!(control.stats().load_failures, 0);
+}
