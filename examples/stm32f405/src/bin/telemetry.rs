@@ -135,8 +135,8 @@ type Store = PersistentStore<Bank1Region1<'static, Async>, PageCache<3>, { buffe
 static STORE: StaticCell<Store> = StaticCell::new();
 /// The store flag's control. The example vehicle is simulated and has no motors, so it
 /// accepts every request; an aircraft stores only with its motors killed
-/// (`StoreControl::with_guard`): erasing a sector stalls the CPU for up to half a
-/// second, and the radio's interrupt-driven UART loses what arrives meanwhile.
+/// (`StoreControl::with_guard`): erasing a sector stalls the CPU for hundreds of
+/// milliseconds, and the radio's interrupt-driven UART loses what arrives meanwhile.
 static CONTROL: StoreControl<M> = StoreControl::new();
 
 #[embassy_executor::task]
