@@ -218,8 +218,9 @@ pub async fn run_aircraft<R: Read>(
 /// repair, or written by a firmware with a larger buffer), it is cleared so that the
 /// next store works.
 ///
-/// If this future is dropped (a firmware never drops it), the store may be dropped
-/// mid-way, as in a power cut: build a new store over the flash before using it again.
+/// If this future is dropped (a firmware never drops it), a store in progress stops
+/// mid-way, as in a power cut, which the store survives: the flash holds the previous
+/// snapshot or the new one, and `store` can be used again.
 ///
 /// # Errors
 /// As [`run_aircraft`].
@@ -606,8 +607,7 @@ async fn run_with_layer<'d, 'c, R: Read, L: LinkLayer + ?Sized>(
 /// The settings store is one of the extra ones, though its futures must never be dropped
 /// mid-way: a `select` drops its other branches when one ends, and here none ends. The
 /// whole application ends only when its future is dropped (a firmware never drops it);
-/// the store's flash is then left as after a power cut, which it survives: start again
-/// with a new store over it.
+/// the store's flash is then left as after a power cut, which the store survives.
 async fn forever<A, B, C, D>(
     app: impl Future<Output = Either4<A, B, C, D>>,
     extra: impl Future<Output = Either3<Infallible, Infallible, Infallible>>,
