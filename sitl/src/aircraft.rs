@@ -3,6 +3,8 @@
 //! flood, aircraft 7 relaying for aircraft 8). [`start`] builds them from the options
 //! and runs them on a thread of their own.
 
+use std::convert::Infallible;
+
 use embassy_executor::{Executor, Spawner};
 use embassy_sync::pipe::Pipe;
 use embassy_time::{Duration, Instant, Ticker};
@@ -11,7 +13,7 @@ use pprz_default::messages::MESSAGES;
 use pprz_default::messages::telemetry::Payload;
 use pprz_devices::host::HostDevice;
 use pprz_devices::sim::{SimLink, SimRx, SimTx};
-use pprz_example_app::{AC_ID, Config, M, RelayCounters};
+use pprz_example_app::{AC_ID, Config, M, RelayCounters, SetupError};
 use pprz_messages::{Message, VarArray};
 use pprz_secure::Responder;
 use pprz_secure::link::SecureLink;
@@ -25,6 +27,7 @@ use static_cell::StaticCell;
 use crate::bridge::ground_bridge;
 use crate::fleet::{self, SECOND_AC_ID};
 use crate::options::{Args, TransportArg};
+use crate::persist::{self, SitlStore};
 use crate::radio::{RADIO_RING, Radio, RadioPlan};
 use crate::{clock, link, record};
 
@@ -107,6 +110,7 @@ pub fn start(
     args: &Args,
     plan: &RadioPlan,
     responder: Option<Responder>,
+    store: Option<&'static mut SitlStore>,
     udp: HostDevice,
 ) -> Result<Aircraft, String> {
     let radio: &'static Radio = RADIO.init(SimLink::new(plan.sim_config(args.flow_control)));
@@ -139,6 +143,7 @@ pub fn start(
         second,
         config: config(plan, health),
         responder,
+        store,
         xbee: plan.xbee(),
         flood: plan.flood_bytes_per_s,
         udp,
@@ -190,6 +195,8 @@ struct Tasks {
     second: Option<Second>,
     config: Config,
     responder: Option<Responder>,
+    /// `--settings-flash`: aircraft 7's store (one aircraft only).
+    store: Option<&'static mut SitlStore>,
     xbee: bool,
     flood: u32,
     udp: HostDevice,
@@ -223,17 +230,18 @@ impl Tasks {
             spawner.spawn(radio_writer(self.link_port, tx_7, None).unwrap());
             spawner.spawn(radio_writer(second.port, tx_8, None).unwrap());
             spawner.spawn(relay_aircraft(radio_device, air_rx, link_device, rx_7, config).unwrap());
-            spawner.spawn(aircraft(device_8, rx_8, config_8).unwrap());
+            spawner.spawn(aircraft(device_8, rx_8, config_8, None).unwrap());
         } else if let Some(responder) = self.responder {
-            spawner.spawn(secure_aircraft(radio_device, air_rx, config, responder).unwrap());
+            let task = secure_aircraft(radio_device, air_rx, config, responder, self.store);
+            spawner.spawn(task.unwrap());
         } else if self.xbee {
             spawner.spawn(xbee_reader(air_rx, radio_device).unwrap());
-            spawner.spawn(aircraft_piped(radio_device, config).unwrap());
+            spawner.spawn(aircraft_piped(radio_device, config, self.store).unwrap());
             if self.flood > 0 {
                 spawner.spawn(xbee_flood(radio_device.sender(), self.flood).unwrap());
             }
         } else {
-            spawner.spawn(aircraft(radio_device, air_rx, config).unwrap());
+            spawner.spawn(aircraft(radio_device, air_rx, config, self.store).unwrap());
         }
         spawner.spawn(ground_bridge(ground, self.udp, self.xbee, secure).unwrap());
     }
@@ -252,17 +260,35 @@ async fn radio_writer(
     }
 }
 
-/// The application on a secure radio (PPRZ v2), with its handshake.
+/// The application on a secure radio (PPRZ v2), with its handshake (and its settings
+/// in `store`, if given).
 #[embassy_executor::task]
 async fn secure_aircraft(
     radio: Device<'static>,
     rx: SimRx<'static, M, RADIO_RING>,
     config: Config,
     responder: Responder,
+    store: Option<&'static mut SitlStore>,
 ) {
     let rng = OsRng.unwrap_err();
-    let Err(e) =
-        pprz_example_app::run_secure_aircraft(radio, rx, config, &SECURE, responder, rng).await;
+    let Err(e) = match store {
+        Some(store) => {
+            pprz_example_app::run_secure_aircraft_with_store(
+                radio,
+                rx,
+                config,
+                &SECURE,
+                responder,
+                rng,
+                store,
+                &persist::CONTROL,
+            )
+            .await
+        }
+        None => {
+            pprz_example_app::run_secure_aircraft(radio, rx, config, &SECURE, responder, rng).await
+        }
+    };
     panic!("the aircraft application cannot start: {e}");
 }
 
@@ -290,18 +316,45 @@ async fn relay_aircraft(
     panic!("the aircraft application cannot start: {e}");
 }
 
-/// The application reading its uplink from the radio (PPRZ v2).
+/// The application reading its uplink from the radio (PPRZ v2), with its settings in
+/// `store`, if given.
 #[embassy_executor::task(pool_size = 2)]
-async fn aircraft(radio: Device<'static>, rx: SimRx<'static, M, RADIO_RING>, config: Config) {
-    let Err(e) = pprz_example_app::run_aircraft(radio, rx, config).await;
+async fn aircraft(
+    radio: Device<'static>,
+    rx: SimRx<'static, M, RADIO_RING>,
+    config: Config,
+    store: Option<&'static mut SitlStore>,
+) {
+    let Err(e) = run_aircraft(radio, rx, config, store).await;
     panic!("the aircraft application cannot start: {e}");
 }
 
-/// The application reading its uplink from [`UPLINK_PIPE`] (XBee).
+/// The application reading its uplink from [`UPLINK_PIPE`] (XBee), with its settings in
+/// `store`, if given.
 #[embassy_executor::task]
-async fn aircraft_piped(radio: Device<'static>, config: Config) {
-    let Err(e) = pprz_example_app::run_aircraft(radio, &UPLINK_PIPE, config).await;
+async fn aircraft_piped(
+    radio: Device<'static>,
+    config: Config,
+    store: Option<&'static mut SitlStore>,
+) {
+    let Err(e) = run_aircraft(radio, &UPLINK_PIPE, config, store).await;
     panic!("the aircraft application cannot start: {e}");
+}
+
+/// The application, with its settings in `store` if given.
+async fn run_aircraft<R: Read>(
+    radio: Device<'static>,
+    rx: R,
+    config: Config,
+    store: Option<&'static mut SitlStore>,
+) -> Result<Infallible, SetupError> {
+    match store {
+        Some(store) => {
+            pprz_example_app::run_aircraft_with_store(radio, rx, config, store, &persist::CONTROL)
+                .await
+        }
+        None => pprz_example_app::run_aircraft(radio, rx, config).await,
+    }
 }
 
 /// The aircraft's XBee API reader: transmit statuses go to the radio device's writer

@@ -1,9 +1,9 @@
 //! The ground station in this process (without `--headless`): it listens for the
 //! telemetry on UDP, decodes it live, runs the key exchange of `--secure`, PINGs every
 //! aircraft (its PINGs keep their uplink alive), changes a setting at 3 s, sets
-//! `ap_mode` back to NAV at `--resume-nav`, serves `--foxglove`, and shows the live
-//! table or one line per message, the settings named after `--settings`. Its clock is
-//! the simulation's (the aircraft's).
+//! `ap_mode` back to NAV at `--resume-nav`, sends the SETTINGs of `--setting` at their
+//! times, serves `--foxglove`, and shows the live table or one line per message, the
+//! settings named after `--settings`. Its clock is the simulation's (the aircraft's).
 
 use std::net::UdpSocket;
 use std::sync::Arc;
@@ -25,8 +25,8 @@ use pprz_secure::GroundKeys;
 use pprz_telemetry::pprz_transports::{AnyTransport, Framing, PprzV2};
 
 use crate::fleet::{self, SECOND_AC_ID};
-use crate::options::Args;
-use crate::{link, record};
+use crate::options::{Args, TimedSetting};
+use crate::{link, persist, record};
 
 /// Simulated seconds between two views of the live table at `--speed 1` or slower (at
 /// higher speeds, that many wall-clock seconds). The first view waits as long: a byte
@@ -101,6 +101,8 @@ impl Station {
             next_ping: 1.0,
             setting_sent: false,
             resume_sent: false,
+            timed: persist::timed_settings(args),
+            timed_sent: 0,
             next_render: render_period(args.speed),
             next_link: 0.0,
         })
@@ -152,6 +154,9 @@ pub struct Ground<'a> {
     setting_sent: bool,
     /// `--resume-nav`: the SETTING of `ap_mode` went.
     resume_sent: bool,
+    /// `--setting`, in time order, and how many went.
+    timed: Vec<TimedSetting>,
+    timed_sent: usize,
 }
 
 impl Ground<'_> {
@@ -179,6 +184,7 @@ impl Ground<'_> {
             self.ping(t);
             self.set_once(t);
             self.resume_nav(t);
+            self.timed_settings(t);
             self.serve_viewer_requests(t);
             self.receive(&mut buf, &sim_now);
             // Stale aircraft and expired requests, also while nothing arrives.
@@ -238,6 +244,17 @@ impl Ground<'_> {
         }
         self.set_all(t, link::AP_MODE_SETTING, f64::from(link::NAV));
         self.resume_sent = true;
+    }
+
+    /// `--setting`: each SETTING due by `t`, once (lost if the uplink is cut then).
+    fn timed_settings(&mut self, t: f64) {
+        while let Some(s) = self.timed.get(self.timed_sent).copied() {
+            if t < s.at_s || !self.monitor.uplink_ready() {
+                return;
+            }
+            self.set_all(t, s.index, s.value);
+            self.timed_sent += 1;
+        }
     }
 
     /// SETTING `index` = `value` to every aircraft at `t`.

@@ -27,7 +27,8 @@
 //! tasks) with [`clock`] and [`fleet`] (a second aircraft behind the first); [`bridge`]
 //! (the radio's ground end on UDP); [`ground`] (the ground station in this process,
 //! with [`keys`] for `--secure`); [`link`] (the outages of `--outage`, each aircraft's
-//! link health and its failsafe); [`record`], [`report`] and [`summary`] (the figures).
+//! link health and its failsafe); [`persist`] (`--settings-flash`, the persistent
+//! settings, and `--setting`); [`record`], [`report`] and [`summary`] (the figures).
 
 mod aircraft;
 mod bridge;
@@ -38,6 +39,7 @@ mod ground;
 mod keys;
 mod link;
 mod options;
+mod persist;
 mod radio;
 mod record;
 mod report;
@@ -105,11 +107,15 @@ fn plan_or_exit(args: &Args) -> RadioPlan {
 /// The run: what can fail is opened first, then the aircraft start, the ground runs
 /// until the end, and the summary is printed.
 fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
-    for warning in link::after_the_end(args) {
+    for warning in link::after_the_end(args)
+        .into_iter()
+        .chain(persist::after_the_end(args))
+    {
         eprintln!("sitl: {warning}");
     }
     let json = JsonFile::create(args).map_err(Failure::sitl)?;
     let keys = load_keys(args)?;
+    let store = persist::open(args).map_err(Failure::sitl)?;
     // The ground listens for telemetry before the aircraft starts.
     let station = if args.headless {
         None
@@ -127,7 +133,7 @@ fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
         Some(k) => (Some(Responder::new(AC_ID, k.aircraft)), k.ground),
         None => (None, None),
     };
-    let aircraft = aircraft::start(args, plan, responder, udp).map_err(Failure::sitl)?;
+    let aircraft = aircraft::start(args, plan, responder, store, udp).map_err(Failure::sitl)?;
     let stop = stop_on_ctrl_c();
     let start = StdInstant::now();
     let monitor = match station {

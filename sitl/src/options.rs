@@ -117,6 +117,18 @@ pub struct Args {
     /// HOME until the ground sets the mode again. Needs the in-process ground.
     #[arg(long, value_name = "SECONDS", value_parser = parse_instant)]
     pub resume_nav: Option<f64>,
+    /// At simulated time AT (seconds) the ground sends SETTING INDEX = VALUE to every
+    /// aircraft, once (e.g. `4:4=1` sets the store flag: the aircraft stores its
+    /// persistent settings). Repeat for several, at most 16. Needs the in-process
+    /// ground.
+    #[arg(long, value_name = "AT:INDEX=VALUE", value_parser = parse_timed_setting)]
+    pub setting: Vec<TimedSetting>,
+    /// Keep the aircraft's persistent settings (the gain) in this file: a simulated
+    /// flash of three 16 KiB pages, created erased when absent. They are loaded at start
+    /// and stored when the ground sets setting 4 (the store flag) to 1. Without it,
+    /// nothing persists from run to run. One aircraft only.
+    #[arg(long, value_name = "PATH")]
+    pub settings_flash: Option<PathBuf>,
     /// The messages.xml the monitor decodes with.
     #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../messages.xml"))]
     pub messages: PathBuf,
@@ -264,7 +276,37 @@ fn parse_outage(s: &str) -> Result<Outage, String> {
     })
 }
 
-/// A time in the run: simulated seconds from 0 to a year (`--outage`, `--resume-nav`).
+/// One `--setting`: the ground sends SETTING `index` = `value` at `at_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimedSetting {
+    /// When, simulated seconds.
+    pub at_s: f64,
+    /// The setting's index.
+    pub index: u8,
+    /// Its new value (finite).
+    pub value: f64,
+}
+
+/// `--setting AT:INDEX=VALUE`.
+fn parse_timed_setting(s: &str) -> Result<TimedSetting, String> {
+    const FORM: &str = "AT:INDEX=VALUE, e.g. 4:4=1";
+    let (at, rest) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}` is not {FORM}"))?;
+    let (index, value) = rest
+        .split_once('=')
+        .ok_or_else(|| format!("`{rest}` has no `=` ({FORM})"))?;
+    let index = integer_in(index, 0, u64::from(u8::MAX))? as u8;
+    let value = number_in(value, -f64::from(f32::MAX), f64::from(f32::MAX))?;
+    Ok(TimedSetting {
+        at_s: parse_instant(at)?,
+        index,
+        value,
+    })
+}
+
+/// A time in the run: simulated seconds from 0 to a year (`--outage`, `--resume-nav`,
+/// `--setting`).
 fn parse_instant(s: &str) -> Result<f64, String> {
     number_in(s, 0.0, cli::MAX_DURATION)
 }

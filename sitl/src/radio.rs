@@ -64,6 +64,7 @@ impl RadioPlan {
     /// The plan of `args`, or the message of a usage error.
     pub fn new(args: &Args) -> Result<Self, String> {
         crate::link::check(args)?;
+        crate::persist::check(args)?;
         let xbee = args.transport == TransportArg::Xbee;
         let serial_rate = args.baud / 10;
         let air_rate = args

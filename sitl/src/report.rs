@@ -75,6 +75,9 @@ pub fn print(
     }
     let summary = collect_summary(args, plan, aircraft);
     print!("{}", summary.text());
+    if let Some(line) = crate::persist::summary_line(args) {
+        print!("{line}");
+    }
     if let Some(m) = monitor {
         ground_lines(m, &summary);
     }

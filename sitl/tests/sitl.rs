@@ -204,6 +204,12 @@ fn nonsense_options_are_refused() {
         ("--lost-timeout", "inf"),
         ("--resume-nav", "-1"),
         ("--resume-nav", "NaN"),
+        ("--setting", "1:256=1"),
+        ("--setting", "1:4"),
+        ("--setting", "4=1"),
+        ("--setting", "-1:4=1"),
+        ("--setting", "1:4=NaN"),
+        ("--setting", "1:4=inf"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
             .args(["--headless", &format!("{option}={value}")])
@@ -273,6 +279,11 @@ fn contradictory_radio_options_are_refused() {
             &["--fleet 2", "--secure"],
         ),
         (&["--resume-nav", "5"], &["--resume-nav", "--headless"]),
+        (&["--setting", "1:4=1"], &["--setting", "--headless"]),
+        (
+            &["--fleet", "2", "--settings-flash", "unused.flash"],
+            &["--settings-flash", "--fleet 2"],
+        ),
         (
             &[
                 "--outage",
@@ -962,4 +973,70 @@ fn a_ping_flood_accounts_for_every_ping_the_ground_sent() {
         missing,
         "{line}"
     );
+}
+
+/// The value of the first DL_VALUE of setting `index` in `out` (`--lines`).
+fn first_dl_value(out: &str, index: u8) -> &str {
+    let prefix = format!("7 telemetry DL_VALUE index={index} value=");
+    out.lines()
+        .find_map(|l| l.strip_prefix(prefix.as_str()))
+        .unwrap_or_else(|| panic!("no DL_VALUE of setting {index}:\n{out}"))
+}
+
+/// `--settings-flash`: a first run sets the gain (the ground's 2.5 at 3 s, then 4.5 with
+/// `--setting`) and stores it (setting 4, the store flag); a second run on the same file
+/// starts with the stored gain: its first DL_VALUE of the gain (periodic, before the
+/// ground sets anything) shows 4.5. Without the option, the gain starts at 1.
+#[test]
+fn settings_flash_keeps_the_stored_gain_from_run_to_run() {
+    let path =
+        std::env::temp_dir().join(format!("pprz-sitl-{}-settings.flash", std::process::id()));
+    let _ = std::fs::remove_file(&path);
+    let flash = path.to_str().expect("a UTF-8 temporary path");
+    let store = [
+        "--settings-flash",
+        flash,
+        "--setting",
+        "3.5:2=4.5",
+        "--setting",
+        "4:4=1",
+    ];
+    let first = run_sitl_for("6", "3", &store);
+    assert!(std::fs::metadata(&path).is_ok_and(|m| m.len() == 3 * 16 * 1024));
+    assert_eq!(
+        first_dl_value(&first, 2),
+        "1",
+        "nothing stored yet:\n{first}"
+    );
+    assert!(
+        first.contains("7 telemetry DL_VALUE index=2 value=4.5"),
+        "{first}"
+    );
+    // The acknowledgement, then the store task's DL_VALUE: both 1.
+    let flags = first
+        .lines()
+        .filter(|l| l.starts_with("7 telemetry DL_VALUE index=4 value=1"))
+        .count();
+    assert!(
+        flags >= 2,
+        "{flags} DL_VALUE of the store flag at 1:\n{first}"
+    );
+    assert!(
+        first.contains(&format!(
+            "Settings flash {flash}: loaded 0 setting(s) at start (0 load(s) failed); stored 1 time(s), 0 failed, 0 refused"
+        )),
+        "{first}"
+    );
+
+    let second = run_sitl_for("4", "3", &["--settings-flash", flash]);
+    assert_eq!(first_dl_value(&second, 2), "4.5", "{second}");
+    assert!(
+        second.contains("loaded 1 setting(s) at start (0 load(s) failed); stored 0 time(s)"),
+        "{second}"
+    );
+    let _ = std::fs::remove_file(&path);
+
+    let plain = run_sitl_for("4", "3", &[]);
+    assert_eq!(first_dl_value(&plain, 2), "1", "{plain}");
+    assert!(!plain.contains("Settings flash"), "{plain}");
 }

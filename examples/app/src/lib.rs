@@ -8,12 +8,18 @@
 //! low-priority payload to show priority shedding.
 //!
 //! Its settings are declared in `settings.xml`, in Paparazzi's format, next to its
-//! `Cargo.toml`: the telemetry mode (index 0), the payload flood (1), a gain (2) and the
-//! autopilot mode (3, numbered as ROTORCRAFT_STATUS `ap_mode`: 2 is HOME, 13 is NAV).
+//! `Cargo.toml`: the telemetry mode (index 0), the payload flood (1), a gain (2,
+//! persistent), the autopilot mode (3, numbered as ROTORCRAFT_STATUS `ap_mode`: 2 is
+//! HOME, 13 is NAV) and Paparazzi's store flag (4, `settings_store_flag`).
 //! The build script generates [`settings`] from the file with `pprz-codegen`; the
 //! application binds each variable and registers the table in one call. The bounds are
 //! the file's: a value outside them is refused and answered with the value in force.
 //! A Paparazzi ground station reads the same file to name the indices.
+//!
+//! A firmware with flash for settings runs [`run_aircraft_with_store`]: the gain is
+//! loaded from flash at start, and stored when the ground sets the store flag to 1
+//! ([`pprz_settings`]). Without it ([`run_aircraft`]), nothing persists and the store
+//! flag reads 0.
 //!
 //! [`run_aircraft`] builds everything that is local to the application (telemetry modes,
 //! scheduler, settings, services, datalink, reader) inside one future that never ends, so
@@ -32,6 +38,7 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+mod persist;
 pub mod telemetry;
 pub mod vehicle;
 
@@ -50,7 +57,7 @@ use pprz_telemetry::SendOptions;
 
 use core::future::Future;
 
-use embassy_futures::select::{Either, Either4, select, select4};
+use embassy_futures::select::{Either, Either3, Either4, select, select3, select4};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker};
@@ -69,10 +76,15 @@ use pprz_telemetry::reader::{Datalink, Inbox, Reader};
 use pprz_telemetry::registry::{Received, RegistryFull};
 use pprz_telemetry::scheduler::{Callback, ModeError, Modes, Scheduler, SchedulerFull};
 use pprz_telemetry::services::{LinkReporter, Services};
-use pprz_telemetry::settings::{Binding, SettingsError};
+use pprz_telemetry::settings::{Binding, Settings, SettingsError};
 use pprz_telemetry::{Device, Layered, LinkLayer, Plain, Relay, RelayStats, Sender};
 use pprz_transports::PprzV2;
 
+use pprz_settings::embedded_storage_async::nor_flash::NorFlash;
+use pprz_settings::sequential_storage::cache::CacheImpl;
+use pprz_settings::{PersistentStore, StoreControl};
+
+use crate::persist::{NoStore, Persistence, WithStore};
 use crate::vehicle::{Mode, Vehicle};
 
 /// The mutex of everything shared between tasks (a critical section on boards).
@@ -184,6 +196,56 @@ pub async fn run_aircraft<R: Read>(
         config,
         &Plain,
         core::future::pending(),
+        NoStore,
+    )
+    .await
+}
+
+/// [`run_aircraft`] with its persistent settings in `store`: at start, before the
+/// services answer, it loads the stored values (the gain) into the settings table; the
+/// store flag (setting 4, `settings_store_flag`) is bound to `control`; and the store
+/// task ([`pprz_settings::run`]) runs inside the application, storing when the ground
+/// sets the flag to 1. After each store, an unsolicited DL_VALUE tells the ground the
+/// flag's value: 1 stored, 0 failed.
+///
+/// Whether the aircraft may store now is `control`'s guard
+/// ([`StoreControl::with_guard`]; Paparazzi stores only with the motors killed). The
+/// example vehicle is simulated and has no motors, so the examples' controls accept
+/// every request.
+///
+/// A load that fails leaves every setting at its default (counted in
+/// `control.stats().load_failures`); if the store cannot read its map (corrupted beyond
+/// repair, or written by a firmware with a larger buffer), it is cleared so that the
+/// next store works.
+///
+/// If this future is dropped (a firmware never drops it), a store in progress stops
+/// mid-way, as in a power cut, which the store survives: the flash holds the previous
+/// snapshot or the new one, and `store` can be used again.
+///
+/// # Errors
+/// As [`run_aircraft`].
+pub async fn run_aircraft_with_store<R, S, C, const BUF: usize>(
+    radio: Device<'_>,
+    radio_rx: R,
+    config: Config,
+    store: &mut PersistentStore<S, C, BUF>,
+    control: &StoreControl<M>,
+) -> Result<Infallible, SetupError>
+where
+    R: Read,
+    S: NorFlash,
+    C: CacheImpl<u8>,
+{
+    let persistence = WithStore { store, control };
+    let extra = core::future::pending();
+    run_with_layer(
+        radio,
+        radio_rx,
+        RadioOnly,
+        config,
+        &Plain,
+        extra,
+        persistence,
     )
     .await
 }
@@ -226,6 +288,7 @@ pub async fn run_relay_aircraft<R: Read>(
         config,
         &Plain,
         core::future::pending(),
+        NoStore,
     )
     .await
 }
@@ -248,10 +311,59 @@ pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
     mut responder: pprz_secure::Responder,
     mut rng: G,
 ) -> Result<Infallible, SetupError> {
+    let extra = secure_tasks(radio, secure, &mut responder, &mut rng);
+    run_with_layer(radio, radio_rx, RadioOnly, config, secure, extra, NoStore).await
+}
+
+/// [`run_secure_aircraft`] with its persistent settings in `store`, as
+/// [`run_aircraft_with_store`] keeps them.
+///
+/// # Errors
+/// As [`run_aircraft`].
+#[cfg(feature = "secure")]
+#[allow(clippy::too_many_arguments)]
+pub async fn run_secure_aircraft_with_store<R, G, S, C, const BUF: usize>(
+    radio: Device<'_>,
+    radio_rx: R,
+    config: Config,
+    secure: &pprz_secure::link::SecureLink<M>,
+    mut responder: pprz_secure::Responder,
+    mut rng: G,
+    store: &mut PersistentStore<S, C, BUF>,
+    control: &StoreControl<M>,
+) -> Result<Infallible, SetupError>
+where
+    R: Read,
+    G: pprz_secure::rand_core::CryptoRng,
+    S: NorFlash,
+    C: CacheImpl<u8>,
+{
+    let extra = secure_tasks(radio, secure, &mut responder, &mut rng);
+    let persistence = WithStore { store, control };
+    run_with_layer(
+        radio,
+        radio_rx,
+        RadioOnly,
+        config,
+        secure,
+        extra,
+        persistence,
+    )
+    .await
+}
+
+/// The secure radio's tasks: the handshake, and SECURE_LINK_STATUS every second.
+#[cfg(feature = "secure")]
+async fn secure_tasks<G: pprz_secure::rand_core::CryptoRng>(
+    radio: Device<'_>,
+    secure: &pprz_secure::link::SecureLink<M>,
+    responder: &mut pprz_secure::Responder,
+    rng: &mut G,
+) -> Infallible {
     use pprz_default::messages::telemetry::SecureLinkStatus;
     let handshake = secure.run_responder(
-        &mut responder,
-        &mut rng,
+        responder,
+        rng,
         radio.sender(),
         pprz_telemetry::Targets::from(radio),
     );
@@ -273,13 +385,9 @@ pub async fn run_secure_aircraft<R: Read, G: pprz_secure::rand_core::CryptoRng>(
             );
         }
     };
-    let extra = async {
-        match embassy_futures::select::select(handshake, status).await {
-            embassy_futures::select::Either::First(never)
-            | embassy_futures::select::Either::Second(never) => never,
-        }
-    };
-    run_with_layer(radio, radio_rx, RadioOnly, config, secure, extra).await
+    match select(handshake, status).await {
+        Either::First(never) | Either::Second(never) => never,
+    }
 }
 
 /// The readers of the application, given the radio's: the radio's alone, or with a
@@ -394,13 +502,14 @@ impl<'d, R2: Read> Readers<'d> for RelayLink<'d, '_, R2> {
 
 /// The application, its reader delivering through `layer`, with `extra` (the secure
 /// link's tasks) running beside it, and the readers of `readers`.
-async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
+async fn run_with_layer<'d, 'c, R: Read, L: LinkLayer + ?Sized>(
     radio: Device<'d>,
     radio_rx: R,
     readers: impl Readers<'d>,
     config: Config,
     layer: &L,
     extra: impl Future<Output = Infallible>,
+    mut persistence: impl Persistence<'c>,
 ) -> Result<Infallible, SetupError> {
     let out = Out::new(radio.sender(), &config);
     let vehicle: Mutex<M, RefCell<Vehicle>> = Mutex::new(RefCell::new(Vehicle::new()));
@@ -423,6 +532,9 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let ac_id = radio.sender().ac_id();
     let get_mode = || ap_mode_setting(v().mode);
     let set_mode = |x: f32| set_ap_mode(&vehicle, x);
+    let control = persistence.control();
+    let get_store = || control.map_or(0.0, StoreControl::store_flag);
+    let set_store = |x: f32| control.iter().for_each(|c| c.set_store_flag(x));
     let own_health = LinkHealth::<M>::new(HealthConfig::new());
     let health = config.health.unwrap_or(&own_health);
     let services: Services<'_, Set, M, SETTINGS> = Services::new(ac_id);
@@ -436,8 +548,11 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
             payload_flood: Binding::Fns(&get_flood, &set_flood),
             gain: Binding::Fns(&get_gain, &set_gain),
             ap_mode: Binding::Fns(&get_mode, &set_mode),
+            settings_store_flag: Binding::Fns(&get_store, &set_store),
         },
     )?;
+    // The stored values, before the services answer: the ground reads them first.
+    persistence.load(table).await;
     services.subscribe(datalink.registry())?;
 
     // Periodic telemetry callbacks.
@@ -456,16 +571,9 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let uart_errors = || out.send_state(&UartErrors::default());
     let reporter = Mutex::<M, _>::new(RefCell::new(LinkReporter::new()));
     let report = || link_report(&out, &reporter, &datalink, radio, health);
-    // Cycle through the settings, as the reference firmware's periodic DL_VALUE does
-    // (one message type for several settings: not a single state stream, so `send`).
+    // Cycle through the settings.
     let dl_value_index: Mutex<M, Cell<u8>> = Mutex::new(Cell::new(0));
-    let dl_value = || {
-        let count = table.len().max(1) as u8;
-        let index = dl_value_index.lock(|c| c.replace((c.get() + 1) % count));
-        if let Some(value) = table.get(index) {
-            out.send(&DlValue { index, value });
-        }
-    };
+    let dl_value = || send_next_value(&out, table, &dl_value_index);
 
     let scheduler: Scheduler<'_, M, PROCESSES, 16> = Scheduler::new(&modes);
     let periodic: [(&str, (u8, u8), Callback<'_>); 14] = [
@@ -490,13 +598,19 @@ async fn run_with_layer<'d, R: Read, L: LinkLayer + ?Sized>(
     let readers = readers.run(reader, layer, &datalink);
     let flood = flood(&out, config.flood_bytes_per_s, &flood_on);
     let app = select4(scheduler.run(), readers, fly(&vehicle), flood);
-    Ok(forever(app, select(extra, failsafe(health, &vehicle))).await)
+    let store = persistence.run(table, &out);
+    Ok(forever(app, select3(extra, failsafe(health, &vehicle), store)).await)
 }
 
 /// Runs the application's tasks and the extra ones; none of them ends.
+///
+/// The settings store is one of the extra ones, though its futures must never be dropped
+/// mid-way: a `select` drops its other branches when one ends, and here none ends. The
+/// whole application ends only when its future is dropped (a firmware never drops it);
+/// the store's flash is then left as after a power cut, which the store survives.
 async fn forever<A, B, C, D>(
     app: impl Future<Output = Either4<A, B, C, D>>,
-    extra: impl Future<Output = Either<Infallible, Infallible>>,
+    extra: impl Future<Output = Either3<Infallible, Infallible, Infallible>>,
 ) -> Infallible
 where
     A: Into<Infallible>,
@@ -509,7 +623,22 @@ where
         Either::First(Either4::Second(n)) => n.into(),
         Either::First(Either4::Third(n)) => n.into(),
         Either::First(Either4::Fourth(n)) => n.into(),
-        Either::Second(Either::First(n) | Either::Second(n)) => n,
+        Either::Second(Either3::First(n) | Either3::Second(n) | Either3::Third(n)) => n,
+    }
+}
+
+/// Sends the DL_VALUE of the next setting of `table` (`next` cycles through them), as
+/// the reference firmware's periodic DL_VALUE does (one message type for several
+/// settings: not a single state stream, so `send`).
+fn send_next_value<const N: usize>(
+    out: &Out<'_>,
+    table: &Settings<'_, M, N>,
+    next: &Mutex<M, Cell<u8>>,
+) {
+    let count = table.len().max(1) as u8;
+    let index = next.lock(|c| c.replace((c.get() + 1) % count));
+    if let Some(value) = table.get(index) {
+        out.send(&DlValue { index, value });
     }
 }
 

@@ -2,25 +2,23 @@
 //! and the running application refuses what the file's bounds exclude, answering with
 //! the value in force.
 
+mod common;
+
 use std::cell::RefCell;
 use std::convert::Infallible;
-use std::future::Future;
 use std::path::Path;
-use std::pin::pin;
-use std::task::{Context, Poll, Waker};
 
 use embassy_futures::select::{Either3, select3};
 use embassy_time::{Duration, Instant, MockDriver, Timer};
-use pprz_default::messages::datalink::Setting;
-use pprz_default::messages::telemetry::DlValue;
 use pprz_default::messages::telemetry::values::RotorcraftStatusApMode as ApMode;
 use pprz_default::periodic::{SCHEDULE, main};
 use pprz_example_app::settings::{COUNT, SETTINGS, index};
 use pprz_example_app::{AC_ID, Config, M, run_aircraft};
 use pprz_messages::settings::SettingType;
-use pprz_messages::{Decode, Message};
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
-use pprz_transports::{Decoder, Encoder, MsgHeader, PprzV2, TxMeta};
+use pprz_transports::PprzV2;
+
+use common::{Air, dl_values, run_on_mock_clock, setting_frame};
 
 /// What the generator reads from the application's `settings.xml`.
 fn from_file() -> pprz_codegen::SettingsSet {
@@ -54,9 +52,10 @@ fn the_table_is_the_one_of_settings_xml() {
             index::TELEMETRY_MODE_MAIN,
             index::PAYLOAD_FLOOD,
             index::GAIN,
-            index::AP_MODE
+            index::AP_MODE,
+            index::SETTINGS_STORE_FLAG
         ],
-        [0, 1, 2, 3]
+        [0, 1, 2, 3, 4]
     );
     let bounds = |i: u8| {
         let d = &SETTINGS[usize::from(i)];
@@ -66,6 +65,12 @@ fn the_table_is_the_one_of_settings_xml() {
     assert_eq!(bounds(index::PAYLOAD_FLOOD), ("flood", 0.0, 1.0));
     assert_eq!(bounds(index::GAIN), ("gain", 0.0, 10.0));
     assert_eq!(bounds(index::AP_MODE), ("ap_mode", 0.0, 19.0));
+    assert_eq!(bounds(index::SETTINGS_STORE_FLAG), ("store", 0.0, 1.0));
+    let flag = &SETTINGS[usize::from(index::SETTINGS_STORE_FLAG)];
+    assert_eq!(flag.handler, Some("StoreSettings"));
+    assert_eq!(flag.module, Some("settings"));
+    assert_eq!(flag.values, ["OFF", "STORE"]);
+    assert!(!flag.persistent);
     let gain = &SETTINGS[usize::from(index::GAIN)];
     assert!(gain.persistent);
     assert_eq!((gain.ty, gain.step), (SettingType::Float, 0.1));
@@ -95,7 +100,7 @@ fn the_labels_are_those_of_telemetry_xml_and_messages_xml() {
 /// The ground's SETTING requests: time (ms after boot), index, value, and the value the
 /// aircraft must answer. Times fall between the scheduler's ticks (60 Hz), so the first
 /// DL_VALUE of the index after a request is its acknowledgement.
-const REQUESTS: [(u64, u8, f32, f32); 9] = [
+const REQUESTS: [(u64, u8, f32, f32); 10] = [
     (1_005, index::GAIN, 11.0, 1.0),    // above 10: refused, 1 in force
     (2_005, index::GAIN, 2.5, 2.5),     // accepted
     (3_005, index::GAIN, -0.5, 2.5),    // below 0: refused
@@ -105,6 +110,7 @@ const REQUESTS: [(u64, u8, f32, f32); 9] = [
     (7_005, index::AP_MODE, 20.0, 2.0), // beyond GUIDED (19): refused
     (8_005, index::TELEMETRY_MODE_MAIN, 3.0, 0.0), // no fourth mode: refused
     (9_005, index::PAYLOAD_FLOOD, 1.0, 1.0),
+    (9_505, index::SETTINGS_STORE_FLAG, 1.0, 0.0), // no store: nothing is stored
 ];
 
 /// The ground's radio: delivers each request frame at its time, then nothing.
@@ -127,67 +133,6 @@ impl embedded_io_async::Read for Ground {
         buf[..frame.len()].copy_from_slice(&frame);
         Ok(frame.len())
     }
-}
-
-/// SETTING(`index`, `value`) for our aircraft, from the ground, as a PPRZ v2 frame.
-fn setting_frame(index: u8, value: f32) -> Vec<u8> {
-    let msg = Setting {
-        index,
-        ac_id: AC_ID,
-        value,
-    };
-    let mut fields = [0u8; 16];
-    let n = msg.encode(&mut fields).unwrap();
-    let meta = TxMeta::new(MsgHeader::new(0, AC_ID, Setting::CLASS_ID, Setting::ID));
-    let mut out = [0u8; 64];
-    let len = PprzV2::new().encode(&meta, &fields[..n], &mut out).unwrap();
-    out[..len].to_vec()
-}
-
-/// The aircraft's radio output, each write with its time.
-struct Air<'a>(&'a RefCell<Vec<(Instant, Vec<u8>)>>);
-
-impl embedded_io_async::ErrorType for Air<'_> {
-    type Error = Infallible;
-}
-
-impl embedded_io_async::Write for Air<'_> {
-    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.0.borrow_mut().push((Instant::now(), buf.to_vec()));
-        Ok(buf.len())
-    }
-
-    async fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-
-/// Polls `fut` until it ends, the mock clock advancing 1 ms whenever it is pending.
-fn run_on_mock_clock<F: Future>(fut: F) -> F::Output {
-    let mut fut = pin!(fut);
-    let mut cx = Context::from_waker(Waker::noop());
-    loop {
-        if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
-            return v;
-        }
-        MockDriver::get().advance(Duration::from_millis(1));
-    }
-}
-
-/// Every DL_VALUE in `written`: time, index, value.
-fn dl_values(written: &[(Instant, Vec<u8>)]) -> Vec<(Instant, u8, f32)> {
-    let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
-    let mut found = Vec::new();
-    for (at, bytes) in written {
-        let mut input = bytes.as_slice();
-        while let Some(frame) = decoder.feed(&mut input) {
-            if (frame.class(), frame.msg_id()) == (DlValue::CLASS_ID, DlValue::ID) {
-                let v = DlValue::decode(frame.payload()).unwrap();
-                found.push((*at, v.index, v.value));
-            }
-        }
-    }
-    found
 }
 
 #[test]

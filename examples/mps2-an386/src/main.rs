@@ -7,13 +7,16 @@
 //! Embassy executor, with a SysTick time driver ([`time_driver`]) and an
 //! interrupt-driven driver for the CMSDK UART ([`uart`]). UART0 is the radio: PPRZ v2
 //! frames both ways, 115200 baud (QEMU ignores the rate; its `-serial` backend carries
-//! the bytes, e.g. over loopback TCP). See README.md for how to run it.
+//! the bytes, e.g. over loopback TCP). The persistent settings (the gain) are kept in
+//! the PSRAM ([`settings_flash`]), which QEMU can keep in a file. See README.md for how
+//! to run it.
 
 #![no_std]
 #![no_main]
 #![deny(clippy::undocumented_unsafe_blocks)]
 
 mod board;
+mod settings_flash;
 mod time_driver;
 mod uart;
 
@@ -37,10 +40,16 @@ async fn radio_writer(mut port: Port<'static>, tx: board::Tx) {
     run_writer(&mut port, tx).await
 }
 
-/// The application, reading the uplink from UART0.
+/// The application, reading the uplink from UART0, its persistent settings in `store`.
 #[embassy_executor::task]
-async fn aircraft(radio: Device<'static>, rx: board::Rx) {
-    let Err(e) = pprz_example_app::run_aircraft(radio, rx, board::app_config()).await;
+async fn aircraft(
+    radio: Device<'static>,
+    rx: board::Rx,
+    store: &'static mut settings_flash::Store,
+) {
+    let config = board::app_config();
+    let control = &settings_flash::CONTROL;
+    let Err(e) = pprz_example_app::run_aircraft_with_store(radio, rx, config, store, control).await;
     panic!("the aircraft application cannot start: {e}");
 }
 
@@ -53,6 +62,7 @@ fn main() -> ! {
     let radio_device = radio.device();
     let spawner = executor.spawner();
     spawner.spawn(radio_writer(radio, tx).expect("one radio writer"));
-    spawner.spawn(aircraft(radio_device, rx).expect("one aircraft"));
+    let store = settings_flash::store();
+    spawner.spawn(aircraft(radio_device, rx, store).expect("one aircraft"));
     board::run(executor)
 }

@@ -4,7 +4,9 @@
 //! checks that PONG and the DL_VALUE acknowledgement come back and that the periodic
 //! telemetry of `telemetry.xml` arrives at its configured rates, measured on the guest's
 //! own clock (GPS_INT's `tow` field). A second test cuts the uplink: the firmware's
-//! link-loss failsafe flies home, and the `ap_mode` setting brings it back to NAV.
+//! link-loss failsafe flies home, and the `ap_mode` setting brings it back to NAV. A
+//! third stores the gain in the firmware's settings flash (the machine's PSRAM, kept in
+//! a file), kills QEMU, starts it again on the same file and reads the gain back.
 //!
 //! QEMU's serial port is a Unix socket of this test's own (a path unique to the process
 //! and the test), so tests running side by side never race for a TCP port.
@@ -50,16 +52,26 @@ struct Qemu {
 }
 
 impl Qemu {
-    fn start(qemu: &str, firmware: &Path, socket: &Path) -> std::io::Result<Self> {
-        let child = Command::new(qemu)
-            .args([
-                "-M",
-                "mps2-an386",
-                "-nographic",
-                "-monitor",
-                "none",
-                "-serial",
-            ])
+    /// QEMU running `firmware`, its UART0 on `socket`; with `psram`, the machine's PSRAM
+    /// (the firmware's settings flash) is that file, which keeps what the guest writes.
+    fn start(
+        qemu: &str,
+        firmware: &Path,
+        socket: &Path,
+        psram: Option<&Path>,
+    ) -> std::io::Result<Self> {
+        let mut command = Command::new(qemu);
+        match psram {
+            Some(file) => command
+                .args(["-M", "mps2-an386,memory-backend=psram", "-object"])
+                .arg(format!(
+                    "memory-backend-file,id=psram,size=16M,mem-path={},share=on",
+                    file.display()
+                )),
+            None => command.args(["-M", "mps2-an386"]),
+        };
+        let child = command
+            .args(["-nographic", "-monitor", "none", "-serial"])
             .arg(format!("unix:{},server=on,wait=on", socket.display()))
             .arg("-kernel")
             .arg(firmware)
@@ -181,6 +193,11 @@ fn firmware_path(name: &str) -> PathBuf {
 /// `test`, which no other test of the process uses), or `None` (the test is skipped, or
 /// fails where QEMU is required) when QEMU or the firmware is missing.
 fn boot(name: &str, test: &str) -> Option<Serial> {
+    boot_with(name, test, None)
+}
+
+/// [`boot`], the machine's PSRAM in the file `psram` if given.
+fn boot_with(name: &str, test: &str, psram: Option<&Path>) -> Option<Serial> {
     let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
     let firmware = firmware_path(name);
     if !firmware.is_file() {
@@ -202,7 +219,7 @@ fn boot(name: &str, test: &str) -> Option<Serial> {
     }
     let socket = std::env::temp_dir().join(format!("pprz-qemu-{}-{test}.sock", std::process::id()));
     let _ = std::fs::remove_file(&socket);
-    let mut guard = Qemu::start(&qemu, &firmware, &socket).expect("QEMU starts");
+    let mut guard = Qemu::start(&qemu, &firmware, &socket, psram).expect("QEMU starts");
     let stream = guard.connect(&socket).unwrap_or_else(|e| panic!("{e}"));
     // The connection is made: the path is no longer needed.
     let _ = std::fs::remove_file(&socket);
@@ -338,6 +355,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
                         && matches!(answer, Answer::Acknowledged { .. });
                 }
                 Event::SecureSession { .. } => panic!("a secure session on a plain link"),
+                Event::SettingsRead { .. } => panic!("no settings read was asked for"),
             }
         }
         if pong_rtt.is_some()
@@ -496,6 +514,7 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
                 Event::DlValue { index, answer, .. } => {
                     acked |= *index == GAIN_INDEX && matches!(answer, Answer::Acknowledged { .. });
                 }
+                Event::SettingsRead { .. } => panic!("no settings read was asked for"),
             }
         }
     }
@@ -769,5 +788,172 @@ fn firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting() {
          {LOST_AFTER_MS} ms); ap_mode up {up:?}, silent {silent:?}, until the SETTING \
          {setting:?}, after it {back:?}; steps ended (wall clock): {}; {wall:.1} s in all",
         ended.join(", ")
+    );
+}
+
+/// The example application's store flag (setting 4, `settings_store_flag`).
+const STORE_FLAG_INDEX: u8 = 4;
+/// The gain the persistence test stores.
+const STORED_GAIN: f32 = 4.5;
+
+/// A file for the machine's PSRAM (16 MiB, QEMU's required size), filled with `0xFF`
+/// (erased flash) and unique to the process and the test; removed when dropped.
+struct PsramFile(PathBuf);
+
+impl PsramFile {
+    fn new(test: &str) -> Self {
+        let path =
+            std::env::temp_dir().join(format!("pprz-qemu-{}-{test}.psram", std::process::id()));
+        std::fs::write(&path, vec![0xFF_u8; 16 << 20]).expect("the PSRAM file is written");
+        Self(path)
+    }
+
+    /// Whether the guest wrote to the settings flash (its first 48 KiB).
+    fn written(&self) -> bool {
+        let bytes = std::fs::read(&self.0).expect("the PSRAM file reads");
+        bytes[..48 << 10].iter().any(|&b| b != 0xFF)
+    }
+}
+
+impl Drop for PsramFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// The ground's side of a QEMU session: every DL_VALUE received (index, value), and
+/// whether the guest sent anything yet.
+struct Values {
+    decoder: Decoder<PprzV2>,
+    values: Vec<(u8, f32)>,
+    talked: bool,
+}
+
+impl Values {
+    fn new() -> Self {
+        Self {
+            decoder: Decoder::new(PprzV2::new()),
+            values: Vec::new(),
+            talked: false,
+        }
+    }
+
+    /// Reads what the guest sent (up to the read timeout) and takes in its DL_VALUEs.
+    fn pump(&mut self, serial: &mut Serial) {
+        let mut buf = [0u8; 1024];
+        let n = serial.receive(&mut buf);
+        let mut input = &buf[..n];
+        while let Some(frame) = self.decoder.feed(&mut input) {
+            self.talked = true;
+            if (frame.class(), frame.msg_id()) == (DlValue::CLASS_ID, DlValue::ID) {
+                let v = DlValue::decode(frame.payload()).expect("DL_VALUE decodes");
+                self.values.push((v.index, v.value));
+            }
+        }
+    }
+
+    /// The values of setting `index` received from the `from`th DL_VALUE on.
+    fn of(&self, index: u8, from: usize) -> Vec<f32> {
+        self.values[from..]
+            .iter()
+            .filter(|(i, _)| *i == index)
+            .map(|&(_, v)| v)
+            .collect()
+    }
+}
+
+/// First boot of the persistence test: SETTING gain = [`STORED_GAIN`] until
+/// acknowledged, then SETTING store flag = 1, once; returns when the flag's
+/// acknowledgement and the store task's DL_VALUE (both 1: stored) have come.
+fn set_and_store(serial: &mut Serial, set: &RuntimeSet) -> Values {
+    let gain = setting(set, GAIN_INDEX, STORED_GAIN);
+    let store = setting(set, STORE_FLAG_INDEX, 1.0);
+    let mut ground = Values::new();
+    let mut store_from: Option<usize> = None;
+    let mut next = 0.0;
+    let start = Instant::now();
+    while start.elapsed() < DEADLINE {
+        ground.pump(serial);
+        let now = start.elapsed().as_secs_f64();
+        match store_from {
+            None if ground.of(GAIN_INDEX, 0).contains(&STORED_GAIN) => {
+                serial.send(&store, "send SETTING store flag");
+                store_from = Some(ground.values.len());
+            }
+            None if ground.talked && now >= next => {
+                serial.send(&gain, "send SETTING gain");
+                next = now + 1.0;
+            }
+            Some(from) if ground.of(STORE_FLAG_INDEX, from).len() >= 2 => break,
+            _ => {}
+        }
+    }
+    let flags = store_from.map(|from| ground.of(STORE_FLAG_INDEX, from));
+    assert_eq!(
+        flags.as_deref(),
+        Some(&[1.0, 1.0][..]),
+        "the store flag's DL_VALUEs after the SETTING (acknowledgement, then stored); \
+         every DL_VALUE: {:?}",
+        ground.values
+    );
+    ground
+}
+
+/// The persistent settings in the emulated flash: the gain set and stored (the store
+/// flag's DL_VALUE says 1 once stored) is, after QEMU is killed and started again on
+/// the same PSRAM file, the gain the firmware starts with: GET_SETTING answers it, and
+/// so does every DL_VALUE of the gain.
+#[test]
+fn firmware_keeps_the_stored_gain_across_a_restart() {
+    let psram = PsramFile::new("persist");
+    let Some(mut serial) = boot_with("aircraft", "persist", Some(&psram.0)) else {
+        return;
+    };
+    let set = default_set();
+    let start = Instant::now();
+    let first = set_and_store(&mut serial, &set);
+    let stored_after = start.elapsed().as_secs_f64();
+    // Killed: what the guest wrote is in the file (a shared mapping).
+    drop(serial);
+    assert!(psram.written(), "nothing in the settings flash");
+
+    let mut serial =
+        boot_with("aircraft", "persist-again", Some(&psram.0)).expect("QEMU booted once already");
+    let get = uplink::frame(
+        &set,
+        AnyTransport::from(PprzV2::new()),
+        AC_ID,
+        "GET_SETTING",
+        &[
+            ("index", f64::from(GAIN_INDEX)),
+            ("ac_id", f64::from(AC_ID)),
+        ],
+    )
+    .expect("GET_SETTING frame");
+    let mut ground = Values::new();
+    let mut next = 0.0;
+    let restart = Instant::now();
+    while restart.elapsed() < DEADLINE && ground.of(GAIN_INDEX, 0).is_empty() {
+        let now = restart.elapsed().as_secs_f64();
+        if ground.talked && now >= next {
+            serial.send(&get, "send GET_SETTING");
+            next = now + 1.0;
+        }
+        ground.pump(&mut serial);
+    }
+    let gains = ground.of(GAIN_INDEX, 0);
+    assert_eq!(
+        gains.first(),
+        Some(&STORED_GAIN),
+        "the gain after the restart; every DL_VALUE: {:?}",
+        ground.values
+    );
+    assert!(gains.iter().all(|&g| g == STORED_GAIN), "{gains:?}");
+    let _ = writeln!(
+        std::io::stderr(),
+        "qemu persistence: gain {STORED_GAIN} stored after {stored_after:.1} s ({} DL_VALUEs); \
+         after the restart, read back in {:.1} s",
+        first.values.len(),
+        restart.elapsed().as_secs_f64()
     );
 }

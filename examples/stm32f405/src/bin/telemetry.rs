@@ -12,6 +12,10 @@
 //!   priorities; unplugged, its writes fail fast and are counted.
 //! * The application of `pprz-example-app`: simulated sensors and rotorcraft state,
 //!   periodic telemetry from the project's `telemetry.xml`, settings.
+//! * Persistent settings (the gain) in flash sectors 1 to 3 (`0x0800_4000..0x0801_0000`,
+//!   three 16 KiB sectors; `memory.x` starts the code at sector 4), through
+//!   embassy-stm32's async flash driver: loaded at start, stored when the ground sets
+//!   setting 4 (the store flag) to 1.
 //! * With the cargo feature `secure`, the radio is a secure PPRZ link (pprz-secure,
 //!   `salty` backend): nothing but the key exchange until the ground completes the
 //!   handshake, then every radio frame encrypted and authenticated; the handshake's
@@ -23,6 +27,7 @@
 #![no_main]
 
 use embassy_executor::Spawner;
+use embassy_stm32::flash::{self, Async, Bank1Region1, Flash};
 use embassy_stm32::gpio::Pull;
 use embassy_stm32::peripherals::{USART2, USB_OTG_FS};
 use embassy_stm32::rcc::{
@@ -39,6 +44,7 @@ use panic_halt as _;
 use pprz_devices::stm32::{UartErrorCounters, UartRx, f405};
 use pprz_devices::usb::{CdcTx, UsbConfig, UsbCounters};
 use pprz_example_app::{AC_ID, Config};
+use pprz_settings::{PageCache, PersistentStore, StoreControl, buffer_len};
 use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
 use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Pacing, Port, run_writer};
 use static_cell::StaticCell;
@@ -47,11 +53,13 @@ use static_cell::StaticCell;
 bind_interrupts!(struct Irqs {
     USART2 => BufferedInterruptHandler<USART2>;
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+    FLASH => flash::InterruptHandler;
 });
 #[cfg(feature = "secure")]
 bind_interrupts!(struct Irqs {
     USART2 => BufferedInterruptHandler<USART2>;
     OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
+    FLASH => flash::InterruptHandler;
     RNG => embassy_stm32::rng::InterruptHandler<embassy_stm32::peripherals::RNG>;
 });
 
@@ -118,6 +126,19 @@ struct UsbBuffers {
 static USB_BUFFERS: StaticCell<UsbBuffers> = StaticCell::new();
 static CDC_STATE: StaticCell<State> = StaticCell::new();
 
+/// The settings' flash: sectors 1 to 3, offsets within `bank1_region1` (sectors 0 to 3,
+/// 16 KiB each, from `0x0800_0000`). Sector 0 holds the vector table; `memory.x` puts
+/// everything else from sector 4 on.
+const SETTINGS_SECTORS: core::ops::Range<u32> = 0x4000..0x1_0000;
+/// The persistent settings' store: three 16 KiB sectors, room for 16 settings.
+type Store = PersistentStore<Bank1Region1<'static, Async>, PageCache<3>, { buffer_len(16) }>;
+static STORE: StaticCell<Store> = StaticCell::new();
+/// The store flag's control. The example vehicle is simulated and has no motors, so it
+/// accepts every request; an aircraft stores only with its motors killed
+/// (`StoreControl::with_guard`): erasing a sector stalls the CPU for hundreds of
+/// milliseconds, and the radio's interrupt-driven UART loses what arrives meanwhile.
+static CONTROL: StoreControl<M> = StoreControl::new();
+
 #[embassy_executor::task]
 async fn radio_writer(mut port: Port<'static>, tx: BufferedUartTx<'static>) {
     #[cfg(not(feature = "secure"))]
@@ -136,33 +157,44 @@ async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
     device.run().await
 }
 
+/// The application, its persistent settings in `store`.
 #[cfg(not(feature = "secure"))]
 #[embassy_executor::task]
-async fn aircraft(radio: Device<'static>, rx: UartRx<'static, BufferedUartRx<'static>>) {
-    let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+async fn aircraft(
+    radio: Device<'static>,
+    rx: UartRx<'static, BufferedUartRx<'static>>,
+    store: &'static mut Store,
+) {
+    let config = Config::default();
+    let Err(e) =
+        pprz_example_app::run_aircraft_with_store(radio, rx, config, store, &CONTROL).await;
     panic!("the aircraft application cannot start: {e}");
 }
 
-/// The application on the secure radio, its handshake's keys from the hardware RNG.
+/// The application on the secure radio, its handshake's keys from the hardware RNG, its
+/// persistent settings in `store`.
 #[cfg(feature = "secure")]
 #[embassy_executor::task]
 async fn aircraft(
     radio: Device<'static>,
     rx: UartRx<'static, BufferedUartRx<'static>>,
     rng: embassy_stm32::rng::Rng<'static, embassy_stm32::peripherals::RNG>,
+    store: &'static mut Store,
 ) {
     let keys = match KEYS.aircraft() {
         Ok(keys) => keys,
         Err(e) => panic!("the aircraft's keys: {e}"),
     };
     let responder = pprz_secure::Responder::new(AC_ID, keys);
-    let Err(e) = pprz_example_app::run_secure_aircraft(
+    let Err(e) = pprz_example_app::run_secure_aircraft_with_store(
         radio,
         rx,
         Config::default(),
         &SECURE,
         responder,
         rng,
+        store,
+        &CONTROL,
     )
     .await;
     panic!("the aircraft application cannot start: {e}");
@@ -252,6 +284,13 @@ async fn main(spawner: Spawner) {
             Err(e) => panic!("USB CDC-ACM: {e:?}"),
         };
 
+    // The settings' flash: bank 1's first region (sectors 0 to 3), sectors 1 to 3 of it.
+    let region = Flash::new(p.FLASH, Irqs).into_regions().bank1_region1;
+    let store = match Store::with_page_cache(region, SETTINGS_SECTORS) {
+        Ok(store) => STORE.init(store),
+        Err(e) => panic!("settings flash: {e}"),
+    };
+
     let Ok([radio, usb]) = DOWNLINK.ports() else {
         panic!("the downlink's ports are taken once, here");
     };
@@ -260,13 +299,14 @@ async fn main(spawner: Spawner) {
     spawner.spawn(radio_writer(radio, radio_tx).unwrap());
     spawner.spawn(usb_writer(usb, usb_tx).unwrap());
     #[cfg(not(feature = "secure"))]
-    spawner.spawn(aircraft(radio_device, radio_rx).unwrap());
+    spawner.spawn(aircraft(radio_device, radio_rx, store).unwrap());
     #[cfg(feature = "secure")]
     spawner.spawn(
         aircraft(
             radio_device,
             radio_rx,
             embassy_stm32::rng::Rng::new(p.RNG, Irqs),
+            store,
         )
         .unwrap(),
     );

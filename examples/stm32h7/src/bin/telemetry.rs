@@ -11,12 +11,17 @@
 //!   921600 baud with the PPRZLOG transport: the same messages, time-stamped, in the
 //!   format Paparazzi's log tools read. Transport and device are run-time choices per
 //!   downlink device.
+//! * Persistent settings (the gain) in the first two sectors of flash bank 2
+//!   (`0x0810_0000..0x0814_0000`, 2 x 128 KiB; `memory.x` keeps the image in bank 1),
+//!   through embassy-stm32's async flash driver: loaded at start, stored when the ground
+//!   sets setting 4 (the store flag) to 1. See the README for the ECC caveat.
 
 #![no_std]
 #![no_main]
 
 use embassy_executor::Spawner;
 use embassy_stm32::bind_interrupts;
+use embassy_stm32::flash::{self, Async, Bank2Region, Flash};
 use embassy_stm32::gpio::Pull;
 use embassy_stm32::peripherals::{USART2, USART3};
 use embassy_stm32::usart::{
@@ -27,6 +32,7 @@ use embassy_time::Instant;
 use panic_halt as _;
 use pprz_devices::stm32::{UartErrorCounters, UartRx};
 use pprz_example_app::{AC_ID, Config};
+use pprz_settings::{PageCache, PersistentStore, StoreControl, buffer_len};
 use pprz_telemetry::pprz_transports::{AnyTransport, PprzLog, PprzV2};
 use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Pacing, Port, run_writer};
 use static_cell::StaticCell;
@@ -34,6 +40,7 @@ use static_cell::StaticCell;
 bind_interrupts!(struct Irqs {
     USART2 => BufferedInterruptHandler<USART2>;
     USART3 => BufferedInterruptHandler<USART3>;
+    FLASH => flash::InterruptHandler;
 });
 
 /// Whether the radio UART uses hardware flow control (RTS/CTS): cargo feature
@@ -71,14 +78,33 @@ static DOWNLINK: Dl = Downlink::new(
 static RADIO_ERRORS: UartErrorCounters = UartErrorCounters::new();
 static BUFFERS: StaticCell<[[u8; 256]; 4]> = StaticCell::new();
 
+/// The settings' flash: the first two sectors of bank 2, offsets within `bank2_region`
+/// (from `0x0810_0000`).
+const SETTINGS_SECTORS: core::ops::Range<u32> = 0..0x4_0000;
+/// The persistent settings' store: two 128 KiB sectors, room for 16 settings.
+type Store = PersistentStore<Bank2Region<'static, Async>, PageCache<2>, { buffer_len(16) }>;
+static STORE: StaticCell<Store> = StaticCell::new();
+/// The store flag's control. The example vehicle is simulated and has no motors, so it
+/// accepts every request; an aircraft stores only with its motors killed
+/// (`StoreControl::with_guard`), the more so on the H7 (see the README: a cut during a
+/// write can leave a word that faults when read).
+static CONTROL: StoreControl<M> = StoreControl::new();
+
 #[embassy_executor::task(pool_size = 2)]
 async fn writer(mut port: Port<'static>, tx: BufferedUartTx<'static>) {
     run_writer(&mut port, tx).await
 }
 
+/// The application, its persistent settings in `store`.
 #[embassy_executor::task]
-async fn aircraft(radio: Device<'static>, rx: UartRx<'static, BufferedUartRx<'static>>) {
-    let Err(e) = pprz_example_app::run_aircraft(radio, rx, Config::default()).await;
+async fn aircraft(
+    radio: Device<'static>,
+    rx: UartRx<'static, BufferedUartRx<'static>>,
+    store: &'static mut Store,
+) {
+    let config = Config::default();
+    let Err(e) =
+        pprz_example_app::run_aircraft_with_store(radio, rx, config, store, &CONTROL).await;
     panic!("the aircraft application cannot start: {e}");
 }
 
@@ -147,7 +173,14 @@ async fn main(spawner: Spawner) {
         panic!("the downlink's ports are taken once, here");
     };
     let radio_device = radio_port.device();
+    // The settings' flash: bank 2, its first two sectors.
+    let region = Flash::new(p.FLASH, Irqs).into_regions().bank2_region;
+    let store = match Store::with_page_cache(region, SETTINGS_SECTORS) {
+        Ok(store) => STORE.init(store),
+        Err(e) => panic!("settings flash: {e}"),
+    };
+    let radio_rx = UartRx::new(radio_rx, &RADIO_ERRORS);
     spawner.spawn(writer(radio_port, radio_tx).unwrap());
     spawner.spawn(writer(log_port, log_tx).unwrap());
-    spawner.spawn(aircraft(radio_device, UartRx::new(radio_rx, &RADIO_ERRORS)).unwrap());
+    spawner.spawn(aircraft(radio_device, radio_rx, store).unwrap());
 }

@@ -1,0 +1,14 @@
+//! Puts `memory.x` where the linker finds it (cortex-m-rt's `link.x` includes it): the
+//! chip's memory with the image in flash bank 1, bank 2 kept for the persistent
+//! settings.
+
+use std::path::PathBuf;
+use std::{env, fs};
+
+fn main() {
+    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+    fs::write(out.join("memory.x"), include_bytes!("memory.x")).expect("OUT_DIR is writable");
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=build.rs");
+}
