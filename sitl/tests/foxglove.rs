@@ -72,7 +72,7 @@ fn a_foxglove_client_receives_the_values_the_monitor_prints() {
         .args([client.to_str().unwrap(), &url])
         .args([
             "--params",
-            "/ac/7/settings/2",
+            "/ac/7/settings/gain",
             "--set",
             "1.5",
             "--timeout",
@@ -121,13 +121,13 @@ fn a_foxglove_client_receives_the_values_the_monitor_prints() {
     assert!(
         reply
             .iter()
-            .any(|r| r.to_string().contains("/ac/7/settings/2") && r.to_string().contains("1.5")),
+            .any(|r| r.to_string().contains("/ac/7/settings/gain") && r.to_string().contains("1.5")),
         "{params_out}"
     );
     assert!(
         lines
             .lines()
-            .any(|l| l == "7 telemetry DL_VALUE index=2 value=1.5"),
+            .any(|l| l == "7 telemetry DL_VALUE index=2 value=1.5 setting=gain"),
         "the aircraft never reported the new value"
     );
     let received: Vec<Value> = String::from_utf8_lossy(&out.stdout)
