@@ -980,6 +980,8 @@ fn first_dl_value(out: &str, index: u8) -> &str {
     let prefix = format!("7 telemetry DL_VALUE index={index} value=");
     out.lines()
         .find_map(|l| l.strip_prefix(prefix.as_str()))
+        // The value, without the setting's name the ground adds after it.
+        .map(|rest| rest.split(' ').next().unwrap_or(rest))
         .unwrap_or_else(|| panic!("no DL_VALUE of setting {index}:\n{out}"))
 }
 
