@@ -825,7 +825,9 @@ fn a_downlink_outage_leaves_the_aircraft_up_and_the_ground_deaf() {
     assert_eq!(silences.len(), 1, "{ac:#}");
     let from = silences[0]["from_s"].as_f64().unwrap();
     let until = silences[0]["until_s"].as_f64().unwrap();
-    assert!((9.0..10.0).contains(&from), "silent from {from}: {ac:#}");
+    // The last frame heard ended before the cut; the ground, on a busy machine, may
+    // read it some milliseconds later.
+    assert!((9.0..10.1).contains(&from), "silent from {from}: {ac:#}");
     assert!(
         (20.0..21.0).contains(&until),
         "silent until {until}: {ac:#}"
