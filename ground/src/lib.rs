@@ -15,6 +15,8 @@
 //! * [`input`]: the bounded queue between the reading threads and the decoder.
 //! * [`cli`]: the command line, with every value checked.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
+//! * [`gateway`]: the fleet gateway's logic (`pprz-gateway`): several links at once,
+//!   redundant links merged, commands routed to the link each aircraft is heard on.
 //! * [`secure`]: the ground's end of a secure PPRZ v2 link (`pprz-monitor --secure`).
 //! * [`viewer`]: decoded telemetry for Foxglove and Lichtblick: a WebSocket server
 //!   (`--foxglove`), MCAP recordings (`--mcap`), settings as parameters; [`json`](mod@json)
@@ -40,6 +42,7 @@
 pub mod cli;
 pub mod escape;
 pub mod format;
+pub mod gateway;
 pub mod input;
 pub mod json;
 pub mod monitor;

@@ -121,10 +121,24 @@ pub fn frame(
         values.push(("ac_id", f64::from(ac_id)));
     }
     let payload = encode_scalars(desc, &values)?;
+    encode(transport, ac_id, desc, &payload)
+}
+
+/// A frame of message `desc` with `payload` from the ground to aircraft `ac_id` (the
+/// frame's destination, with PPRZ v2 and the transports built on it).
+///
+/// # Errors
+/// The transport refused the frame (a payload too long for it).
+pub fn encode(
+    transport: AnyTransport,
+    ac_id: u8,
+    desc: &MessageDescriptor<'_>,
+    payload: &[u8],
+) -> Result<Vec<u8>, UplinkError> {
     let meta = TxMeta::new(MsgHeader::new(GROUND_ID, ac_id, desc.class_id, desc.id));
     let mut out = vec![0u8; transport.max_frame_len()];
     let n = transport
-        .encode(&meta, &payload, &mut out)
+        .encode(&meta, payload, &mut out)
         .map_err(|e| UplinkError::Transport(e.to_string()))?;
     out.truncate(n);
     Ok(out)

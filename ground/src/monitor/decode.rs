@@ -359,6 +359,7 @@ impl Handled {
             line: &self.line,
             raw,
             source: header.source,
+            destination: header.destination,
             class_id: header.class,
             msg_id: header.id,
             message: self.message,
@@ -379,6 +380,8 @@ pub struct Decoded<'a> {
     pub raw: &'a [u8],
     /// The aircraft that sent it (the frame's source id).
     pub source: u8,
+    /// The frame's destination id (`None` with PPRZ v1, which has none).
+    pub destination: Option<u8>,
     /// The message class id.
     pub class_id: u8,
     /// The message id within its class.
