@@ -14,6 +14,8 @@
 //!   of every setting.
 //! * [`input`]: the bounded queue between the reading threads and the decoder.
 //! * [`cli`]: the command line, with every value checked.
+//! * [`device`]: the links to aircraft (UDP, TCP, serial ports, files): reading and
+//!   writing.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
 //! * [`gateway`]: the fleet gateway's logic (`pprz-gateway`): several links at once,
 //!   redundant links merged, commands routed to the link each aircraft is heard on.
@@ -40,6 +42,7 @@
 #![deny(unsafe_code)]
 
 pub mod cli;
+pub mod device;
 pub mod escape;
 pub mod format;
 pub mod gateway;

@@ -219,7 +219,9 @@ impl Gateway {
         let can_send: Vec<bool> = self.links.iter().map(|l| l.can_send).collect();
         let route = self.routes.uplink(now, ac, self.policy, &can_send);
         if route.is_empty() {
-            return Err(UplinkError::Transport("no link can send to the aircraft".into()));
+            return Err(UplinkError::Transport(
+                "no link can send to the aircraft".into(),
+            ));
         }
         let mut out = Vec::with_capacity(route.len());
         for l in route {

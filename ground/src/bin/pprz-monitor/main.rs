@@ -7,7 +7,6 @@
 
 use std::fs::File;
 use std::io::{BufWriter, ErrorKind, Write};
-use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -18,8 +17,9 @@ mod record;
 
 use clap::Parser;
 use pprz_ground::cli::{Args, SettingValue};
+use pprz_ground::device::{self, Endpoint, Source, Uplink as UplinkSink};
 use pprz_ground::escape;
-use pprz_ground::input::{self, DEFAULT_CAPACITY, Drops, End, InputQueue, Overflow, Pop};
+use pprz_ground::input::{Drops, End, InputQueue, Overflow, Pop};
 use pprz_ground::monitor::{Decoded, IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
@@ -28,31 +28,6 @@ use pprz_ground::uplink;
 use pprz_ground::viewer::{self, Viewer};
 use pprz_transports::AnyTransport;
 use record::{FileId, Recorder};
-
-/// Where uplink frames are written.
-enum UplinkSink {
-    Udp(UdpSocket, SocketAddr),
-    Stream(Box<dyn Write + Send>),
-    None,
-}
-
-impl UplinkSink {
-    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
-        match self {
-            Self::Udp(socket, to) => socket.send_to(frame, *to).map(drop),
-            Self::Stream(w) => w.write_all(frame).and_then(|()| w.flush()),
-            Self::None => Err(std::io::Error::other(
-                "no uplink: give --uplink with --udp, or use --tcp/--serial",
-            )),
-        }
-    }
-}
-
-/// An input opened but not read yet (reading starts once the recording is open).
-enum Source {
-    Udp(UdpSocket),
-    Stream(Box<dyn std::io::Read + Send>, Overflow),
-}
 
 /// The identities of the input files (which the recording must not overwrite), each
 /// with a description.
@@ -64,58 +39,35 @@ fn open_input(args: &Args) -> Result<(Source, UplinkSink, Inputs), String> {
     if let Ok(id) = FileId::of_path(&args.messages) {
         inputs.push((id, format!("the messages file {}", args.messages.display())));
     }
-    if let Some(addr) = args.udp {
-        let socket = UdpSocket::bind(addr).map_err(|e| format!("cannot bind UDP {addr}: {e}"))?;
-        let recv = socket.try_clone().map_err(|e| e.to_string())?;
-        let sink = match args.uplink {
-            Some(to) => UplinkSink::Udp(socket, to),
-            None => UplinkSink::None,
-        };
-        return Ok((Source::Udp(recv), sink, inputs));
-    }
-    if let Some(addr) = args.tcp {
-        let stream =
-            TcpStream::connect(addr).map_err(|e| format!("cannot connect to {addr}: {e}"))?;
-        let write = stream.try_clone().map_err(|e| e.to_string())?;
-        let source = Source::Stream(Box::new(stream), Overflow::DropOldest);
-        return Ok((source, UplinkSink::Stream(Box::new(write)), inputs));
-    }
-    if let Some(dev) = &args.serial {
-        let port = serialport::new(dev, args.baud)
-            .timeout(Duration::from_millis(100))
-            .open()
-            .map_err(|e| format!("cannot open serial port {dev}: {e}"))?;
-        let write = port.try_clone().map_err(|e| e.to_string())?;
-        if let Ok(id) = FileId::of_path(Path::new(dev)) {
-            inputs.push((id, format!("the serial port {dev}")));
+    let endpoint = if let Some(listen) = args.udp {
+        Endpoint::Udp {
+            listen,
+            uplink: args.uplink,
         }
-        let source = Source::Stream(Box::new(port), Overflow::DropOldest);
-        return Ok((source, UplinkSink::Stream(Box::new(write)), inputs));
-    }
-    if let Some(path) = &args.file {
-        let file = open_file(path)?;
+    } else if let Some(addr) = args.tcp {
+        Endpoint::Tcp(addr)
+    } else if let Some(device) = &args.serial {
+        if let Ok(id) = FileId::of_path(Path::new(device)) {
+            inputs.push((id, format!("the serial port {device}")));
+        }
+        Endpoint::Serial {
+            device: device.clone(),
+            baud: args.baud,
+        }
+    } else if let Some(path) = &args.file {
+        let file = device::open_file(path)?;
         let id = FileId::of_file(path, &file)
             .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         inputs.push((id, format!("the --file input {}", path.display())));
-        let source = Source::Stream(Box::new(file), Overflow::Block);
-        return Ok((source, UplinkSink::None, inputs));
-    }
-    if let Some(id) = FileId::of_stdin() {
-        inputs.push((id, "the file standard input reads".to_owned()));
-    }
-    let source = Source::Stream(Box::new(std::io::stdin()), Overflow::Block);
-    Ok((source, UplinkSink::None, inputs))
-}
-
-/// Opens a file to replay: a directory is an error now, not a read error later.
-fn open_file(path: &Path) -> Result<File, String> {
-    let cannot = |e: &dyn std::fmt::Display| format!("cannot read {}: {e}", path.display());
-    let file = File::open(path).map_err(|e| cannot(&e))?;
-    let meta = file.metadata().map_err(|e| cannot(&e))?;
-    if meta.is_dir() {
-        return Err(cannot(&"it is a directory"));
-    }
-    Ok(file)
+        Endpoint::File(path.clone())
+    } else {
+        if let Some(id) = FileId::of_stdin() {
+            inputs.push((id, "the file standard input reads".to_owned()));
+        }
+        Endpoint::Stdin
+    };
+    let (source, sink) = endpoint.open()?;
+    Ok((source, sink, inputs))
 }
 
 /// Where decoded messages go: standard output (`--lines`) and the recording. Keeps
@@ -414,7 +366,7 @@ fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<
     let recorder = open_recorder(args, &mut inputs, transport)?;
     let has_uplink = !matches!(uplink_sink, UplinkSink::None);
     let viewer = open_viewer(args, &inputs, has_uplink, prepared.table.as_ref())?;
-    let queue = start_reading(source);
+    let queue = source.start();
     let stop = stop_on_ctrl_c();
     let live = queue.overflow() == Overflow::DropOldest;
     let mut monitor = Monitor::new(set, transport)
@@ -490,22 +442,6 @@ fn open_recorder(
         inputs.push((id, format!("the --record file {}", path.display())));
     }
     Ok(Some(Recorder::new(BufWriter::new(file), transport)))
-}
-
-/// Starts the thread that reads `source` into a queue.
-fn start_reading(source: Source) -> InputQueue {
-    match source {
-        Source::Udp(socket) => {
-            let q = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
-            input::spawn_udp(socket, q.clone());
-            q
-        }
-        Source::Stream(reader, overflow) => {
-            let q = InputQueue::new(DEFAULT_CAPACITY, overflow);
-            input::spawn_stream(reader, q.clone());
-            q
-        }
-    }
 }
 
 /// A flag that Ctrl-C sets.
