@@ -519,3 +519,193 @@ fn put_element(
         ScalarFault::OutOfRange => ParseError::OutOfRange { field, ty, value },
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::json::message;
+    use crate::set::RuntimeSet;
+    use pprz_test_support::rng::Rng;
+    use serde_json::json;
+
+    /// Every type and shape: labels, converted values, fixed and variable arrays, text.
+    const XML: &str = r#"<protocol>
+        <msg_class name="datalink" id="2">
+        <message name="ALL" id="1">
+          <field name="mode" type="uint8" values="OFF|ON|AUTO"/>
+          <field name="i8" type="int8"/>
+          <field name="u16" type="uint16"/>
+          <field name="i16" type="int16" unit="cm" alt_unit="m"/>
+          <field name="u32" type="uint32"/>
+          <field name="i32" type="int32" unit="mm" alt_unit="m"/>
+          <field name="u64" type="uint64"/>
+          <field name="i64" type="int64"/>
+          <field name="phi" type="float" unit="rad" alt_unit="deg"/>
+          <field name="d" type="double"/>
+          <field name="c" type="char"/>
+          <field name="acc" type="int16[3]" unit="cm" alt_unit="m"/>
+          <field name="modes" type="uint8[2]" values="A|B"/>
+          <field name="bytes" type="uint8[]"/>
+          <field name="name" type="char[6]"/>
+          <field name="text" type="char[]"/>
+          <field name="fs" type="float[]" unit="rad" alt_unit="deg"/>
+          <field name="ds" type="double[2]"/>
+          <field name="last" type="int64[]"/>
+        </message>
+        <message name="SETTING" id="4"><field name="index" type="uint8"/>
+          <field name="ac_id" type="uint8"/><field name="value" type="float"/></message>
+        <message name="PING" id="8"/>
+        <message name="BIG" id="9"><field name="a" type="double[15]"/><field name="b" type="double[]"/></message>
+        </msg_class>
+        <msg_class name="ground" id="3">
+        <message name="NAMED" id="1"><field name="s" type="string"/><field name="x" type="uint8"/></message>
+        </msg_class></protocol>"#;
+
+    fn set() -> RuntimeSet {
+        RuntimeSet::parse("all.xml", XML).unwrap()
+    }
+
+    fn desc<'a>(set: &'a RuntimeSet, class: &str, name: &str) -> &'a MessageDescriptor<'static> {
+        set.find_by_name(class, name).unwrap()
+    }
+
+    /// A random number of `base`: any bit pattern but NaN and infinities (which have no
+    /// JSON form), often a value at an edge.
+    fn random_number(rng: &mut Rng, base: BaseType, out: &mut Vec<u8>) {
+        const F64_EDGES: [f64; 8] = [
+            -0.0,
+            f64::MAX,
+            f64::MIN,
+            f64::MIN_POSITIVE,
+            5e-324,
+            1e300,
+            -1.5e19,
+            0.1,
+        ];
+        match base {
+            BaseType::F32 => loop {
+                let v = if rng.chance(10) {
+                    F64_EDGES[rng.below(8)] as f32
+                } else {
+                    f32::from_bits(rng.next_u64() as u32)
+                };
+                if v.is_finite() {
+                    break out.extend(v.to_le_bytes());
+                }
+            },
+            BaseType::F64 => loop {
+                let v = if rng.chance(10) {
+                    F64_EDGES[rng.below(8)]
+                } else {
+                    f64::from_bits(rng.next_u64())
+                };
+                if v.is_finite() {
+                    break out.extend(v.to_le_bytes());
+                }
+            },
+            b => {
+                let bits = match rng.below(4) {
+                    0 => 0,
+                    1 => u64::MAX,
+                    2 => u64::MAX >> 1,
+                    _ => rng.next_u64(),
+                };
+                out.extend(&bits.to_le_bytes()[..b.size()]);
+            }
+        }
+    }
+
+    /// Random UTF-8 text of at most `max` bytes, with controls, NUL, quotes, escapes,
+    /// bidi overrides and characters of 2, 3 and 4 bytes.
+    fn random_text(rng: &mut Rng, max: usize) -> Vec<u8> {
+        const CHARS: [char; 13] = [
+            'a', 'Z', ' ', '\0', '\n', '\x1b', '"', '\\', '\x7f', 'é', '€', '\u{202e}', '😀',
+        ];
+        let target = rng.below(max + 1);
+        let mut s = String::new();
+        for _ in 0..target {
+            let c = CHARS[rng.below(CHARS.len())];
+            if s.len() + c.len_utf8() <= target {
+                s.push(c);
+            }
+        }
+        s.into_bytes()
+    }
+
+    /// A random well-formed payload of `desc` that has a JSON form read back exactly:
+    /// text is UTF-8 and a `char[]` does not end with NUL. `None` if no payload fits.
+    fn random_payload(rng: &mut Rng, desc: &MessageDescriptor<'_>) -> Option<Vec<u8>> {
+        let mut budget = MAX_PAYLOAD.checked_sub(desc.min_len())?;
+        let mut p = Vec::new();
+        for f in desc.fields {
+            match f.ty {
+                FieldType::Scalar(b) => random_number(rng, b, &mut p),
+                FieldType::Array(BaseType::Char, n) => {
+                    let t = random_text(rng, n);
+                    p.extend(&t);
+                    p.resize(p.len() + n - t.len(), 0);
+                }
+                FieldType::Vector(BaseType::Char) => {
+                    let mut t = random_text(rng, budget.min(60));
+                    while t.last() == Some(&0) {
+                        t.pop();
+                    }
+                    budget -= t.len();
+                    p.push(t.len() as u8);
+                    p.extend(t);
+                }
+                FieldType::Array(b, n) => (0..n).for_each(|_| random_number(rng, b, &mut p)),
+                FieldType::Vector(b) => {
+                    let count = rng.below((budget / b.size()).min(20) + 1);
+                    budget -= count * b.size();
+                    p.push(count as u8);
+                    (0..count).for_each(|_| random_number(rng, b, &mut p));
+                }
+            }
+        }
+        Some(p)
+    }
+
+    /// `message` then `parse_message_str` gives `payload` back.
+    fn assert_round_trip(desc: &MessageDescriptor<'_>, payload: &[u8]) {
+        let text = message(desc, payload).unwrap();
+        let back = parse_message_str(desc, &text);
+        assert_eq!(back.as_deref(), Ok(payload), "{} {text}", desc.name);
+    }
+
+    #[test]
+    fn every_type_round_trips() {
+        let set = set();
+        let mut rng = Rng::new(28);
+        for desc in set.set().messages() {
+            for _ in 0..500 {
+                if let Some(p) = random_payload(&mut rng, desc) {
+                    assert_round_trip(desc, &p);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn reference_messages_round_trip() {
+        let Some(dir) =
+            pprz_test_support::reference::locate_for_test("pprz-ground json reference round trip")
+        else {
+            return;
+        };
+        let set = RuntimeSet::load(dir.join("messages.xml")).expect("the reference loads");
+        let messages = set.set().messages();
+        assert!(messages.len() > 100, "{} messages", messages.len());
+        let mut rng = Rng::new(7);
+        let mut tried = 0;
+        for desc in messages {
+            for _ in 0..20 {
+                if let Some(p) = random_payload(&mut rng, desc) {
+                    assert_round_trip(desc, &p);
+                    tried += 1;
+                }
+            }
+        }
+        assert!(tried > 100 * 20, "{tried}");
+    }
+}
