@@ -448,7 +448,10 @@ fn put_field(
         }
         FieldType::Vector(base) => {
             let items = v.as_array().ok_or_else(|| wrong("an array"))?;
-            fits(out, 1usize.saturating_add(items.len().saturating_mul(base.size())))?;
+            fits(
+                out,
+                1usize.saturating_add(items.len().saturating_mul(base.size())),
+            )?;
             out.push(u8::try_from(items.len()).unwrap_or(u8::MAX));
             for (i, item) in items.iter().enumerate() {
                 put_element(f, base, Some(i), item, out)?;
@@ -707,5 +710,282 @@ mod tests {
             }
         }
         assert!(tried > 100 * 20, "{tried}");
+    }
+
+    /// A valid ALL message, with every form accepted besides the plain one.
+    fn all() -> Json {
+        json!({
+            "mode": "AUTO", "i8": -128, "u16": 65535.0, "i16": -3, "i16_alt": 999,
+            "u32": 4_294_967_295u32, "i32": 1e3, "u64": u64::MAX, "i64": i64::MIN,
+            "phi": 0.5, "d": -0.0, "c": "é", "acc": [1, 2.0, -3], "acc_alt": "ignored",
+            "modes": ["B", 0], "bytes": [], "name": "ab", "text": "hi\u{0}",
+            "fs": [1.5], "ds": [1, -0], "last": [-1]
+        })
+    }
+
+    fn all_payload() -> Vec<u8> {
+        let mut p = vec![2, 0x80, 0xFF, 0xFF, 0xFD, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF];
+        p.extend(1000i32.to_le_bytes());
+        p.extend(u64::MAX.to_le_bytes());
+        p.extend(i64::MIN.to_le_bytes());
+        p.extend(0.5f32.to_le_bytes());
+        p.extend((-0.0f64).to_le_bytes());
+        p.push(0xE9);
+        p.extend([1, 0, 2, 0, 0xFD, 0xFF]);
+        p.extend([1, 0]);
+        p.push(0);
+        p.extend(*b"ab\0\0\0\0");
+        p.extend([3, b'h', b'i', 0]);
+        p.push(1);
+        p.extend(1.5f32.to_le_bytes());
+        p.extend(1f64.to_le_bytes());
+        // `-0` in `json!` is the Rust integer 0.
+        p.extend(0f64.to_le_bytes());
+        p.push(1);
+        p.extend((-1i64).to_le_bytes());
+        p
+    }
+
+    #[test]
+    fn accepted_forms() {
+        let set = set();
+        let d = desc(&set, "datalink", "ALL");
+        assert_eq!(parse_message(d, &all()), Ok(all_payload()));
+        // A char as its byte, an integer with its label's index.
+        let mut j = all();
+        j["c"] = json!(0xE9);
+        j["mode"] = json!(2);
+        j["modes"] = json!([1, "A"]);
+        assert_eq!(parse_message(d, &j), Ok(all_payload()));
+        // In JSON text, `-0` keeps its sign for a float.
+        let setting = desc(&set, "datalink", "SETTING");
+        let p = parse_message_str(setting, r#"{"value": -0, "ac_id": -0, "index": 1e2}"#);
+        assert_eq!(p, Ok(vec![100, 0, 0, 0, 0, 0x80]));
+        assert_eq!(
+            parse_message_str(desc(&set, "datalink", "PING"), " {} "),
+            Ok(vec![])
+        );
+        let named = desc(&set, "ground", "NAMED");
+        assert_eq!(
+            parse_message(named, &json!({"s": "€", "x": 1})),
+            Ok(vec![3, 0xE2, 0x82, 0xAC, 1])
+        );
+        // A field named like another field's converted value is that field; the
+        // converted value has another key, ignored.
+        let s = RuntimeSet::parse(
+            "a.xml",
+            r#"<protocol><msg_class name="datalink" id="2"><message name="M" id="1">
+            <field name="a" type="int32" unit="mm" alt_unit="m"/>
+            <field name="a_alt" type="uint8"/></message></msg_class></protocol>"#,
+        )
+        .unwrap();
+        let m = desc(&s, "datalink", "M");
+        let j = json!({"a": 5, "a_alt": 6, "a_alt_": 0.005});
+        assert_eq!(parse_message(m, &j), Ok(vec![5, 0, 0, 0, 6]));
+    }
+
+    #[test]
+    fn shared_scalar_encoder() {
+        let mut out = Vec::new();
+        assert_eq!(
+            put_scalar(BaseType::F32, Num::Int(16_777_217), &mut out),
+            Ok(())
+        );
+        assert_eq!(out, 16_777_216f32.to_le_bytes());
+        assert_eq!(
+            put_scalar(BaseType::F32, Num::Float(1e39), &mut out),
+            Err(ScalarFault::OutOfRange)
+        );
+        // NaN and infinities are written (a command line may give them; JSON cannot).
+        assert_eq!(
+            put_scalar(BaseType::F32, Num::Float(f64::NAN), &mut out),
+            Ok(())
+        );
+        assert_eq!(
+            put_scalar(
+                BaseType::U64,
+                Num::Float(18_446_744_073_709_551_616.0),
+                &mut out
+            ),
+            Err(ScalarFault::OutOfRange)
+        );
+        assert_eq!(
+            put_scalar(BaseType::I8, Num::Float(f64::INFINITY), &mut out),
+            Err(ScalarFault::OutOfRange)
+        );
+        assert_eq!(
+            put_scalar(BaseType::I8, Num::Float(0.5), &mut out),
+            Err(ScalarFault::Fraction)
+        );
+        assert_eq!(out.len(), 8);
+    }
+
+    /// The error of ALL with `key` set to `value` (removed when `None`).
+    fn refuse(key: &str, value: Option<Json>) -> ParseError {
+        let set = set();
+        let mut j = all();
+        match value {
+            Some(v) => j[key] = v,
+            None => drop(j.as_object_mut().unwrap().remove(key)),
+        }
+        parse_message(desc(&set, "datalink", "ALL"), &j).unwrap_err()
+    }
+
+    #[test]
+    fn every_refusal() {
+        let set = set();
+        let all_desc = desc(&set, "datalink", "ALL");
+        let str_err = |t: &str| parse_message_str(all_desc, t).unwrap_err();
+        let cases: Vec<(ParseError, &str)> = vec![
+            (
+                str_err(&" ".repeat(MAX_TEXT + 1)),
+                "JSON text of 65537 bytes, longer than 65536",
+            ),
+            (str_err("{\"mode\": 1,"), "not JSON: EOF while parsing"),
+            (
+                parse_message(all_desc, &json!([1, 2])).unwrap_err(),
+                "a message is a JSON object, not an array of 2 items",
+            ),
+            (
+                refuse("x\u{1b}[2J\n\u{202e}", Some(json!(1))),
+                r#"unknown key "x\x1b[2J\n\u{202e}": neither a field nor a converted value of the message"#,
+            ),
+            (refuse("d", None), "field d is missing"),
+            (
+                refuse("u16", Some(json!("3"))),
+                r#"field u16 (uint16) takes an integer, not "3""#,
+            ),
+            (
+                refuse("i8", Some(json!(1.5))),
+                "field i8 (int8) takes an integer, not 1.5",
+            ),
+            (
+                refuse("u64", Some(json!(18_446_744_073_709_551_616.0))),
+                "value 1.8446744073709552e+19 out of the range of field u64 (uint64)",
+            ),
+            (
+                refuse("modes", Some(json!([0, "C"]))),
+                r#"field modes[1] has no label "C""#,
+            ),
+            (
+                refuse("acc", Some(json!([1, 2]))),
+                "field acc takes 3 items, not 2",
+            ),
+            (
+                refuse("name", Some(json!("abcdeé"))),
+                "field name holds at most 6 bytes of text, not 7",
+            ),
+            (
+                refuse("bytes", Some(json!(vec![0; 200]))),
+                "payload too long: at least 277 bytes with field bytes, at most 255",
+            ),
+        ];
+        for (e, text) in cases {
+            let shown = e.to_string();
+            assert!(shown.starts_with(text), "{shown:?} vs {text:?}");
+            assert!(!shown.chars().any(escape::is_unsafe), "{shown:?}");
+        }
+    }
+
+    #[test]
+    fn wrong_types_and_ranges() {
+        let wrong = |key: &str, v: Json| match refuse(key, Some(v)) {
+            ParseError::WrongType { field, .. } => field,
+            e => panic!("{key}: {e}"),
+        };
+        assert_eq!(wrong("mode", json!(true)), "mode");
+        assert_eq!(wrong("i8", Json::Null), "i8");
+        assert_eq!(wrong("c", json!("ab")), "c");
+        assert_eq!(wrong("c", json!("Ā")), "c");
+        assert_eq!(wrong("c", json!("")), "c");
+        assert_eq!(wrong("acc", json!(5)), "acc");
+        assert_eq!(wrong("acc", json!([1, {"a": 1}, 3])), "acc[1]");
+        assert_eq!(wrong("name", json!(["a"])), "name");
+        assert_eq!(wrong("text", json!(null)), "text");
+        assert_eq!(wrong("phi", json!("0.5")), "phi");
+        let range = |key: &str, v: Json| match refuse(key, Some(v)) {
+            ParseError::OutOfRange { field, ty, .. } => format!("{field} {ty}"),
+            e => panic!("{key}: {e}"),
+        };
+        assert_eq!(range("i8", json!(128)), "i8 int8");
+        assert_eq!(range("u16", json!(-1)), "u16 uint16");
+        assert_eq!(range("i64", json!(9.3e18)), "i64 int64");
+        assert_eq!(range("c", json!(256)), "c char");
+        assert_eq!(range("phi", json!(1e39)), "phi float");
+        assert_eq!(range("last", json!([0, 1e300])), "last[1] int64");
+        assert!(matches!(
+            refuse("mode", Some(json!("MANUAL"))),
+            ParseError::UnknownLabel { .. }
+        ));
+    }
+
+    #[test]
+    fn hostile_inputs() {
+        let set = set();
+        let d = desc(&set, "datalink", "ALL");
+        // Nesting beyond serde_json's limit, numbers beyond f64.
+        let deep = format!("{}{}", "[".repeat(10_000), "]".repeat(10_000));
+        assert!(
+            matches!(parse_message_str(d, &deep), Err(ParseError::Syntax(e)) if e.contains("recursion"))
+        );
+        let huge = r#"{"mode": 1e400}"#;
+        assert!(matches!(
+            parse_message_str(d, huge),
+            Err(ParseError::Syntax(_))
+        ));
+        let setting = desc(&set, "datalink", "SETTING");
+        for (text, field) in [
+            (
+                r#"{"index": 18446744073709551616, "ac_id": 1, "value": 0}"#,
+                "index",
+            ),
+            (r#"{"index": -1e-400, "ac_id": 1e300, "value": 0}"#, "ac_id"),
+            (r#"{"index": 0, "ac_id": 1, "value": -3.5e38}"#, "value"),
+        ] {
+            let e = parse_message_str(setting, text);
+            assert!(
+                matches!(&e, Err(ParseError::OutOfRange { field: f, .. }) if f == field),
+                "{e:?}"
+            );
+        }
+        // Nested values where numbers belong are refused without looking inside.
+        let mut nested = json!(1);
+        for _ in 0..100 {
+            nested = json!([nested]);
+        }
+        assert!(matches!(
+            refuse("acc", Some(json!([nested, 1, 2]))),
+            ParseError::WrongType { .. }
+        ));
+        // Long strings and arrays: refused by size, shown shortened.
+        let long = "\u{1b}".repeat(100_000);
+        let e = refuse("name", Some(json!(long))).to_string();
+        assert!(e.ends_with("not 100000"), "{e}");
+        let e = refuse("text", Some(json!(long)));
+        assert!(matches!(e, ParseError::PayloadTooLong { needed, .. } if needed > 100_000));
+        let e = refuse("i8", Some(json!(long))).to_string();
+        assert!(e.len() < 200 && e.contains("(100000 bytes)"), "{e}");
+        assert!(!e.chars().any(escape::is_unsafe));
+        let e = refuse("bytes", Some(json!(vec![1; 1_000_000])));
+        assert!(matches!(e, ParseError::PayloadTooLong { .. }));
+        // The payload is checked with the fields that follow: a vector that fits alone
+        // but not with them.
+        let big = desc(&set, "datalink", "BIG");
+        let j = json!({"a": vec![0; 15], "b": vec![0.5; 16]});
+        assert_eq!(parse_message(big, &j).map(|p| p.len()), Ok(249));
+        let j = json!({"a": vec![0; 15], "b": vec![0.5; 17]});
+        assert_eq!(
+            parse_message(big, &j),
+            Err(ParseError::PayloadTooLong {
+                field: "b".into(),
+                needed: 257,
+                max: 255
+            })
+        );
+        // Control characters in keys and values are escaped in every message.
+        let e = refuse("\u{0}\r\u{85}\u{2028}", Some(json!(1))).to_string();
+        assert!(!e.chars().any(escape::is_unsafe), "{e}");
+        let e = refuse("mode", Some(json!("\u{7}\u{9b}"))).to_string();
+        assert!(!e.chars().any(escape::is_unsafe), "{e}");
     }
 }
