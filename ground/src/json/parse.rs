@@ -103,7 +103,7 @@ pub enum ParseError {
 }
 
 /// A name from the message set, on one line.
-fn name(s: &str) -> String {
+fn one_line(s: &str) -> String {
     escape::lines(s).replace('\n', "\\n")
 }
 
@@ -113,14 +113,14 @@ impl fmt::Display for ParseError {
             Self::TextTooLong { len, max } => {
                 write!(f, "JSON text of {len} bytes, longer than {max}")
             }
-            Self::Syntax(e) => write!(f, "not JSON: {}", name(e)),
+            Self::Syntax(e) => write!(f, "not JSON: {}", one_line(e)),
             Self::NotAnObject { found } => write!(f, "a message is a JSON object, not {found}"),
             Self::UnknownKey(k) => write!(
                 f,
                 "unknown key {}: neither a field nor a converted value of the message",
                 escape::quoted(k)
             ),
-            Self::MissingField(n) => write!(f, "field {} is missing", name(n)),
+            Self::MissingField(n) => write!(f, "field {} is missing", one_line(n)),
             Self::WrongType {
                 field,
                 ty,
@@ -129,25 +129,25 @@ impl fmt::Display for ParseError {
             } => write!(
                 f,
                 "field {} ({}) takes {expected}, not {found}",
-                name(field),
-                name(ty)
+                one_line(field),
+                one_line(ty)
             ),
             Self::NotAnInteger { field, ty, value } => write!(
                 f,
                 "field {} ({}) takes an integer, not {value}",
-                name(field),
-                name(ty)
+                one_line(field),
+                one_line(ty)
             ),
             Self::OutOfRange { field, ty, value } => write!(
                 f,
                 "value {value} out of the range of field {} ({})",
-                name(field),
-                name(ty)
+                one_line(field),
+                one_line(ty)
             ),
             Self::UnknownLabel { field, label } => write!(
                 f,
                 "field {} has no label {}",
-                name(field),
+                one_line(field),
                 escape::quoted(label)
             ),
             Self::WrongLength {
@@ -157,17 +157,17 @@ impl fmt::Display for ParseError {
             } => write!(
                 f,
                 "field {} takes {expected} items, not {actual}",
-                name(field)
+                one_line(field)
             ),
             Self::TextTooLongForField { field, max, actual } => write!(
                 f,
                 "field {} holds at most {max} bytes of text, not {actual}",
-                name(field)
+                one_line(field)
             ),
             Self::PayloadTooLong { field, needed, max } => write!(
                 f,
                 "payload too long: at least {needed} bytes with field {}, at most {max}",
-                name(field)
+                one_line(field)
             ),
         }
     }
@@ -315,27 +315,48 @@ pub fn parse_message_str(desc: &MessageDescriptor<'_>, text: &str) -> Result<Vec
 ///
 /// * The value is a JSON object with a key per field of the message, all required, in
 ///   any order. The converted values [`message`](super::message) adds ([`alt_key`]) may
-///   be there and are ignored: the field's own value is the one written. Any other key
-///   is refused.
+///   be there too, whatever their value: they are ignored, the field's own value is the
+///   one written. Any other key is refused.
 /// * Integer fields (`uint8` to `int64`) take a JSON integer in the type's range, or a
-///   number without fractional part (`3.0`, `-0`, `1e3`). A field with `values` labels
-///   also takes one of its labels, for the label's index.
+///   number without fractional part (`3.0`, `-0`, `1e3`). An integer field or array
+///   with `values` labels also takes a label (exact, case included) for its index.
+///   Booleans, strings, `null`, fractions and numbers out of range are refused.
 /// * `float` and `double` take any JSON number (JSON has no NaN nor infinity), rounded to
-///   the type; a number beyond the range of `float` is refused.
+///   the nearest value of the type; a number beyond the range of `float` is refused.
 /// * A `char` takes a string of one character from U+0000 to U+00FF (the byte
 ///   [`message`](super::message) shows as that character), or an integer 0 to 255.
-/// * `char[N]`, `char[]` and `string` take a JSON string, written as its UTF-8 bytes:
-///   at most `N` bytes for `char[N]`, padded with NUL bytes; a `char[]`/`string` is its
-///   length byte then its bytes.
-/// * Other arrays take a JSON array of such numbers: exactly `N` items for `T[N]`, and
-///   for `T[]` as many as fit in the payload (written as the count, then the items).
-/// * The payload is at most 255 bytes, the most a frame carries.
+/// * `char[N]`, `char[]` and `string` take a JSON string, written as its UTF-8 bytes
+///   (`\u0000` included): at most `N` bytes for `char[N]`, padded with NUL bytes; a
+///   `char[]`/`string` is its length byte, then its bytes.
+/// * Other arrays take a JSON array of numbers as above: exactly `N` items for `T[N]`,
+///   and for `T[]` as many as fit in the payload (written as the count, then the items).
+/// * The payload is at most 255 bytes, the most a length byte counts; a transport may
+///   carry fewer (247 in PPRZ v2) and refuses a longer frame itself.
 ///
 /// Payloads are little endian, as [`dynamic::fields`](pprz_messages::dynamic::fields)
-/// decodes them. No input panics; every refusal names the field (or key) and the value.
+/// decodes them. No input panics, and the work is bounded by the payload: an array too
+/// long is refused before its items are read.
+///
+/// ```
+/// use pprz_ground::{json, set::RuntimeSet};
+/// use serde_json::json;
+/// let set = RuntimeSet::parse("m.xml", r#"<protocol><msg_class name="datalink" id="2">
+///     <message name="M" id="1"><field name="mode" type="uint8" values="OFF|ON"/>
+///     <field name="alt" type="int32" unit="mm" alt_unit="m"/><field name="t" type="char[]"/>
+///     </message></msg_class></protocol>"#).unwrap();
+/// let m = set.find_by_name("datalink", "M").unwrap();
+/// let p = json::parse_message(m, &json!({"mode": "ON", "alt": 1500, "alt_alt": 1.5, "t": "hi"}));
+/// assert_eq!(p.unwrap(), [1, 0xDC, 0x05, 0, 0, 2, b'h', b'i']);
+/// // What `message` writes is read back.
+/// let text = json::message(m, &[1, 0xDC, 0x05, 0, 0, 2, b'h', b'i']).unwrap();
+/// assert_eq!(json::parse_message_str(m, &text).unwrap(), [1, 0xDC, 0x05, 0, 0, 2, b'h', b'i']);
+/// ```
 ///
 /// # Errors
-/// The first field or key refused, in the order of the list above.
+/// The first problem met, as a [`ParseError`] that names the key or field (and array
+/// item) and the value given: not an object, then an unknown key, then the fields in
+/// the message's order (missing, wrong JSON type, wrong length, payload too long,
+/// then each number: fraction, out of range, unknown label).
 pub fn parse_message(desc: &MessageDescriptor<'_>, json: &Json) -> Result<Vec<u8>, ParseError> {
     let Json::Object(obj) = json else {
         return Err(ParseError::NotAnObject {
@@ -761,6 +782,12 @@ mod tests {
         let setting = desc(&set, "datalink", "SETTING");
         let p = parse_message_str(setting, r#"{"value": -0, "ac_id": -0, "index": 1e2}"#);
         assert_eq!(p, Ok(vec![100, 0, 0, 0, 0, 0x80]));
+        // A key twice: the last one counts.
+        let p = parse_message_str(
+            setting,
+            r#"{"value": 0, "ac_id": 1, "ac_id": 2, "index": 3}"#,
+        );
+        assert_eq!(p, Ok(vec![3, 2, 0, 0, 0, 0]));
         assert_eq!(
             parse_message_str(desc(&set, "datalink", "PING"), " {} "),
             Ok(vec![])
