@@ -3,9 +3,10 @@
 
 use std::fmt;
 
-use pprz_messages::{BaseType, FieldType, MessageDescriptor};
+use pprz_messages::{FieldType, MessageDescriptor};
 use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, TxMeta};
 
+use crate::json::parse::{Num, put_scalar};
 use crate::set::RuntimeSet;
 
 /// Why an uplink frame could not be built.
@@ -15,7 +16,8 @@ pub enum UplinkError {
     UnknownMessage(String),
     /// The message has a field that is not a number (arrays, text).
     UnsupportedField(String),
-    /// A value does not fit its field's type.
+    /// A value does not fit its field's type (out of its range, a fractional part for an
+    /// integer, a finite value beyond the range of `float`).
     OutOfRange {
         /// Field name.
         field: String,
@@ -59,30 +61,10 @@ pub fn encode_scalars(
             .iter()
             .find(|(n, _)| *n == field.name)
             .map_or(0.0, |(_, v)| *v);
-        let range = |lo: f64, hi: f64| {
-            if v.fract() == 0.0 && v >= lo && v <= hi {
-                Ok(v)
-            } else {
-                Err(UplinkError::OutOfRange {
-                    field: field.name.to_owned(),
-                    value: v,
-                })
-            }
-        };
-        match base {
-            BaseType::U8 | BaseType::Char => out.push(range(0.0, 255.0)? as u8),
-            BaseType::I8 => out.extend((range(-128.0, 127.0)? as i8).to_le_bytes()),
-            BaseType::U16 => out.extend((range(0.0, 65535.0)? as u16).to_le_bytes()),
-            BaseType::I16 => out.extend((range(-32768.0, 32767.0)? as i16).to_le_bytes()),
-            BaseType::U32 => out.extend((range(0.0, 4_294_967_295.0)? as u32).to_le_bytes()),
-            BaseType::I32 => {
-                out.extend((range(-2_147_483_648.0, 2_147_483_647.0)? as i32).to_le_bytes())
-            }
-            BaseType::U64 => out.extend((range(0.0, 1.8e19)? as u64).to_le_bytes()),
-            BaseType::I64 => out.extend((range(-9.2e18, 9.2e18)? as i64).to_le_bytes()),
-            BaseType::F32 => out.extend((v as f32).to_le_bytes()),
-            BaseType::F64 => out.extend(v.to_le_bytes()),
-        }
+        put_scalar(base, Num::Float(v), &mut out).map_err(|_| UplinkError::OutOfRange {
+            field: field.name.to_owned(),
+            value: v,
+        })?;
     }
     Ok(out)
 }

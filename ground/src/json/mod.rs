@@ -21,6 +21,9 @@
 //! schema names are escaped anyway ([`topic_part`]), and every text (units, labels) is
 //! escaped as JSON, so a hostile file can neither break a topic nor a schema. Sizes are
 //! bounded by the payload (at most 255 bytes), whatever the file declares.
+//!
+//! [`parse_message`] is the inverse of [`message`]: it reads such an object back into a
+//! payload, refusing anything that does not fit the message with a [`ParseError`].
 
 use std::fmt::Write as _;
 
@@ -30,6 +33,10 @@ use pprz_messages::{BaseType, FieldDescriptor, FieldType, MessageDescriptor};
 use serde_json::{Map, Value as Json, json};
 
 use crate::format::is_unit;
+
+pub(crate) mod parse;
+
+pub use parse::{MAX_TEXT, ParseError, parse_message, parse_message_str};
 
 /// The JSON Schema dialect of every schema.
 pub const DIALECT: &str = "https://json-schema.org/draft/2020-12/schema";
