@@ -11,6 +11,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use embassy_executor::Spawner;
 use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, Write};
@@ -18,7 +19,6 @@ use pprz_devices::host::{HostDevice, HostRx, HostTx};
 use pprz_devices::sim::{SimRx, SimTx};
 use pprz_example_app::{AC_ID, M};
 use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, Encoder, MAX_FRAME_LEN, PprzV2};
-use embassy_executor::Spawner;
 
 use crate::fleet::MAX_FLEET;
 use crate::options::TransportArg;
