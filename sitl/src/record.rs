@@ -131,12 +131,15 @@ pub struct TypeRecord {
     pub max_gap_us: u64,
 }
 
+/// A distinct message submitted: aircraft, class, id and payload.
+type SubmissionKey = (u8, u8, u8, Vec<u8>);
+
 /// Everything measured; one per process ([`lock`]).
 #[derive(Debug, Default)]
 pub struct Record {
     /// Latest submission time (µs) of each distinct message (aircraft, class, id,
     /// payload), and how many times it was submitted.
-    submissions: HashMap<(u8, u8, u8, Vec<u8>), (u64, u32)>,
+    submissions: HashMap<SubmissionKey, (u64, u32)>,
     /// Submissions recorded since the last pruning.
     since_prune: usize,
     /// Per level (high, normal, low).
