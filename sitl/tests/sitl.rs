@@ -938,8 +938,8 @@ fn a_fleet_of_32_each_on_its_own_radio() {
 }
 
 /// `--fleet 3`: the outage cuts every aircraft's radio to the ground: each falls
-/// silent at the ground from the cut to its end, and each goes Lost (with a 1 s timeout)
-/// and is Up again after it.
+/// silent at the ground from the cut to its end, and each goes Lost (with a 1.5 s
+/// timeout, straight from Up) and is Up again after it.
 #[test]
 fn an_outage_cuts_every_radio_of_a_fleet() {
     let (_, json) = run_sitl_json(
@@ -952,7 +952,7 @@ fn an_outage_cuts_every_radio_of_a_fleet() {
             "--outage",
             "both:2..4",
             "--lost-timeout",
-            "1",
+            "1.5",
         ],
     );
     let aircraft = json["link"]["aircraft"].as_array().unwrap();
