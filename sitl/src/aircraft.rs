@@ -2,6 +2,11 @@
 //! radio device, and the tasks around them (the radio's writers, the XBee reader and
 //! flood, aircraft 7 relaying for aircraft 8). [`start`] builds them from the options
 //! and runs them on a thread of their own.
+//!
+//! Aircraft 7 is built from statics, with what only one aircraft has (`--secure`,
+//! `--settings-flash`, XBee, the relay's second radio). The fleet's other aircraft
+//! (`--fleet N`) are built alike by [`wing`], on the heap and leaked (they live as long
+//! as the run): each its radio, its frame arena, its downlink and its link health.
 
 use std::convert::Infallible;
 
@@ -24,18 +29,21 @@ use pprz_telemetry::pprz_transports::{Decoder, Encoder, MAX_FRAME_LEN, PprzV2, X
 use pprz_telemetry::{Device, Downlink, FrameArena, Port, Sender, run_writer, run_writer_with};
 use static_cell::StaticCell;
 
-use crate::bridge::ground_bridge;
-use crate::fleet::{self, SECOND_AC_ID};
+use crate::bridge::{self, BridgeMode, GroundRadio};
+use crate::fleet::{self, MAX_FLEET};
 use crate::options::{Args, TransportArg};
 use crate::persist::{self, SitlStore};
 use crate::radio::{RADIO_RING, Radio, RadioPlan};
 use crate::{clock, link, record};
 
 /// Aircraft 7's downlink: device 0 its radio to the ground, device 1 its radio to
-/// aircraft 8 (`--fleet 2`; unused otherwise).
+/// aircraft 8 (`--relay`; unused otherwise).
 pub type Dl = Downlink<'static, M, 2, 32>;
-/// Aircraft 8's downlink: its radio to aircraft 7.
-pub type Dl8 = Downlink<'static, M, 1, 32>;
+/// The downlink of every other aircraft of the fleet: its one radio.
+pub type WingDl = Downlink<'static, M, 1, 32>;
+
+/// Bytes of each aircraft's frame arena.
+const ARENA_BYTES: usize = 8192;
 
 /// The PAYLOAD fields the flood sends over XBee 802.15.4 (the application's 120-byte
 /// flood frames exceed its 96 field bytes).
@@ -44,28 +52,37 @@ const XBEE_FLOOD_FIELDS: usize = 90;
 /// Priority of the frames aircraft 7 forwards whose message it does not know.
 const RELAY_PRIORITY: u8 = priority::LOW;
 
-static ARENA: FrameArena<M, 8192> = FrameArena::new();
-static ARENA_8: FrameArena<M, 8192> = FrameArena::new();
-static DOWNLINK_8: StaticCell<Dl8> = StaticCell::new();
-/// The radio between aircraft 7 and 8 (side A: 7, side B: 8).
-static LINK_78: StaticCell<Radio> = StaticCell::new();
+static ARENA: FrameArena<M, ARENA_BYTES> = FrameArena::new();
 /// The downlink, built at start-up from the options (its device configuration is not
 /// known at compile time).
 static DOWNLINK: StaticCell<Dl> = StaticCell::new();
 static RADIO: StaticCell<Radio> = StaticCell::new();
 /// Aircraft 7's link health, with the timeout of `--lost-timeout`.
 static HEALTH: StaticCell<LinkHealth<M>> = StaticCell::new();
-/// Aircraft 8's (`--fleet 2`).
-static HEALTH_8: StaticCell<LinkHealth<M>> = StaticCell::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// `--secure`: the radio's secure link (its writer seals, the application's reader
 /// opens, the application runs its handshake).
 pub static SECURE: SecureLink<M> = SecureLink::aircraft(AC_ID);
-/// `--fleet 2`: aircraft 7's relay counters (what it forwarded and refused, per reason),
+/// `--relay`: aircraft 7's relay counters (what it forwarded and refused, per reason),
 /// copied after every frame it reads.
 pub static RELAY_COUNTERS: RelayCounters = RelayCounters::new();
 /// XBee: the uplink messages, re-framed as PPRZ v2 for the application's reader.
 static UPLINK_PIPE: Pipe<M, 1024> = Pipe::new();
+
+/// One aircraft of the fleet besides aircraft 7.
+pub struct Wing {
+    /// Its id.
+    pub id: u8,
+    /// Its radio: to the ground, or (`relayed`) to aircraft 7. Endpoint A is the
+    /// aircraft.
+    pub radio: &'static Radio,
+    /// Its downlink (device 0: the radio).
+    pub downlink: &'static WingDl,
+    /// Its link health (its application's reader drives it, its failsafe watches it).
+    pub health: &'static LinkHealth<M>,
+    /// `--relay`: its radio joins it to aircraft 7, which relays, not to the ground.
+    pub relayed: bool,
+}
 
 /// The aircraft of the run, started: what the ground's viewer and the summary read.
 #[derive(Clone, Copy)]
@@ -76,35 +93,53 @@ pub struct Aircraft {
     pub radio_device: Device<'static>,
     /// Its radio to the ground.
     pub radio: &'static Radio,
-    /// `--fleet 2`: the radio between 7 and 8, and 8's downlink.
-    pub second: Option<(&'static Radio, &'static Dl8)>,
     /// Aircraft 7's link health (its application's reader drives it, its failsafe
     /// watches it).
     pub health: &'static LinkHealth<M>,
-    /// `--fleet 2`: aircraft 8's.
-    pub health_8: Option<&'static LinkHealth<M>>,
+    /// The fleet's other aircraft, 8 first (none with `--fleet 1`).
+    pub wings: &'static [Wing],
 }
 
 impl Aircraft {
     /// Each aircraft's id and link health, aircraft 7 first.
     pub fn healths(&self) -> Vec<(u8, &'static LinkHealth<M>)> {
         let mut all = vec![(AC_ID, self.health)];
-        all.extend(self.health_8.map(|h| (SECOND_AC_ID, h)));
+        all.extend(self.wings.iter().map(|w| (w.id, w.health)));
         all
+    }
+
+    /// The radios to the ground: aircraft 7's, then every other aircraft's own (not
+    /// one relayed through 7).
+    pub fn ground_radios(&self) -> Vec<GroundRadio> {
+        let mut all = vec![GroundRadio {
+            ac: AC_ID,
+            radio: self.radio,
+        }];
+        all.extend(
+            self.wings
+                .iter()
+                .filter(|w| !w.relayed)
+                .map(|w| GroundRadio {
+                    ac: w.id,
+                    radio: w.radio,
+                }),
+        );
+        all
+    }
+
+    /// `--relay`: the aircraft 7 relays for.
+    pub fn relayed(&self) -> Option<&'static Wing> {
+        self.wings.iter().find(|w| w.relayed)
+    }
+
+    /// The aircraft `id` of the fleet, if it is not 7.
+    pub fn wing(&self, id: u8) -> Option<&'static Wing> {
+        self.wings.iter().find(|w| w.id == id)
     }
 }
 
-/// Aircraft 8 (`--fleet 2`) before it starts: its radio to 7, its downlink and the port
-/// of its radio device.
-struct Second {
-    link: &'static Radio,
-    downlink: &'static Dl8,
-    port: Port<'static>,
-    health: &'static LinkHealth<M>,
-}
-
 /// Builds the aircraft the options describe, starts the clock and runs the aircraft on
-/// a thread of their own; `udp` is the UDP side of the radio's ground end, `responder`
+/// a thread of their own; `udp` is the UDP side of the radios' ground ends, `responder`
 /// the aircraft's end of `--secure`. Fails (with the message) before anything runs.
 pub fn start(
     args: &Args,
@@ -113,34 +148,35 @@ pub fn start(
     store: Option<&'static mut SitlStore>,
     udp: HostDevice,
 ) -> Result<Aircraft, String> {
-    let radio: &'static Radio = RADIO.init(SimLink::new(plan.sim_config(args.flow_control)));
+    let radio: &'static Radio = RADIO.init(SimLink::new(plan.sim_config(args.flow_control, 0)));
     link::cut(radio, &args.outage)?;
     let health: &'static LinkHealth<M> = HEALTH.init(link::health(args));
-    let fleet = args.fleet > 1;
     let downlink: &'static Dl = DOWNLINK.init(
         Downlink::new(&ARENA, AC_ID, [plan.device_config(), plan.device_config()])
-            .with_routes(fleet::routes(fleet)),
+            .with_routes(fleet::routes(args.relay)),
     );
     let [radio_port, link_port] = downlink.ports().map_err(|e| e.to_string())?;
     let radio_device = radio_port.device();
-    let second = if fleet {
-        Some(second_aircraft(args, plan)?)
-    } else {
-        None
-    };
+    let mut wings = Vec::with_capacity(usize::from(args.fleet));
+    let mut wing_ports = Vec::with_capacity(usize::from(args.fleet));
+    for index in 1..args.fleet {
+        let (w, port) = wing(args, plan, index)?;
+        wings.push(w);
+        wing_ports.push(port);
+    }
     let aircraft = Aircraft {
         downlink,
         radio_device,
         radio,
-        second: second.as_ref().map(|s| (s.link, s.downlink)),
         health,
-        health_8: second.as_ref().map(|s| s.health),
+        wings: Box::leak(wings.into_boxed_slice()),
     };
     let tasks = Tasks {
         radio_port,
         link_port,
         radio,
-        second,
+        aircraft,
+        wing_ports,
         config: config(plan, health),
         responder,
         store,
@@ -170,21 +206,32 @@ fn config(plan: &RadioPlan, health: &'static LinkHealth<M>) -> Config {
     }
 }
 
-/// `--fleet 2`: aircraft 8 and its radio to 7.
-fn second_aircraft(args: &Args, plan: &RadioPlan) -> Result<Second, String> {
-    let link: &'static Radio = LINK_78.init(SimLink::new(plan.sim_config(args.flow_control)));
-    let downlink: &'static Dl8 = DOWNLINK_8.init(Downlink::new(
-        &ARENA_8,
-        SECOND_AC_ID,
-        [plan.device_config()],
-    ));
+/// The fleet's aircraft number `index` (1: aircraft 8, ...), before it starts, with the
+/// port of its radio device: its radio (radio number `index`, the same as aircraft 7's,
+/// its errors seeded apart, cut by the outages when it reaches the ground), its frame
+/// arena, downlink and link health. With `--relay`, aircraft 8's radio joins it to 7.
+fn wing(args: &Args, plan: &RadioPlan, index: u8) -> Result<(Wing, Port<'static>), String> {
+    let relayed = args.relay && index == 1;
+    let radio: &'static Radio = Box::leak(Box::new(SimLink::new(
+        plan.sim_config(args.flow_control, index),
+    )));
+    if !relayed {
+        link::cut(radio, &args.outage)?;
+    }
+    let arena: &'static FrameArena<M, ARENA_BYTES> = Box::leak(Box::new(FrameArena::new()));
+    let id = fleet::id(index);
+    let downlink: &'static WingDl =
+        Box::leak(Box::new(Downlink::new(arena, id, [plan.device_config()])));
     let [port] = downlink.ports().map_err(|e| e.to_string())?;
-    Ok(Second {
-        link,
+    let health: &'static LinkHealth<M> = Box::leak(Box::new(link::health(args)));
+    let wing = Wing {
+        id,
+        radio,
         downlink,
-        port,
-        health: HEALTH_8.init(link::health(args)),
-    })
+        health,
+        relayed,
+    };
+    Ok((wing, port))
 }
 
 /// Everything the executor's tasks take, moved to its thread.
@@ -192,7 +239,9 @@ struct Tasks {
     radio_port: Port<'static>,
     link_port: Port<'static>,
     radio: &'static Radio,
-    second: Option<Second>,
+    aircraft: Aircraft,
+    /// The ports of the other aircraft's radio devices, in the order of `aircraft.wings`.
+    wing_ports: Vec<Port<'static>>,
     config: Config,
     responder: Option<Responder>,
     /// `--settings-flash`: aircraft 7's store (one aircraft only).
@@ -203,9 +252,9 @@ struct Tasks {
 }
 
 impl Tasks {
-    /// Spawns the aircraft's tasks and the radio's ground end.
+    /// Spawns the aircraft's tasks and the radios' ground ends.
     fn spawn(self, spawner: Spawner) {
-        let (air, ground) = self.radio.endpoints();
+        let (air, _) = self.radio.endpoints();
         let (air_rx, air_tx) = air.split();
         let radio_device = self.radio_port.device();
         let secure = self.responder.is_some();
@@ -215,22 +264,16 @@ impl Tasks {
             spawner.spawn(link::watch(AC_ID, health).unwrap());
         }
         spawner.spawn(radio_writer(self.radio_port, air_tx, layer).unwrap());
-        if let Some(second) = self.second {
-            let (side_7, side_8) = second.link.endpoints();
+        for (wing, port) in self.aircraft.wings.iter().zip(self.wing_ports) {
+            spawn_wing(spawner, wing, port, config);
+        }
+        if let Some(wing) = self.aircraft.relayed() {
+            // Aircraft 7 at the other end of 8's radio (endpoint B).
+            let (_, side_7) = wing.radio.endpoints();
             let (rx_7, tx_7) = side_7.split();
-            let (rx_8, tx_8) = side_8.split();
             let link_device = self.link_port.device();
-            let device_8 = second.port.device();
-            let config_8 = Config {
-                observer: Some(record::submitted_by_second),
-                health: Some(second.health),
-                ..config
-            };
-            spawner.spawn(link::watch(SECOND_AC_ID, second.health).unwrap());
             spawner.spawn(radio_writer(self.link_port, tx_7, None).unwrap());
-            spawner.spawn(radio_writer(second.port, tx_8, None).unwrap());
             spawner.spawn(relay_aircraft(radio_device, air_rx, link_device, rx_7, config).unwrap());
-            spawner.spawn(aircraft(device_8, rx_8, config_8, None).unwrap());
         } else if let Some(responder) = self.responder {
             let task = secure_aircraft(radio_device, air_rx, config, responder, self.store);
             spawner.spawn(task.unwrap());
@@ -241,14 +284,36 @@ impl Tasks {
                 spawner.spawn(xbee_flood(radio_device.sender(), self.flood).unwrap());
             }
         } else {
-            spawner.spawn(aircraft(radio_device, air_rx, config, self.store).unwrap());
+            let task = aircraft(AC_ID, radio_device, air_rx, config, self.store);
+            spawner.spawn(task.unwrap());
         }
-        spawner.spawn(ground_bridge(ground, self.udp, self.xbee, secure).unwrap());
+        let mode = BridgeMode {
+            xbee: self.xbee,
+            secure,
+        };
+        bridge::spawn(spawner, &self.aircraft.ground_radios(), self.udp, mode);
     }
 }
 
-/// A radio device's writer (sealing every frame with `secure`, if given).
-#[embassy_executor::task(pool_size = 3)]
+/// Spawns the tasks of one of the fleet's other aircraft: its link health's record,
+/// its radio device's writer and its application (with aircraft 7's `config` but its
+/// own health).
+fn spawn_wing(spawner: Spawner, wing: &'static Wing, port: Port<'static>, config: Config) {
+    let (air, _) = wing.radio.endpoints();
+    let (rx, tx) = air.split();
+    let device = port.device();
+    let config = Config {
+        health: Some(wing.health),
+        ..config
+    };
+    spawner.spawn(link::watch(wing.id, wing.health).unwrap());
+    spawner.spawn(radio_writer(port, tx, None).unwrap());
+    spawner.spawn(aircraft(wing.id, device, rx, config, None).unwrap());
+}
+
+/// A radio device's writer (sealing every frame with `secure`, if given): one per
+/// aircraft, and aircraft 7's second with `--relay`.
+#[embassy_executor::task(pool_size = MAX_FLEET as usize + 1)]
 async fn radio_writer(
     mut port: Port<'static>,
     tx: SimTx<'static, M, RADIO_RING>,
@@ -292,7 +357,7 @@ async fn secure_aircraft(
     panic!("the aircraft application cannot start: {e}");
 }
 
-/// Aircraft 7 relaying for aircraft 8 (`--fleet 2`): its radio to the ground and its
+/// Aircraft 7 relaying for aircraft 8 (`--relay`): its radio to the ground and its
 /// radio to 8, both read by one relaying datalink.
 #[embassy_executor::task]
 async fn relay_aircraft(
@@ -316,16 +381,17 @@ async fn relay_aircraft(
     panic!("the aircraft application cannot start: {e}");
 }
 
-/// The application reading its uplink from the radio (PPRZ v2), with its settings in
-/// `store`, if given.
-#[embassy_executor::task(pool_size = 2)]
+/// Aircraft `ac`'s application reading its uplink from the radio (PPRZ v2), with its
+/// settings in `store`, if given.
+#[embassy_executor::task(pool_size = MAX_FLEET as usize)]
 async fn aircraft(
+    ac: u8,
     radio: Device<'static>,
     rx: SimRx<'static, M, RADIO_RING>,
     config: Config,
     store: Option<&'static mut SitlStore>,
 ) {
-    let Err(e) = run_aircraft(radio, rx, config, store).await;
+    let Err(e) = record::as_aircraft(ac, run_aircraft(radio, rx, config, store)).await;
     panic!("the aircraft application cannot start: {e}");
 }
 

@@ -144,7 +144,7 @@ pub struct Ground<'a> {
     /// What the ground speaks on UDP: PPRZ v2.
     transport: AnyTransport,
     /// The aircraft it PINGs and sets.
-    fleet: &'static [u8],
+    fleet: Vec<u8>,
     /// `--secure`: frames are recorded here, opened (the bridge sees them sealed).
     secure: bool,
     /// Simulated times of the next PING, view and viewer link statistics.
@@ -211,9 +211,9 @@ impl Ground<'_> {
     /// skips none); on a secure link, from the session on, sealed.
     fn ping(&mut self, t: f64) {
         let ping_period = 1.0 / self.args.ping_rate;
-        let fleet = self.fleet;
+        let fleet = std::mem::take(&mut self.fleet);
         while t >= self.next_ping {
-            for &ac in fleet {
+            for &ac in &fleet {
                 if self.send(ac, "PING", &[]) {
                     self.monitor.ping_sent(Some(ac), t);
                     if self.secure {
@@ -223,6 +223,7 @@ impl Ground<'_> {
             }
             self.next_ping += ping_period;
         }
+        self.fleet = fleet;
     }
 
     /// The SETTING of every aircraft, once, at [`SETTING_AT_S`].
@@ -259,8 +260,8 @@ impl Ground<'_> {
 
     /// SETTING `index` = `value` to every aircraft at `t`.
     fn set_all(&mut self, t: f64, index: u8, value: f64) {
-        let fleet = self.fleet;
-        for &ac in fleet {
+        let fleet = std::mem::take(&mut self.fleet);
+        for &ac in &fleet {
             let values = [
                 ("index", f64::from(index)),
                 ("ac_id", f64::from(ac)),
@@ -270,6 +271,7 @@ impl Ground<'_> {
                 self.monitor.setting_sent(Some(ac), t, index, value);
             }
         }
+        self.fleet = fleet;
     }
 
     /// Settings read and written from the viewer.
@@ -356,10 +358,10 @@ impl Ground<'_> {
 /// Without a ground in this process (`--headless`): says where the aircraft talk and
 /// waits for the end of the run.
 pub fn wait_headless(args: &Args, stop: &AtomicBool, start: StdInstant) {
-    let who = if args.fleet > 1 {
-        format!("aircraft {AC_ID} and {SECOND_AC_ID} (through {AC_ID})")
-    } else {
-        format!("aircraft {AC_ID}")
+    let who = match args.fleet {
+        1 => format!("aircraft {AC_ID}"),
+        _ if args.relay => format!("aircraft {AC_ID} and {SECOND_AC_ID} (through {AC_ID})"),
+        n => format!("aircraft {AC_ID} to {}", fleet::id(n - 1)),
     };
     println!(
         "{who} running: telemetry to UDP {}, uplink on UDP {} (Ctrl-C to stop)",

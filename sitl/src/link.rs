@@ -6,7 +6,7 @@
 
 use embassy_time::{Duration, Instant};
 use pprz_default::messages::telemetry::values::RotorcraftStatusApMode as ApMode;
-use pprz_devices::sim::{Direction, MAX_OUTAGES};
+use pprz_devices::sim::{Direction, MAX_OUTAGES, SimStats};
 use pprz_example_app::M;
 use pprz_telemetry::health::{Health, HealthConfig, LinkHealth};
 
@@ -93,7 +93,8 @@ pub fn health(args: &Args) -> LinkHealth<M> {
     LinkHealth::new(HealthConfig::new().lost_after(lost))
 }
 
-/// Cuts `radio` (aircraft 7's radio to the ground) in the windows of `outages`.
+/// Cuts `radio` (a radio to the ground: every one is cut alike) in the windows of
+/// `outages`.
 pub fn cut(radio: &Radio, outages: &[Outage]) -> Result<(), String> {
     for o in outages {
         let (from, until) = (instant(o.from_s), instant(o.until_s));
@@ -139,7 +140,7 @@ pub fn steps(
 }
 
 /// Records every change of aircraft `ac`'s link `health`.
-#[embassy_executor::task(pool_size = 2)]
+#[embassy_executor::task(pool_size = crate::fleet::MAX_FLEET as usize)]
 pub async fn watch(ac: u8, health: &'static LinkHealth<M>) {
     let mut state = health.state();
     loop {
@@ -156,8 +157,14 @@ pub async fn watch(ac: u8, health: &'static LinkHealth<M>) {
 pub fn figures(args: &Args, aircraft: &Aircraft) -> LinkFigures {
     let now_us = Instant::now().as_micros();
     let config = aircraft.health.config();
-    let stats = |d: Direction| aircraft.radio.stats(d);
-    let (down, up) = (stats(Direction::AToB), stats(Direction::BToA));
+    // What the outages cut, every radio to the ground together.
+    let radios = aircraft.ground_radios();
+    let total = |d: Direction, f: fn(&SimStats) -> u32| {
+        radios
+            .iter()
+            .map(|r| f(&r.radio.stats(d)))
+            .fold(0u32, u32::saturating_add)
+    };
     let outages: Vec<Window> = args
         .outage
         .iter()
@@ -219,10 +226,10 @@ pub fn figures(args: &Args, aircraft: &Aircraft) -> LinkFigures {
         lost_timeout_s: config.lost_timeout().as_micros() as f64 / 1e6,
         degraded_timeout_s: config.degraded_timeout().as_micros() as f64 / 1e6,
         resume_nav_s: args.resume_nav,
-        lost_bytes_down: down.outage_bytes,
-        lost_bytes_up: up.outage_bytes,
-        failed_attempts_down: down.outage_attempts,
-        failed_attempts_up: up.outage_attempts,
+        lost_bytes_down: total(Direction::AToB, |s| s.outage_bytes),
+        lost_bytes_up: total(Direction::BToA, |s| s.outage_bytes),
+        failed_attempts_down: total(Direction::AToB, |s| s.outage_attempts),
+        failed_attempts_up: total(Direction::BToA, |s| s.outage_attempts),
         aircraft: each,
     }
 }

@@ -24,8 +24,9 @@
 //!
 //! The modules follow a run: [`options`] (the command line) and [`radio`] (the radio
 //! they describe, checked as a whole); [`aircraft`] (the application, its downlink and
-//! tasks) with [`clock`] and [`fleet`] (a second aircraft behind the first); [`bridge`]
-//! (the radio's ground end on UDP); [`ground`] (the ground station in this process,
+//! tasks) with [`clock`] and [`fleet`] (`--fleet N`: more aircraft, each on a radio of
+//! its own, or with `--relay` a second one behind the first); [`bridge`] (the radios'
+//! ground ends on one UDP socket); [`ground`] (the ground station in this process,
 //! with [`keys`] for `--secure`); [`link`] (the outages of `--outage`, each aircraft's
 //! link health and its failsafe); [`persist`] (`--settings-flash`, the persistent
 //! settings, and `--setting`); [`record`], [`report`] and [`summary`] (the figures).
@@ -189,7 +190,6 @@ fn run_ground(
     start: StdInstant,
 ) -> Result<Monitor, Failure> {
     let ground = station.start(args, keys).map_err(Failure::sitl)?;
-    let side =
-        |ac: u8| figures::aircraft_levels(ac, aircraft.downlink, aircraft.second.map(|(_, d)| d));
+    let side = |ac: u8| figures::aircraft_levels(ac, aircraft);
     Ok(ground.run(&side, stop, start))
 }

@@ -90,22 +90,38 @@ pub struct Args {
     /// PPRZ v2 only.
     #[arg(long, value_name = "KEYFILE")]
     pub secure: Option<PathBuf>,
-    /// Aircraft in the simulation, 1 or 2. With 2, aircraft 8 flies beside aircraft 7,
-    /// out of the ground's reach: a second simulated radio (the same as the first) joins
-    /// 7 and 8, and 7 relays between its two radios (PPRZ v2 only). The ground sees both
-    /// aircraft on the same UDP port and PINGs both.
+    /// Aircraft in the simulation, 1 to 32: aircraft 7, 8, ... up to 7 + N - 1, each on a
+    /// simulated radio of its own to the ground (the same radio as aircraft 7's: the
+    /// options above, `--outage`, `--bit-error-rate`; each radio's errors seeded apart
+    /// from `--seed`). The ground sees every aircraft on the same UDP port and PINGs
+    /// and sets each. PPRZ v2 without `--secure` when more than one.
     #[arg(long, default_value_t = 1, value_parser = parse_fleet)]
     pub fleet: u8,
+    /// With `--fleet 2` only: aircraft 8 flies out of the ground's reach, its radio
+    /// joins it to aircraft 7, and 7 relays between its two radios.
+    #[arg(long)]
+    pub relay: bool,
+    /// Seed of the simulated radios' errors (bit errors, XBee failures): each radio's
+    /// seed is derived from it and the radio's index, so runs are reproducible and the
+    /// radios independent.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Probability that a bit on the air is flipped, 0 to 0.01, on every simulated
+    /// radio: damaged PPRZ v2 frames fail their checksum, damaged XBee transmissions
+    /// are retried.
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = parse_bit_error_rate)]
+    pub bit_error_rate: f64,
     /// Serve the ground's decoded telemetry to Foxglove or Lichtblick over the Foxglove
     /// WebSocket protocol at this address (e.g. `127.0.0.1:8765`; port 0: any free port,
     /// printed), with the aircraft's own per-level figures on `/ac/<id>/link`. Needs the
     /// in-process ground (not `--headless`).
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<SocketAddr>,
-    /// Cut the radio to the ground from START to END seconds of simulated time
+    /// Cut the radios to the ground from START to END seconds of simulated time
     /// (decimals allowed): DIR `up` cuts the uplink (ground to aircraft), `down` the
-    /// downlink, `both` both. What is sent in the window is lost, counted by the
-    /// simulated radio. Repeat for several windows (at most 8 per direction).
+    /// downlink, `both` both. Every radio to the ground is cut (with `--relay`, aircraft
+    /// 7's, which also carries 8's frames). What is sent in the window is lost, counted
+    /// by the simulated radio. Repeat for several windows (at most 8 per direction).
     #[arg(long, value_name = "DIR:START..END", value_parser = parse_outage)]
     pub outage: Vec<Outage>,
     /// The aircraft's link health: Lost (and the failsafe flies home) after this many
@@ -347,9 +363,16 @@ fn parse_speed(s: &str) -> Result<f64, String> {
     number_in(s, 0.01, 100.0)
 }
 
-/// `--fleet`: one or two aircraft.
+/// `--fleet`: 1 to [`MAX_FLEET`](crate::fleet::MAX_FLEET) aircraft.
 fn parse_fleet(s: &str) -> Result<u8, String> {
-    integer_in(s, 1, 2).map(|n| n as u8)
+    integer_in(s, 1, u64::from(crate::fleet::MAX_FLEET))
+        .map(|n| n as u8)
+        .map_err(|e| format!("{e} aircraft"))
+}
+
+/// `--bit-error-rate`: 0 (no errors) to one bit in a hundred.
+fn parse_bit_error_rate(s: &str) -> Result<f64, String> {
+    number_in(s, 0.0, 0.01)
 }
 
 /// `--ping-rate`: at most 10 kHz (a flood), at least one PING every 10 s.

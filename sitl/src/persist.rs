@@ -32,9 +32,10 @@ pub const MAX_TIMED_SETTINGS: usize = 16;
 /// of a usage error.
 pub fn check(args: &Args) -> Result<(), String> {
     if args.settings_flash.is_some() && args.fleet > 1 {
-        return Err(
-            "--settings-flash keeps the settings of one aircraft: drop --fleet 2".to_owned(),
-        );
+        return Err(format!(
+            "--settings-flash keeps the settings of one aircraft: drop --fleet {}",
+            args.fleet
+        ));
     }
     if !args.setting.is_empty() && args.headless {
         return Err(

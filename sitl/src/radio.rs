@@ -8,6 +8,7 @@ use pprz_example_app::M;
 use pprz_secure::link::SecureLink;
 use pprz_telemetry::{DeliveryWindow, DeviceConfig, Pacing};
 
+use crate::fleet;
 use crate::options::{Args, FlowControl, OnOff, TransportArg};
 
 /// Receive ring of each direction of the simulated radio: bytes in the modem, on the
@@ -58,6 +59,31 @@ pub struct RadioPlan {
     pub flood_bytes_per_s: u32,
     /// `--secure`: the radio reserves the secure overhead after every frame.
     pub secure: bool,
+    /// `--bit-error-rate`: the probability that a bit on the air is flipped.
+    pub bit_error_rate: f64,
+    /// `--seed`: each radio's seed derives from it.
+    pub seed: u64,
+}
+
+/// The checks of `--fleet` and `--relay` with the other options.
+fn check_fleet(args: &Args, xbee: bool) -> Result<(), String> {
+    let n = args.fleet;
+    if args.relay && n != 2 {
+        return Err(format!(
+            "--relay needs --fleet 2 (aircraft 8 reaches the ground only through aircraft 7); --fleet {n} puts every aircraft on a radio of its own"
+        ));
+    }
+    if n > 1 && xbee {
+        return Err(format!(
+            "--fleet {n} needs --transport pprz2 (the fleet's radios and the relay carry PPRZ v2 frames)"
+        ));
+    }
+    if n > 1 && args.secure.is_some() {
+        return Err(format!(
+            "--fleet {n} cannot run with --secure: the secure link is between one aircraft and the ground (use --fleet 1)"
+        ));
+    }
+    Ok(())
 }
 
 impl RadioPlan {
@@ -84,12 +110,7 @@ impl RadioPlan {
         if args.headless && args.foxglove.is_some() {
             return Err("--foxglove serves the in-process ground's telemetry: drop --headless (or run pprz-monitor --foxglove beside it)".into());
         }
-        if args.fleet > 1 && (xbee || args.secure.is_some()) {
-            return Err(
-                "--fleet 2 needs --transport pprz2 without --secure (the relay forwards PPRZ v2 frames; the secure link is between one aircraft and the ground)"
-                    .to_owned(),
-            );
-        }
+        check_fleet(args, xbee)?;
         if args.secure.is_some() && xbee {
             return Err(
                 "--secure needs --transport pprz2 (the secure link is Paparazzi's secure PPRZ v2)"
@@ -134,6 +155,8 @@ impl RadioPlan {
             window,
             flood_bytes_per_s,
             secure: args.secure.is_some(),
+            bit_error_rate: args.bit_error_rate,
+            seed: args.seed,
         })
     }
 
@@ -142,8 +165,9 @@ impl RadioPlan {
         self.transport == TransportArg::Xbee
     }
 
-    /// The simulated radio.
-    pub fn sim_config(&self, flow_control: FlowControl) -> SimConfig {
+    /// The simulated radio number `index` (0: aircraft 7's radio to the ground; each
+    /// radio's errors seeded apart, [`fleet::radio_seed`]).
+    pub fn sim_config(&self, flow_control: FlowControl, index: u8) -> SimConfig {
         let config = SimConfig::new(self.air_rate)
             .serial_rate(self.serial_rate)
             .latency(Duration::from_millis(5))
@@ -152,7 +176,8 @@ impl RadioPlan {
                 FlowControl::Cts => Overflow::Wait,
                 FlowControl::None => Overflow::Drop,
             })
-            .seed(7);
+            .bit_error_rate(self.bit_error_rate)
+            .seed(fleet::radio_seed(self.seed, index));
         if self.xbee() {
             // An XBee 802.15.4 (module docs of `pprz_devices::sim`): MAC framing and
             // acknowledgement on the air, 1 ms ACK wait, 3 retries; the ground writes API

@@ -21,7 +21,10 @@
 //! aircraft's side by [`crate::link`]), and what the ground saw: the `ap_mode` of its
 //! ROTORCRAFT_STATUS messages and the times it heard nothing from it.
 
+use std::cell::Cell;
 use std::collections::{BTreeMap, HashMap};
+use std::future::{Future, poll_fn};
+use std::pin::pin;
 use std::sync::{LazyLock, Mutex, MutexGuard};
 
 use embassy_time::Instant;
@@ -35,8 +38,6 @@ use pprz_telemetry::health::Health;
 use pprz_telemetry::pprz_messages::priority;
 
 use pprz_devices::rng::SplitMix64;
-
-use crate::fleet::SECOND_AC_ID;
 
 /// Seconds (simulated) a submission is remembered for matching.
 pub const HORIZON_S: u64 = 120;
@@ -130,12 +131,15 @@ pub struct TypeRecord {
     pub max_gap_us: u64,
 }
 
+/// A distinct message submitted: aircraft, class, id and payload.
+type SubmissionKey = (u8, u8, u8, Vec<u8>);
+
 /// Everything measured; one per process ([`lock`]).
 #[derive(Debug, Default)]
 pub struct Record {
-    /// Latest submission time (µs) of each distinct message (class, id, payload), and
-    /// how many times it was submitted.
-    submissions: HashMap<(u8, u8, Vec<u8>), (u64, u32)>,
+    /// Latest submission time (µs) of each distinct message (aircraft, class, id,
+    /// payload), and how many times it was submitted.
+    submissions: HashMap<SubmissionKey, (u64, u32)>,
     /// Submissions recorded since the last pruning.
     since_prune: usize,
     /// Per level (high, normal, low).
@@ -213,15 +217,32 @@ pub fn lock() -> MutexGuard<'static, Record> {
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// The observer given to the application of aircraft [`AC_ID`]: the message
-/// `class_id`/`msg_id` with fields `payload` was submitted at `now`.
-pub fn submitted(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
-    lock().submitted(AC_ID, class_id, msg_id, payload, now.as_micros());
+thread_local! {
+    /// The aircraft whose application the executor's thread is running now
+    /// ([`as_aircraft`]); [`AC_ID`] outside.
+    static CURRENT: Cell<u8> = const { Cell::new(AC_ID) };
 }
 
-/// [`submitted`] for the fleet's second aircraft ([`SECOND_AC_ID`]).
-pub fn submitted_by_second(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
-    lock().submitted(SECOND_AC_ID, class_id, msg_id, payload, now.as_micros());
+/// Runs `application` as aircraft `ac`'s: while it runs, what it submits is recorded
+/// as `ac`'s ([`submitted`], the observer every aircraft's application is given, is a
+/// plain function that cannot tell them apart otherwise).
+pub async fn as_aircraft<F: Future>(ac: u8, application: F) -> F::Output {
+    let mut application = pin!(application);
+    poll_fn(|cx| {
+        let outside = CURRENT.replace(ac);
+        let poll = application.as_mut().poll(cx);
+        CURRENT.set(outside);
+        poll
+    })
+    .await
+}
+
+/// The observer given to every aircraft's application: the message
+/// `class_id`/`msg_id` with fields `payload` was submitted at `now` by the aircraft
+/// running ([`as_aircraft`]).
+pub fn submitted(class_id: u8, msg_id: u8, payload: &[u8], now: Instant) {
+    let ac = CURRENT.get();
+    lock().submitted(ac, class_id, msg_id, payload, now.as_micros());
 }
 
 /// A frame from the ground to `destination` with `payload` went up the radio at `now`:
@@ -237,7 +258,12 @@ pub fn uplink(destination: u8, class_id: u8, msg_id: u8, payload: &[u8], now: In
         };
         let mut fields = [0u8; 8];
         if let Ok(len) = answer.encode(&mut fields) {
-            let key = (DlValue::CLASS_ID, DlValue::ID, fields[..len].to_vec());
+            let key = (
+                destination,
+                DlValue::CLASS_ID,
+                DlValue::ID,
+                fields[..len].to_vec(),
+            );
             lock().submissions.remove(&key);
         }
     }
@@ -282,7 +308,7 @@ impl Record {
         }
         let entry = self
             .submissions
-            .entry((class_id, msg_id, payload.to_vec()))
+            .entry((ac_id, class_id, msg_id, payload.to_vec()))
             .or_insert((now_us, 0));
         *entry = (now_us, entry.1.saturating_add(1));
         self.types.entry((class_id, msg_id)).or_default().submitted += 1;
@@ -323,7 +349,7 @@ impl Record {
         t.last_us = now_us;
         // The key is rebuilt for the lookup: a HashMap of owned keys is not searched by
         // borrowed tuples.
-        let key = (class_id, msg_id, payload.to_vec());
+        let key = (source, class_id, msg_id, payload.to_vec());
         if let Some(&(at, times)) = self.submissions.get(&key)
             && now_us.saturating_sub(at) <= HORIZON_S * 1_000_000
         {

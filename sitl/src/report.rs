@@ -143,10 +143,8 @@ fn pings_not_up(sent: u64, up: u64, dropped: u64) -> Option<String> {
 /// The figures of the run so far.
 pub fn collect_summary(args: &Args, plan: &RadioPlan, aircraft: &Aircraft) -> Summary {
     let elapsed_us = Instant::now().as_micros();
-    let fleet = aircraft
-        .second
-        .map(|(_, downlink_8)| figures::fleet_figures(aircraft.downlink, downlink_8));
-    let stats: DeviceStats = aircraft.downlink.stats(0).unwrap_or_default();
+    let fleet = (!aircraft.wings.is_empty()).then(|| figures::fleet_figures(aircraft));
+    let stats = ground_devices(aircraft);
     // Copied out of the record before anything else is locked.
     let (received, ping, messages) = recorded();
     let level = |i: usize| {
@@ -191,6 +189,45 @@ pub fn collect_summary(args: &Args, plan: &RadioPlan, aircraft: &Aircraft) -> Su
         fleet,
         link: link::figures(args, aircraft),
     }
+}
+
+/// The radio devices to the ground, their statistics summed: aircraft 7's radio, and
+/// each other aircraft's own radio (not the one relayed through 7, whose frames 7's
+/// radio device counts).
+fn ground_devices(aircraft: &Aircraft) -> DeviceStats {
+    let mut all: DeviceStats = aircraft.downlink.stats(0).unwrap_or_default();
+    for w in aircraft.wings.iter().filter(|w| !w.relayed) {
+        let s = w.downlink.stats(0).unwrap_or_default();
+        add_stats(&mut all, &s);
+    }
+    all
+}
+
+/// Adds the counters of `s` that the summary shows to `all`.
+fn add_stats(all: &mut DeviceStats, s: &DeviceStats) {
+    for (a, l) in all.levels.iter_mut().zip(s.levels) {
+        a.submitted = a.submitted.saturating_add(l.submitted);
+        a.sent = a.sent.saturating_add(l.sent);
+        a.lost = a.lost.saturating_add(l.lost);
+        a.superseded = a.superseded.saturating_add(l.superseded);
+    }
+    let (d, e) = (&mut all.dropped, &s.dropped);
+    for (a, b) in [
+        (&mut d.too_large, e.too_large),
+        (&mut d.encode, e.encode),
+        (&mut d.queue_full, e.queue_full),
+        (&mut d.arena_full, e.arena_full),
+        (&mut d.write_error, e.write_error),
+        (&mut d.rate_limited, e.rate_limited),
+        (&mut d.refused, e.refused),
+        (&mut all.evicted.queue_full, s.evicted.queue_full),
+        (&mut all.evicted.arena_full, s.evicted.arena_full),
+        (&mut all.sent, s.sent),
+        (&mut all.superseded, s.superseded),
+    ] {
+        *a = a.saturating_add(b);
+    }
+    all.queued = all.queued.saturating_add(s.queued);
 }
 
 /// What reached the ground at one priority level, from the record.
@@ -279,23 +316,30 @@ fn downlink_figures(stats: &DeviceStats) -> DownlinkFigures {
     }
 }
 
-/// The aircraft's radio modem (aircraft to ground), `elapsed_us` into the run.
+/// The radio modems to the ground (aircraft to ground), `elapsed_us` into the run: the
+/// losses summed, the busy times averaged.
 fn modem_figures(aircraft: &Aircraft, elapsed_us: u64) -> ModemFigures {
-    let sim = aircraft.radio.stats(Direction::AToB);
+    let radios = aircraft.ground_radios();
     let fraction = |busy_us: u64| {
         if elapsed_us == 0 {
             0.0
         } else {
-            busy_us as f64 / elapsed_us as f64
+            busy_us as f64 / elapsed_us as f64 / radios.len() as f64
         }
     };
-    ModemFigures {
-        dropped_bytes: sim.dropped_bytes,
-        frames_dropped: sim.frames_dropped,
-        overrun_bytes: sim.overrun_bytes,
-        uart_busy: fraction(sim.serial_busy_us),
-        air_busy: fraction(sim.air_busy_us),
+    let mut m = ModemFigures::default();
+    let (mut uart_us, mut air_us) = (0u64, 0u64);
+    for r in &radios {
+        let sim = r.radio.stats(Direction::AToB);
+        m.dropped_bytes = m.dropped_bytes.saturating_add(sim.dropped_bytes);
+        m.frames_dropped = m.frames_dropped.saturating_add(sim.frames_dropped);
+        m.overrun_bytes = m.overrun_bytes.saturating_add(sim.overrun_bytes);
+        uart_us = uart_us.saturating_add(sim.serial_busy_us);
+        air_us = air_us.saturating_add(sim.air_busy_us);
     }
+    m.uart_busy = fraction(uart_us);
+    m.air_busy = fraction(air_us);
+    m
 }
 
 /// The aircraft's end of the secure link.

@@ -30,9 +30,9 @@ pub struct Summary {
     pub messages: Vec<MessageFigures>,
     /// The aircraft's end of the secure link (`--secure`; `None`, JSON `null`, without).
     pub secure: Option<SecureFigures>,
-    /// `--fleet 2`: per aircraft and per level, and the relay's routes (`None`, JSON
-    /// `null`, with one aircraft). The figures above are the radio's: every aircraft's
-    /// frames together.
+    /// `--fleet 2` or more: per aircraft and per level, and with `--relay` the relay's
+    /// routes (`None`, JSON `null`, with one aircraft). The figures above are the
+    /// radios' to the ground: every aircraft's frames together.
     pub fleet: Option<FleetFigures>,
     /// The link to the ground: each aircraft's link health and what the ground saw of
     /// its failsafe, with the outages of the run.
@@ -51,9 +51,11 @@ pub struct LinkFigures {
     /// When the ground set `ap_mode` back to NAV (`--resume-nav`; `None`, JSON `null`,
     /// without).
     pub resume_nav_s: Option<f64>,
-    /// Bytes sent on the downlink during an outage, lost (transparent radio).
+    /// Bytes sent on the downlink during an outage, lost (transparent radio), every
+    /// radio to the ground together.
     pub lost_bytes_down: u32,
-    /// Bytes sent on the uplink during an outage, lost (transparent radio).
+    /// Bytes sent on the uplink during an outage, lost (transparent radio), every radio
+    /// to the ground together.
     pub lost_bytes_up: u32,
     /// XBee: downlink transmissions that failed in an outage.
     pub failed_attempts_down: u32,
@@ -68,7 +70,8 @@ pub struct LinkFigures {
 pub struct AircraftLink {
     /// Its id.
     pub ac_id: u8,
-    /// The outages of its way to the ground (aircraft 7's radio, also aircraft 8's way).
+    /// The outages of its way to the ground (its radio, or with `--relay` aircraft 7's,
+    /// also aircraft 8's way: every radio to the ground is cut alike).
     pub outages: Vec<Window>,
     /// Its link health's changes, from Lost (nothing heard yet) at the start.
     pub transitions: Vec<Transition>,
@@ -212,16 +215,18 @@ impl AircraftLink {
     }
 }
 
-/// A fleet: each aircraft, and what the relay carried on each of its routes.
+/// A fleet: each aircraft, and with `--relay` what the relay carried on each of its
+/// routes.
 #[derive(Debug, Clone, Serialize)]
 pub struct FleetFigures {
-    /// Each aircraft, the one whose radio reaches the ground first.
+    /// Each aircraft, by id: 7 first.
     pub aircraft: Vec<AircraftFigures>,
-    /// The relay's routes: what it forwarded for the others on each of its devices.
+    /// The relay's routes: what it forwarded for the others on each of its devices
+    /// (empty without `--relay`).
     pub routes: Vec<RouteFigures>,
     /// What the relay did with the frames not only for itself: forwarded, or refused
-    /// and why.
-    pub relay: RelayFigures,
+    /// and why (`None`, JSON `null`, without `--relay`).
+    pub relay: Option<RelayFigures>,
 }
 
 /// The relay's decisions on the frames for other aircraft and broadcast frames it read
@@ -718,7 +723,13 @@ impl FleetFigures {
                 r.evicted
             );
         }
-        let r = &self.relay;
+        let Some(r) = &self.relay else {
+            let _ = writeln!(
+                s,
+                "  (submitted, sent, shed: on the aircraft's own radio, its replies included; received: at\n   the ground)"
+            );
+            return;
+        };
         let _ = writeln!(
             s,
             "  relay {} refused {} (own source {}, reverse path {}, no route {}, malformed {}); forwarded {}, broadcast {}",

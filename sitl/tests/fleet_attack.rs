@@ -1,4 +1,4 @@
-//! Spoofed frames on the ground's uplink of a fleet (`--fleet 2`): aircraft 7 relays
+//! Spoofed frames on the ground's uplink of a fleet (`--fleet 2 --relay`): aircraft 7 relays
 //! between the ground and aircraft 8, and refuses what its rules forbid. Each refusal
 //! must show, per reason, in the summary and in `--summary-json`.
 //!
@@ -189,7 +189,7 @@ fn number_after(out: &str, line: &str, label: &str) -> u64 {
         .unwrap_or_else(|| panic!("no number after {label:?} on a line {line:?}:\n{out}"))
 }
 
-/// 3000 spoofed frames (750 of each kind) on the ground's uplink of `--fleet 2`: the
+/// 3000 spoofed frames (750 of each kind) on the ground's uplink of `--fleet 2 --relay`: the
 /// relay refuses every one, and the summary and its JSON say how many for each reason.
 /// The SITL's peak RSS is printed before and after the attack.
 #[test]
@@ -210,7 +210,7 @@ fn spoofed_frames_at_the_relay_are_counted_per_reason() {
     // only a guard).
     let sitl = Sitl(Some(
         Command::new(env!("CARGO_BIN_EXE_sitl"))
-            .args(["--fleet", "2", "--headless", "--duration", "600"])
+            .args(["--fleet", "2", "--relay", "--headless", "--duration", "600"])
             .args(["--speed", "4", "--ground", &ground, "--uplink", &uplink])
             .arg("--summary-json")
             .arg(&json_path)

@@ -210,6 +210,10 @@ fn nonsense_options_are_refused() {
         ("--setting", "-1:4=1"),
         ("--setting", "1:4=NaN"),
         ("--setting", "1:4=inf"),
+        ("--fleet", "0"),
+        ("--fleet", "33"),
+        ("--bit-error-rate", "0.5"),
+        ("--bit-error-rate", "NaN"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
             .args(["--headless", &format!("{option}={value}")])
@@ -278,6 +282,12 @@ fn contradictory_radio_options_are_refused() {
             &["--fleet", "2", "--secure", TEST_KEYS],
             &["--fleet 2", "--secure"],
         ),
+        (
+            &["--fleet", "32", "--secure", TEST_KEYS],
+            &["--fleet 32", "--secure", "one aircraft"],
+        ),
+        (&["--relay"], &["--relay", "--fleet 2"]),
+        (&["--fleet", "3", "--relay"], &["--relay", "--fleet 2"]),
         (&["--resume-nav", "5"], &["--resume-nav", "--headless"]),
         (&["--setting", "1:4=1"], &["--setting", "--headless"]),
         (
@@ -655,13 +665,18 @@ fn services_answered(out: &str) {
     );
 }
 
-/// `--fleet 2`: aircraft 8 reaches the ground only through aircraft 7, which relays; the
+/// `--fleet 2 --relay`: aircraft 8 reaches the ground only through aircraft 7, which relays; the
 /// ground PINGs both and sets a setting on both; under a 10x overload from both, the
 /// relay sheds 8's payload and nothing more important, and the summary reports it per
 /// aircraft, per level and per route.
 #[test]
 fn a_fleet_of_two_relays_through_the_first() {
-    let (out, json) = run_sitl_json("fleet", "8", "4", &["--fleet", "2", "--overload"]);
+    let (out, json) = run_sitl_json(
+        "fleet",
+        "8",
+        "4",
+        &["--fleet", "2", "--relay", "--overload"],
+    );
     // Lines from both aircraft (the first word of a line is its source).
     for ac in ["7", "8"] {
         assert!(
@@ -840,7 +855,7 @@ fn a_downlink_outage_leaves_the_aircraft_up_and_the_ground_deaf() {
     );
 }
 
-/// `--fleet 2`: the outage cuts aircraft 7's radio to the ground, which is aircraft 8's
+/// `--fleet 2 --relay`: the outage cuts aircraft 7's radio to the ground, which is aircraft 8's
 /// only way to the ground too (7 relays): both lose the ground's PINGs, go Lost (with
 /// a 2 s timeout, straight from Up) and fly home; both are Up again after the cut, and
 /// stay in HOME.
@@ -850,7 +865,15 @@ fn an_uplink_outage_cuts_both_aircraft_of_a_fleet() {
         "outage-fleet",
         "10",
         "6",
-        &["--fleet", "2", "--outage", "up:4..8", "--lost-timeout", "2"],
+        &[
+            "--fleet",
+            "2",
+            "--relay",
+            "--outage",
+            "up:4..8",
+            "--lost-timeout",
+            "2",
+        ],
     );
     let aircraft = json["link"]["aircraft"].as_array().unwrap();
     assert_eq!(aircraft.len(), 2);
@@ -865,6 +888,92 @@ fn an_uplink_outage_cuts_both_aircraft_of_a_fleet() {
         assert_eq!(ap_modes(ac), ["NAV", "HOME"], "{ac:#}");
         assert_eq!(ac["failsafes"][0]["nav_s"], Value::Null, "{ac:#}");
     }
+}
+
+/// `--fleet 0` and `--fleet 33` are refused with a message naming the range.
+#[test]
+fn a_fleet_is_1_to_32_aircraft() {
+    for n in ["0", "33"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
+            .args(["--headless", "--fleet", n])
+            .output()
+            .expect("sitl starts");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "--fleet {n}: {stderr}");
+        assert!(stderr.contains("1 to 32 aircraft"), "--fleet {n}: {stderr}");
+    }
+}
+
+/// `--fleet 32`: aircraft 7 to 38, each on a radio of its own, all heard by the one
+/// ground, which PINGs each (and each answers) and sets each; the summary JSON has the
+/// 32 aircraft with their ids, none relayed.
+#[test]
+fn a_fleet_of_32_each_on_its_own_radio() {
+    let (out, json) = run_sitl_json("fleet32", "5", "1", &["--fleet", "32"]);
+    let aircraft = json["fleet"]["aircraft"]
+        .as_array()
+        .expect("a fleet section");
+    assert_eq!(aircraft.len(), 32, "{json:#}");
+    for (a, id) in aircraft.iter().zip(7u64..) {
+        assert_eq!(uint(a, "/ac_id"), id);
+        assert_eq!(a["relayed_by"], Value::Null, "{a:#}");
+        let sent = uint(a, "/ping/sent");
+        let answered = uint(a, "/ping/answered");
+        assert!(sent >= 3 && answered + 1 >= sent, "aircraft {id}: {a:#}");
+        assert!(uint(a, "/levels/1/received") > 20, "aircraft {id}: {a:#}");
+        let lines = |what: &str| out.lines().any(|l| l.starts_with(&format!("{id} {what}")));
+        assert!(lines("telemetry ATTITUDE"), "no ATTITUDE from {id}");
+        assert!(lines("telemetry PONG"), "no PONG from {id}");
+        assert!(
+            lines("telemetry DL_VALUE index=2 value=2.5"),
+            "no SETTING acknowledged by {id}"
+        );
+    }
+    assert_eq!(json["fleet"]["relay"], Value::Null);
+    assert_eq!(json["link"]["aircraft"].as_array().map(Vec::len), Some(32));
+    assert!(
+        out.contains("ground station, aircraft 38: PINGs sent"),
+        "{out}"
+    );
+}
+
+/// `--fleet 3`: the outage cuts every aircraft's radio to the ground: each falls
+/// silent at the ground from the cut to its end, and each goes Lost (with a 1.5 s
+/// timeout, straight from Up) and is Up again after it.
+#[test]
+fn an_outage_cuts_every_radio_of_a_fleet() {
+    let (_, json) = run_sitl_json(
+        "outage-fleet3",
+        "6",
+        "2",
+        &[
+            "--fleet",
+            "3",
+            "--outage",
+            "both:2..4",
+            "--lost-timeout",
+            "1.5",
+        ],
+    );
+    let aircraft = json["link"]["aircraft"].as_array().unwrap();
+    assert_eq!(aircraft.len(), 3);
+    for (ac, id) in aircraft.iter().zip([7, 8, 9]) {
+        assert_eq!(uint(ac, "/ac_id"), id);
+        assert_eq!(states(ac), ["up", "lost", "up"], "{ac:#}");
+        let silence = &ac["silences"][0];
+        let from = silence["from_s"].as_f64().unwrap();
+        let until = silence["until_s"].as_f64().unwrap();
+        assert!(
+            (1.9..2.2).contains(&from),
+            "{id} silent from {from}: {ac:#}"
+        );
+        assert!(
+            (4.0..4.5).contains(&until),
+            "{id} silent until {until}: {ac:#}"
+        );
+    }
+    // Each radio lost its share of the downlink in the cut.
+    assert!(uint(&json, "/link/lost_bytes_down") > 3 * 1000, "{json:#}");
 }
 
 /// The number that follows `label` in `out`.
