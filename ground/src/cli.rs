@@ -60,12 +60,11 @@ impl Transport {
     }
 }
 
-/// Watch Paparazzi-compatible aircraft: decode their telemetry live with any
-/// messages.xml (a section per aircraft), measure PING round trips, send SETTINGs and
-/// see them acknowledged.
-#[derive(Debug, Parser)]
-#[command(name = "pprz-monitor", version, about)]
-pub struct Args {
+/// One link to the aircraft, as `pprz-monitor` and `pprz-gateway` take it: where to
+/// read (one of `--udp`, `--tcp`, `--serial`, `--file`, `--stdin`), where the uplink
+/// goes, the framing and the messages.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LinkArgs {
     /// The messages.xml to decode with (any Paparazzi file, e.g. the full PPRZLINK one).
     #[arg(long, default_value = "messages.xml")]
     pub messages: PathBuf,
@@ -94,6 +93,50 @@ pub struct Args {
     /// With --tcp or --serial they go back on the same stream.
     #[arg(long, value_name = "ADDR")]
     pub uplink: Option<SocketAddr>,
+}
+
+impl LinkArgs {
+    /// Where the link reads (standard input when no input option is given).
+    pub fn endpoint(&self) -> crate::device::Endpoint {
+        use crate::device::Endpoint;
+        if let Some(listen) = self.udp {
+            Endpoint::Udp {
+                listen,
+                uplink: self.uplink,
+            }
+        } else if let Some(addr) = self.tcp {
+            Endpoint::Tcp(addr)
+        } else if let Some(device) = &self.serial {
+            Endpoint::Serial {
+                device: device.clone(),
+                baud: self.baud,
+            }
+        } else if let Some(path) = &self.file {
+            Endpoint::File(path.clone())
+        } else {
+            Endpoint::Stdin
+        }
+    }
+
+    /// Whether an input option was given.
+    pub fn given(&self) -> bool {
+        self.udp.is_some()
+            || self.tcp.is_some()
+            || self.serial.is_some()
+            || self.file.is_some()
+            || self.stdin
+    }
+}
+
+/// Watch Paparazzi-compatible aircraft: decode their telemetry live with any
+/// messages.xml (a section per aircraft), measure PING round trips, send SETTINGs and
+/// see them acknowledged.
+#[derive(Debug, Parser)]
+#[command(name = "pprz-monitor", version, about)]
+pub struct Args {
+    /// The link to the aircraft and its messages.
+    #[command(flatten)]
+    pub link: LinkArgs,
     /// Aircraft id for PING/SETTING (the frames' destination and the SETTING's ac_id
     /// field); repeat it or separate ids with commas to PING and SET several aircraft
     /// (each PONG and DL_VALUE is matched to its source). With --secure, one aircraft
@@ -177,9 +220,9 @@ impl Args {
     /// A message naming the problem.
     pub fn check(&self) -> Result<(), String> {
         let wants_uplink = self.ping.is_some() || !self.setting.is_empty() || self.read_settings;
-        let has_uplink = self.tcp.is_some()
-            || self.serial.is_some()
-            || (self.udp.is_some() && self.uplink.is_some());
+        let has_uplink = self.link.tcp.is_some()
+            || self.link.serial.is_some()
+            || (self.link.udp.is_some() && self.link.uplink.is_some());
         if wants_uplink && !has_uplink {
             return Err(
                 "--ping, --setting and --read-settings need a link to the aircraft: --tcp, --serial, or --udp with --uplink"
@@ -208,7 +251,7 @@ impl Args {
                     return Err("--secure talks to one aircraft: give a single --ac-id".into());
                 }
             }
-            if self.transport != Transport::Pprz2 {
+            if self.link.transport != Transport::Pprz2 {
                 return Err(
                     "--secure needs --transport pprz2 (the secure link is PPRZ v2 only)".into(),
                 );
@@ -220,7 +263,7 @@ impl Args {
                 );
             }
         }
-        if self.uplink.is_some() && self.udp.is_none() {
+        if self.link.uplink.is_some() && self.link.udp.is_none() {
             return Err("--uplink goes with --udp (with --tcp or --serial, uplink frames go back on the same stream)".into());
         }
         Ok(())

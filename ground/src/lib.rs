@@ -17,6 +17,8 @@
 //! * [`device`]: the links to aircraft (UDP, TCP, serial ports, files): reading and
 //!   writing.
 //! * [`uplink`]: PING / SETTING / GET_SETTING frames for the aircraft.
+//! * [`bus`]: the fleet bus (Zenoh): the gateway's session, ground stations'
+//!   sessions, the key layout.
 //! * [`gateway`]: the fleet gateway's logic (`pprz-gateway`): several links at once,
 //!   redundant links merged, commands routed to the link each aircraft is heard on.
 //! * [`secure`]: the ground's end of a secure PPRZ v2 link (`pprz-monitor --secure`).
@@ -41,6 +43,7 @@
 #![warn(missing_docs)]
 #![deny(unsafe_code)]
 
+pub mod bus;
 pub mod cli;
 pub mod device;
 pub mod escape;

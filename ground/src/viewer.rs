@@ -768,7 +768,7 @@ fn with_setting_key(schema: &str) -> String {
 /// monitor, its link `quality` (`None` before it is heard: then stale, as long as it has
 /// never been heard), the aircraft's own figures per level when known, and the JSON of
 /// its latest DATALINK_REPORT.
-fn link_json(
+pub(crate) fn link_json(
     state: &Aircraft,
     quality: Option<&LinkQuality>,
     side: Option<[LevelFigures; 3]>,

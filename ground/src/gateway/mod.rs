@@ -35,6 +35,7 @@
 
 pub mod dedup;
 pub mod route;
+pub mod serve;
 
 use pprz_messages::MessageDescriptor;
 use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, PprzV2, TxMeta};

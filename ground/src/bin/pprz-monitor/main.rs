@@ -17,7 +17,7 @@ mod record;
 
 use clap::Parser;
 use pprz_ground::cli::{Args, SettingValue};
-use pprz_ground::device::{self, Endpoint, Source, Uplink as UplinkSink};
+use pprz_ground::device::{self, Source, Uplink as UplinkSink};
 use pprz_ground::escape;
 use pprz_ground::input::{Drops, End, InputQueue, Overflow, Pop};
 use pprz_ground::monitor::{Decoded, IDLE_FLUSH, MAX_EVENTS, Monitor, Notice};
@@ -36,36 +36,29 @@ type Inputs = Vec<(FileId, String)>;
 /// Opens the input; returns it, the uplink, and the input files.
 fn open_input(args: &Args) -> Result<(Source, UplinkSink, Inputs), String> {
     let mut inputs = Vec::new();
-    if let Ok(id) = FileId::of_path(&args.messages) {
-        inputs.push((id, format!("the messages file {}", args.messages.display())));
+    if let Ok(id) = FileId::of_path(&args.link.messages) {
+        inputs.push((id, format!("the messages file {}", args.link.messages.display())));
     }
-    let endpoint = if let Some(listen) = args.udp {
-        Endpoint::Udp {
-            listen,
-            uplink: args.uplink,
+    match (&args.link.serial, &args.link.file) {
+        (Some(device), _) => {
+            if let Ok(id) = FileId::of_path(Path::new(device)) {
+                inputs.push((id, format!("the serial port {device}")));
+            }
         }
-    } else if let Some(addr) = args.tcp {
-        Endpoint::Tcp(addr)
-    } else if let Some(device) = &args.serial {
-        if let Ok(id) = FileId::of_path(Path::new(device)) {
-            inputs.push((id, format!("the serial port {device}")));
+        (None, Some(path)) => {
+            let file = device::open_file(path)?;
+            let id = FileId::of_file(path, &file)
+                .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+            inputs.push((id, format!("the --file input {}", path.display())));
         }
-        Endpoint::Serial {
-            device: device.clone(),
-            baud: args.baud,
+        (None, None) if !args.link.given() || args.link.stdin => {
+            if let Some(id) = FileId::of_stdin() {
+                inputs.push((id, "the file standard input reads".to_owned()));
+            }
         }
-    } else if let Some(path) = &args.file {
-        let file = device::open_file(path)?;
-        let id = FileId::of_file(path, &file)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        inputs.push((id, format!("the --file input {}", path.display())));
-        Endpoint::File(path.clone())
-    } else {
-        if let Some(id) = FileId::of_stdin() {
-            inputs.push((id, "the file standard input reads".to_owned()));
-        }
-        Endpoint::Stdin
-    };
+        _ => {}
+    }
+    let endpoint = args.link.endpoint();
     let (source, sink) = endpoint.open()?;
     Ok((source, sink, inputs))
 }
@@ -360,8 +353,8 @@ fn main() -> ExitCode {
 }
 
 fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<(), String> {
-    let set = load_set(&args.messages)?;
-    let transport: AnyTransport = args.transport.any();
+    let set = load_set(&args.link.messages)?;
+    let transport: AnyTransport = args.link.transport.any();
     let (source, uplink_sink, mut inputs) = open_input(args)?;
     let recorder = open_recorder(args, &mut inputs, transport)?;
     let has_uplink = !matches!(uplink_sink, UplinkSink::None);

@@ -1,0 +1,230 @@
+//! The fleet bus: Zenoh sessions of the gateway and of the ground stations that use
+//! it ([`keys`] gives the key layout).
+//!
+//! The gateway's session is a Zenoh peer listening on [`DEFAULT_LISTEN`]; a ground
+//! station (`pprz-monitor --zenoh`, a script) opens a client session to it. Multicast
+//! scouting is off unless asked for ([`BusConfig::multicast`]): nothing leaves the
+//! machine unless an endpoint says so. Zenoh runs its own threads; the gateway's
+//! loop publishes with blocking calls that return at once, and what Zenoh receives
+//! (commands, settings queries) waits in a bounded queue for that loop
+//! ([`Bus::next_request`]); beyond [`MAX_REQUESTS`] waiting, requests are dropped and
+//! counted ([`Bus::flooded`]).
+//!
+//! ```no_run
+//! use pprz_ground::bus::{Bus, BusConfig};
+//! let mut bus = Bus::open(&BusConfig::client("tcp/127.0.0.1:7447")).unwrap();
+//! bus.put("pprz/7/uplink/PING", "{}", None);
+//! ```
+
+pub mod keys;
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+
+use zenoh::Wait;
+use zenoh::bytes::ZBytes;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::query::{Query, Queryable};
+use zenoh::{Config, Session};
+
+/// Where the gateway listens by default.
+pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
+
+/// Requests (commands, settings queries) waiting for the gateway's loop at most.
+pub const MAX_REQUESTS: usize = 1024;
+
+/// Keys with a publisher of their own at most; further keys are put without one
+/// (a little slower, never refused).
+pub const MAX_PUBLISHERS: usize = 4096;
+
+/// How a session joins the bus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BusConfig {
+    /// A peer (the gateway: it serves clients and other peers) or a client (a ground
+    /// station: it talks through the peer it connects to).
+    pub peer: bool,
+    /// Endpoints to listen on (e.g. `tcp/127.0.0.1:7447`).
+    pub listen: Vec<String>,
+    /// Endpoints to connect to (a `zenohd` router, another peer, the gateway).
+    pub connect: Vec<String>,
+    /// Multicast scouting (finds peers on the local network by multicast; off: only
+    /// the endpoints given are used).
+    pub multicast: bool,
+}
+
+impl BusConfig {
+    /// The gateway's default: a peer listening on [`DEFAULT_LISTEN`], no scouting.
+    pub fn gateway() -> Self {
+        Self {
+            peer: true,
+            listen: vec![DEFAULT_LISTEN.to_owned()],
+            connect: Vec::new(),
+            multicast: false,
+        }
+    }
+
+    /// A ground station's: a client of the gateway at `endpoint`.
+    pub fn client(endpoint: &str) -> Self {
+        Self {
+            peer: false,
+            listen: Vec::new(),
+            connect: vec![endpoint.to_owned()],
+            multicast: false,
+        }
+    }
+
+    /// The Zenoh configuration.
+    ///
+    /// # Errors
+    /// An endpoint Zenoh refuses (its message).
+    pub fn zenoh(&self) -> Result<Config, String> {
+        let list = |v: &[String]| serde_json::Value::from(v.to_vec()).to_string();
+        let mut c = Config::default();
+        let mode = if self.peer { "\"peer\"" } else { "\"client\"" };
+        let set = |c: &mut Config, k: &str, v: &str| {
+            c.insert_json5(k, v)
+                .map_err(|e| format!("zenoh configuration {k} = {v}: {e}"))
+        };
+        set(&mut c, "mode", mode)?;
+        set(&mut c, "listen/endpoints", &list(&self.listen))?;
+        set(&mut c, "connect/endpoints", &list(&self.connect))?;
+        let multicast = if self.multicast { "true" } else { "false" };
+        set(&mut c, "scouting/multicast/enabled", multicast)?;
+        set(&mut c, "scouting/gossip/enabled", multicast)?;
+        Ok(c)
+    }
+}
+
+/// What the bus brought for the gateway's loop.
+pub enum Request {
+    /// A command put on `pprz/<ac_id>/uplink/<MESSAGE>`.
+    Command {
+        /// Its key.
+        key: String,
+        /// Its payload (JSON text, unchecked).
+        payload: Vec<u8>,
+    },
+    /// A query on `pprz/<ac_id>/settings/<name>`, to answer with [`Query::reply`].
+    Setting(Query),
+}
+
+/// A session on the bus (module doc).
+pub struct Bus {
+    session: Session,
+    publishers: HashMap<String, Publisher<'static>>,
+    requests: Option<Receiver<Request>>,
+    flooded: Arc<AtomicU64>,
+    put_errors: u64,
+    _commands: Option<Subscriber<()>>,
+    _settings: Option<Queryable<()>>,
+}
+
+impl Bus {
+    /// Opens a session.
+    ///
+    /// # Errors
+    /// The configuration is refused, or an endpoint cannot be listened on or reached.
+    pub fn open(config: &BusConfig) -> Result<Self, String> {
+        let session = zenoh::open(config.zenoh()?)
+            .wait()
+            .map_err(|e| format!("zenoh: {e}"))?;
+        Ok(Self {
+            session,
+            publishers: HashMap::new(),
+            requests: None,
+            flooded: Arc::new(AtomicU64::new(0)),
+            put_errors: 0,
+            _commands: None,
+            _settings: None,
+        })
+    }
+
+    /// The same session taking commands ([`keys::UPLINK_ALL`]) and settings queries
+    /// ([`keys::SETTINGS_ALL`]) for [`next_request`](Self::next_request).
+    ///
+    /// # Errors
+    /// Zenoh refused a declaration.
+    pub fn serving(mut self) -> Result<Self, String> {
+        let (tx, rx) = sync_channel::<Request>(MAX_REQUESTS);
+        let (tx2, flooded, flooded2) = (tx.clone(), self.flooded.clone(), self.flooded.clone());
+        let commands = self
+            .session
+            .declare_subscriber(keys::UPLINK_ALL)
+            .callback(move |sample| {
+                let request = Request::Command {
+                    key: sample.key_expr().as_str().to_owned(),
+                    payload: sample.payload().to_bytes().into_owned(),
+                };
+                queue(&tx, request, &flooded);
+            })
+            .wait()
+            .map_err(|e| format!("zenoh: {e}"))?;
+        let settings = self
+            .session
+            .declare_queryable(keys::SETTINGS_ALL)
+            .callback(move |query| queue(&tx2, Request::Setting(query), &flooded2))
+            .wait()
+            .map_err(|e| format!("zenoh: {e}"))?;
+        self.requests = Some(rx);
+        self._commands = Some(commands);
+        self._settings = Some(settings);
+        Ok(self)
+    }
+
+    /// The next request waiting, if any.
+    pub fn next_request(&self) -> Option<Request> {
+        self.requests.as_ref()?.try_recv().ok()
+    }
+
+    /// Requests dropped because [`MAX_REQUESTS`] were waiting.
+    pub fn flooded(&self) -> u64 {
+        self.flooded.load(Ordering::Relaxed)
+    }
+
+    /// Puts that Zenoh refused (counted, not retried).
+    pub fn put_errors(&self) -> u64 {
+        self.put_errors
+    }
+
+    /// Publishes `payload` on `key` (a publisher is declared for it the first time, up
+    /// to [`MAX_PUBLISHERS`]), with an attachment. Under congestion Zenoh drops the
+    /// sample; a put it refuses is counted ([`put_errors`](Self::put_errors)).
+    pub fn put(&mut self, key: &str, payload: impl Into<ZBytes>, attachment: Option<Vec<u8>>) {
+        if !self.publishers.contains_key(key) && self.publishers.len() < MAX_PUBLISHERS {
+            match self.session.declare_publisher(key.to_owned()).wait() {
+                Ok(p) => {
+                    self.publishers.insert(key.to_owned(), p);
+                }
+                Err(_) => {
+                    self.put_errors += 1;
+                    return;
+                }
+            }
+        }
+        let result = match self.publishers.get(key) {
+            Some(p) => p.put(payload).attachment(attachment).wait(),
+            None => self
+                .session
+                .put(key.to_owned(), payload)
+                .attachment(attachment)
+                .wait(),
+        };
+        if result.is_err() {
+            self.put_errors += 1;
+        }
+    }
+
+    /// The Zenoh session (to subscribe, query...).
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+}
+
+/// Queues a request for the loop, or counts it when the queue is full (or gone).
+fn queue(tx: &SyncSender<Request>, request: Request, flooded: &AtomicU64) {
+    if let Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) = tx.try_send(request) {
+        flooded.fetch_add(1, Ordering::Relaxed);
+    }
+}
