@@ -509,7 +509,7 @@ mod tests {
         ])
         .unwrap();
         assert_eq!(
-            (a.ping, a.duration, a.baud),
+            (a.ping, a.duration, a.link.baud),
             (Some(0.2), Some(10.0), 115_200)
         );
         let resolved: Vec<_> = a.setting.iter().map(|s| s.resolve(None)).collect();
