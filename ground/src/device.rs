@@ -193,7 +193,7 @@ impl FromStr for LinkSpec {
         let (name, rest) = s.split_once('=').ok_or_else(|| {
             format!("`{shown}`: give NAME=KIND:TARGET, e.g. radio=udp:127.0.0.1:4242")
         })?;
-        check_name(name)?;
+        check_name("link name", name)?;
         let (kind, rest) = rest.split_once(':').ok_or_else(|| {
             format!("link {name}: give KIND:TARGET (udp, tcp, serial, file, stdin)")
         })?;
@@ -258,7 +258,9 @@ impl FromStr for LinkSpec {
     }
 }
 
-fn check_name(name: &str) -> Result<(), String> {
+/// Checks a name of a link or a gateway (`what`): 1 to [`MAX_NAME`] letters, digits,
+/// `-` or `_`.
+pub(crate) fn check_name(what: &str, name: &str) -> Result<(), String> {
     let ok = !name.is_empty()
         && name.len() <= MAX_NAME
         && name
@@ -268,7 +270,7 @@ fn check_name(name: &str) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!(
-            "link name `{}`: 1 to {MAX_NAME} letters, digits, `-` or `_`",
+            "{what} `{}`: 1 to {MAX_NAME} letters, digits, `-` or `_`",
             crate::escape::token(name)
         ))
     }

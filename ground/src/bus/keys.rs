@@ -63,7 +63,11 @@ pub fn setting(ac: u8, name: &str) -> String {
 
 /// Link `link` of gateway `gateway`.
 pub fn gateway_link(gateway: &str, link: &str) -> String {
-    format!("{ROOT}/gateway/{}/link/{}", topic_part(gateway), topic_part(link))
+    format!(
+        "{ROOT}/gateway/{}/link/{}",
+        topic_part(gateway),
+        topic_part(link)
+    )
 }
 
 /// The refused commands of gateway `gateway`.
@@ -142,6 +146,9 @@ mod tests {
         ] {
             assert_eq!(parse_uplink(bad), None, "{bad}");
         }
-        assert_eq!(gateway_link("gw", "radio a"), "pprz/gateway/gw/link/radio%20a");
+        assert_eq!(
+            gateway_link("gw", "radio a"),
+            "pprz/gateway/gw/link/radio%20a"
+        );
     }
 }

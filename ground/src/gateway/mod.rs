@@ -34,6 +34,7 @@
 //! ```
 
 pub mod dedup;
+pub mod options;
 pub mod route;
 pub mod serve;
 

@@ -200,8 +200,10 @@ impl Service {
 
     /// One command: checked, framed and sent.
     fn command(&mut self, now: f64, key: &str, payload: &[u8]) -> Result<(), (Refusal, String)> {
-        let (ac, name) = keys::parse_uplink(key)
-            .ok_or((Refusal::BadKey, "not pprz/<ac_id>/uplink/<MESSAGE>".to_owned()))?;
+        let (ac, name) = keys::parse_uplink(key).ok_or((
+            Refusal::BadKey,
+            "not pprz/<ac_id>/uplink/<MESSAGE>".to_owned(),
+        ))?;
         let set = self.gateway.fleet().set();
         let desc = set.find_by_name("datalink", &name).ok_or_else(|| {
             (
@@ -209,10 +211,17 @@ impl Service {
                 format!("no datalink message {}", crate::escape::token(&name)),
             )
         })?;
-        let text = std::str::from_utf8(payload)
-            .map_err(|_| (Refusal::BadFields, "the payload is not UTF-8 text".to_owned()))?;
+        let text = std::str::from_utf8(payload).map_err(|_| {
+            (
+                Refusal::BadFields,
+                "the payload is not UTF-8 text".to_owned(),
+            )
+        })?;
         let mut value: Value = if text.len() > json::MAX_TEXT {
-            return Err((Refusal::BadFields, format!("{} bytes of JSON: at most {}", text.len(), json::MAX_TEXT)));
+            return Err((
+                Refusal::BadFields,
+                format!("{} bytes of JSON: at most {}", text.len(), json::MAX_TEXT),
+            ));
         } else {
             serde_json::from_str(text).map_err(|e| (Refusal::BadFields, e.to_string()))?
         };
@@ -227,13 +236,16 @@ impl Service {
                 Some(v) => {
                     return Err((
                         Refusal::OtherAircraft,
-                        format!("ac_id {} in the fields, {ac} in the key", crate::escape::token(&v.to_string())),
+                        format!(
+                            "ac_id {} in the fields, {ac} in the key",
+                            crate::escape::token(&v.to_string())
+                        ),
                     ));
                 }
             }
         }
-        let bytes = json::parse_message(desc, &value)
-            .map_err(|e| (Refusal::BadFields, e.to_string()))?;
+        let bytes =
+            json::parse_message(desc, &value).map_err(|e| (Refusal::BadFields, e.to_string()))?;
         self.take_token(now, ac)?;
         self.send(now, ac, desc, &bytes)
     }
@@ -263,11 +275,17 @@ impl Service {
     /// Takes a command token of aircraft `ac`.
     fn take_token(&mut self, now: f64, ac: u8) -> Result<(), (Refusal, String)> {
         let rate = self.rate;
-        let b = self.buckets.entry(ac).or_insert(Bucket { tokens: rate, at: now });
+        let b = self.buckets.entry(ac).or_insert(Bucket {
+            tokens: rate,
+            at: now,
+        });
         b.tokens = (b.tokens + (now - b.at).max(0.0) * rate).min(rate);
         b.at = now;
         if b.tokens < 1.0 {
-            return Err((Refusal::Rate, format!("more than {rate} commands a second for aircraft {ac}")));
+            return Err((
+                Refusal::Rate,
+                format!("more than {rate} commands a second for aircraft {ac}"),
+            ));
         }
         b.tokens -= 1.0;
         Ok(())
@@ -292,7 +310,13 @@ impl Service {
         let payload = query.payload().map(|p| p.to_bytes().into_owned());
         match self.setting_request(now, &key, payload.as_deref()) {
             Ok(Some((ac, index, value))) if self.pending.len() < MAX_PENDING_SETTINGS => {
-                self.pending.push(Pending { query, ac, index, value, deadline: now + SETTING_TIMEOUT });
+                self.pending.push(Pending {
+                    query,
+                    ac,
+                    index,
+                    value,
+                    deadline: now + SETTING_TIMEOUT,
+                });
             }
             Ok(Some(_)) => {
                 let why = format!("more than {MAX_PENDING_SETTINGS} settings queries waiting");
@@ -300,9 +324,15 @@ impl Service {
                 self.refuse(&key, Refusal::TooManyQueries, &why);
             }
             Ok(None) => {
-                let answer = keys::parse_setting(&key).and_then(|(ac, name)| self.setting_json(ac, &name));
+                let answer =
+                    keys::parse_setting(&key).and_then(|(ac, name)| self.setting_json(ac, &name));
                 self.stats.settings_answered += 1;
-                let _ = query.reply(query.key_expr().clone(), answer.unwrap_or_default().to_string()).wait();
+                let _ = query
+                    .reply(
+                        query.key_expr().clone(),
+                        answer.unwrap_or_default().to_string(),
+                    )
+                    .wait();
             }
             Err((reason, why)) => {
                 let _ = query.reply_err(why.clone()).wait();
@@ -320,12 +350,16 @@ impl Service {
         payload: Option<&[u8]>,
     ) -> Result<Option<(u8, u8, f32)>, (Refusal, String)> {
         let bad = |why: String| (Refusal::BadSetting, why);
-        let (ac, name) = keys::parse_setting(key)
-            .ok_or((Refusal::BadKey, "not pprz/<ac_id>/settings/<name>".to_owned()))?;
+        let (ac, name) = keys::parse_setting(key).ok_or((
+            Refusal::BadKey,
+            "not pprz/<ac_id>/settings/<name>".to_owned(),
+        ))?;
         let table = self.table.clone();
         let index = match &table {
             Some(t) => t.resolve(&name).map_err(|e| bad(e.to_string()))?,
-            None => name.parse::<u8>().map_err(|_| bad("a name needs the settings files (--settings)".into()))?,
+            None => name
+                .parse::<u8>()
+                .map_err(|_| bad("a name needs the settings files (--settings)".into()))?,
         };
         let Some(payload) = payload.filter(|p| !p.is_empty()) else {
             return Ok(None);
@@ -336,14 +370,19 @@ impl Service {
             Some(Value::String(s)) => s.clone(),
             _ => return Err(bad("give {\"value\": a number or a label}".into())),
         };
-        let arg = SettingArg { name: index.to_string(), value: text };
+        let arg = SettingArg {
+            name: index.to_string(),
+            value: text,
+        };
         let resolved = arg.resolve(table.as_deref()).map_err(bad)?;
         let set = self.gateway.fleet().set();
-        let desc = set
-            .find_by_name("datalink", "SETTING")
-            .ok_or((Refusal::UnknownMessage, "the messages.xml has no SETTING".to_owned()))?;
+        let desc = set.find_by_name("datalink", "SETTING").ok_or((
+            Refusal::UnknownMessage,
+            "the messages.xml has no SETTING".to_owned(),
+        ))?;
         let fields = json!({"index": resolved.index, "ac_id": ac, "value": resolved.value});
-        let bytes = json::parse_message(desc, &fields).map_err(|e| (Refusal::BadFields, e.to_string()))?;
+        let bytes =
+            json::parse_message(desc, &fields).map_err(|e| (Refusal::BadFields, e.to_string()))?;
         self.take_token(now, ac)?;
         self.send(now, ac, desc, &bytes)?;
         Ok(Some((ac, resolved.index, resolved.value)))
@@ -382,7 +421,9 @@ impl Service {
                 .fleet()
                 .aircraft_state(p.ac)
                 .and_then(|a| a.setting_values().get(&p.index).copied());
-            let applied = value.is_some_and(|v| (v as f32 - p.value).abs() <= f32::EPSILON * p.value.abs().max(1.0));
+            let applied = value.is_some_and(|v| {
+                (v as f32 - p.value).abs() <= f32::EPSILON * p.value.abs().max(1.0)
+            });
             if !applied && now < p.deadline {
                 i += 1;
                 continue;
@@ -390,9 +431,20 @@ impl Service {
             let p = self.pending.swap_remove(i);
             self.stats.settings_answered += 1;
             if applied {
-                let name = self.table.as_ref().and_then(|t| t.unique_name(p.index)).map(str::to_owned);
-                let answer = self.setting_json(p.ac, name.as_deref().unwrap_or(&p.index.to_string()));
-                let _ = p.query.reply(p.query.key_expr().clone(), answer.unwrap_or_default().to_string()).wait();
+                let name = self
+                    .table
+                    .as_ref()
+                    .and_then(|t| t.unique_name(p.index))
+                    .map(str::to_owned);
+                let answer =
+                    self.setting_json(p.ac, name.as_deref().unwrap_or(&p.index.to_string()));
+                let _ = p
+                    .query
+                    .reply(
+                        p.query.key_expr().clone(),
+                        answer.unwrap_or_default().to_string(),
+                    )
+                    .wait();
             } else {
                 let why = format!(
                     "no DL_VALUE of {} from aircraft {} within {SETTING_TIMEOUT} s (value in force: {})",
@@ -444,7 +496,8 @@ impl Service {
             self.bus.put(&key, body.to_string(), None);
         }
         let body = self.stats_json();
-        self.bus.put(&keys::stats(&self.name), body.to_string(), None);
+        self.bus
+            .put(&keys::stats(&self.name), body.to_string(), None);
     }
 
     /// The counters as JSON (published on `pprz/gateway/<name>/stats`).

@@ -37,7 +37,10 @@ type Inputs = Vec<(FileId, String)>;
 fn open_input(args: &Args) -> Result<(Source, UplinkSink, Inputs), String> {
     let mut inputs = Vec::new();
     if let Ok(id) = FileId::of_path(&args.link.messages) {
-        inputs.push((id, format!("the messages file {}", args.link.messages.display())));
+        inputs.push((
+            id,
+            format!("the messages file {}", args.link.messages.display()),
+        ));
     }
     match (&args.link.serial, &args.link.file) {
         (Some(device), _) => {

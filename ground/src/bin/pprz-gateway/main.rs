@@ -1,0 +1,171 @@
+//! `pprz-gateway`: serve a fleet on a Zenoh bus from several links at once, redundant
+//! links merged, commands routed to the link each aircraft is heard on.
+//!
+//! Exit status: 0 after a complete run (all inputs ended, `--duration`, Ctrl-C), 1
+//! when the bus or a link failed to open, 2 for invalid options.
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use pprz_ground::bus::Bus;
+use pprz_ground::device::Uplink;
+use pprz_ground::gateway::options::GatewayArgs;
+use pprz_ground::gateway::serve::Service;
+use pprz_ground::gateway::{Gateway, GatewayLink};
+use pprz_ground::input::{InputQueue, Pop};
+use pprz_ground::monitor::Monitor;
+use pprz_ground::set::RuntimeSet;
+use pprz_ground::settings::SettingsTable;
+use pprz_transports::PprzV2;
+
+/// Requests from the bus handled per loop turn at most (the links' input comes
+/// between).
+const REQUESTS_PER_TURN: usize = 64;
+
+/// How often the figures are published, in seconds.
+const TICK: f64 = 1.0;
+
+fn main() -> ExitCode {
+    let args = GatewayArgs::parse();
+    let links = match args.links() {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("pprz-gateway: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let set = match RuntimeSet::load(&args.link.messages) {
+        Ok(s) => s,
+        Err(e) => {
+            for d in e.diagnostics() {
+                eprintln!("pprz-gateway: {d}");
+            }
+            eprintln!("pprz-gateway: give the messages.xml of the aircraft with --messages");
+            return ExitCode::from(2);
+        }
+    };
+    let table = if args.settings_files.is_empty() {
+        None
+    } else {
+        match SettingsTable::load(&args.settings_files) {
+            Ok(t) => Some(Arc::new(t)),
+            Err(e) => {
+                eprintln!("pprz-gateway: {e}");
+                return ExitCode::from(2);
+            }
+        }
+    };
+    match run(&args, set, table, &links) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("pprz-gateway: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(
+    args: &GatewayArgs,
+    set: RuntimeSet,
+    table: Option<Arc<SettingsTable>>,
+    specs: &[pprz_ground::device::LinkSpec],
+) -> Result<(), String> {
+    let mut queues: Vec<Option<InputQueue>> = Vec::new();
+    let mut uplinks: Vec<Uplink> = Vec::new();
+    let mut links = Vec::new();
+    for spec in specs {
+        let (source, uplink) = spec
+            .endpoint
+            .open()
+            .map_err(|e| format!("link {}: {e}", spec.name))?;
+        links.push(GatewayLink::new(
+            &spec.name,
+            set.clone(),
+            spec.transport.any(),
+            uplink.can_send(),
+        ));
+        queues.push(Some(source.start()));
+        uplinks.push(uplink);
+    }
+    let fleet = Monitor::new(set, PprzV2::new().into())
+        .with_stale_after(args.stale_after)
+        .map_err(|e| e.to_string())?;
+    let fleet = match &table {
+        Some(t) => fleet.with_settings(t.clone()),
+        None => fleet,
+    };
+    let gateway = Gateway::new(fleet.set().clone(), links)
+        .with_fleet_monitor(fleet)
+        .with_window(
+            args.dedup_window,
+            pprz_ground::gateway::dedup::DEFAULT_CAPACITY,
+        )
+        .with_policy(args.uplink_policy.into());
+    let bus_config = args.bus();
+    let bus = Bus::open(&bus_config)?.serving()?;
+    for endpoint in &bus_config.listen {
+        eprintln!("zenoh: listening on {endpoint}");
+    }
+    let mut service =
+        Service::new(&args.name, gateway, uplinks, bus).with_uplink_rate(args.uplink_rate);
+    if let Some(t) = table {
+        service = service.with_settings(t);
+    }
+    let stop = stop_on_ctrl_c();
+    let start = Instant::now();
+    let mut next_tick = 0.0;
+    loop {
+        let now = start.elapsed().as_secs_f64();
+        let mut busy = false;
+        for (i, slot) in queues.iter_mut().enumerate() {
+            let Some(q) = slot else { continue };
+            match q.pop(Duration::ZERO) {
+                Pop::Data { bytes, .. } => {
+                    service.feed(i, now, &bytes);
+                    busy = true;
+                }
+                Pop::Idle => {}
+                Pop::End(end) => {
+                    if let pprz_ground::input::End::Error(e) = end {
+                        eprintln!("pprz-gateway: link {}: {e}", specs[i].name);
+                    }
+                    *slot = None;
+                }
+            }
+        }
+        service.serve_requests(now, REQUESTS_PER_TURN);
+        if now >= next_tick {
+            service.tick(now);
+            next_tick = now + TICK;
+        }
+        let ended = queues.iter().all(Option::is_none);
+        let timed_out = args.duration.is_some_and(|d| now >= d);
+        if ended || timed_out || stop.load(Ordering::SeqCst) {
+            service.tick(now);
+            break;
+        }
+        if !busy {
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+    let summary = service.stats_json();
+    eprintln!("pprz-gateway: {summary}");
+    if let Some(path) = &args.summary_json {
+        std::fs::write(path, format!("{summary:#}\n"))
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// A flag that Ctrl-C sets.
+fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
+        eprintln!("warning: Ctrl-C handler not installed: {e}");
+    }
+    stop
+}
