@@ -5,8 +5,10 @@
 //! | `pprz/<ac_id>/<class>/<MESSAGE>` | a decoded message as JSON (attachment: the frame as its link received it) |
 //! | `pprz/<ac_id>/frame` | every delivered message as a PPRZ v2 frame (messages the gateway cannot decode too) |
 //! | `pprz/<ac_id>/link` | the aircraft's link figures, as JSON, once a second |
+//! | `pprz/<ac_id>/alive` | a liveliness token, present while the aircraft is live |
 //! | `pprz/<ac_id>/uplink/<MESSAGE>` | a command: the message's fields as a JSON object |
 //! | `pprz/<ac_id>/settings/<name>` | a query: read a setting, or set it (payload `{"value": x}`) |
+//! | `pprz/gateway/<name>` | a liveliness token, present while the gateway runs |
 //! | `pprz/gateway/<name>/link/<link>` | one link's figures, as JSON, once a second |
 //! | `pprz/gateway/<name>/refused` | a refused command: its key, the reason, the counts |
 //! | `pprz/gateway/<name>/stats` | the gateway's counters, as JSON, once a second |
@@ -49,6 +51,16 @@ pub fn frame(ac: u8) -> String {
 /// The link figures of aircraft `ac`.
 pub fn link(ac: u8) -> String {
     format!("{ROOT}/{ac}/link")
+}
+
+/// The liveliness token of aircraft `ac`.
+pub fn alive(ac: u8) -> String {
+    format!("{ROOT}/{ac}/alive")
+}
+
+/// The liveliness token of gateway `gateway`.
+pub fn gateway(gateway: &str) -> String {
+    format!("{ROOT}/gateway/{}", topic_part(gateway))
 }
 
 /// A command `name` for aircraft `ac`.

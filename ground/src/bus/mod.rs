@@ -216,6 +216,16 @@ impl Bus {
         }
     }
 
+    /// Declares the liveliness token `key` (it vanishes when dropped, or when this
+    /// session ends, even by a crash); `None` if Zenoh refused it.
+    pub fn token(&self, key: &str) -> Option<zenoh::liveliness::LivelinessToken> {
+        self.session
+            .liveliness()
+            .declare_token(key.to_owned())
+            .wait()
+            .ok()
+    }
+
     /// The Zenoh session (to subscribe, query...).
     pub fn session(&self) -> &Session {
         &self.session

@@ -20,6 +20,7 @@ use std::sync::Arc;
 
 use serde_json::{Value, json};
 use zenoh::Wait;
+use zenoh::liveliness::LivelinessToken;
 use zenoh::query::Query;
 
 use super::{Delivered, Gateway};
@@ -27,6 +28,7 @@ use crate::bus::{Bus, Request, keys};
 use crate::cli::SettingArg;
 use crate::device::Uplink;
 use crate::json;
+use crate::monitor::LinkState;
 use crate::settings::SettingsTable;
 
 /// Seconds a settings query waits for the DL_VALUE of the value it set.
@@ -118,12 +120,16 @@ pub struct Service {
     buckets: BTreeMap<u8, Bucket>,
     pending: Vec<Pending>,
     stats: ServiceStats,
+    /// The liveliness tokens of the live aircraft, and the gateway's own.
+    alive: BTreeMap<u8, LivelinessToken>,
+    _token: Option<LivelinessToken>,
 }
 
 impl Service {
     /// The gateway `name` (in the bus keys) with its links' uplinks (in link order),
     /// on `bus`.
     pub fn new(name: &str, gateway: Gateway, uplinks: Vec<Uplink>, bus: Bus) -> Self {
+        let token = bus.token(&keys::gateway(name));
         Self {
             name: name.to_owned(),
             gateway,
@@ -134,6 +140,8 @@ impl Service {
             buckets: BTreeMap::new(),
             pending: Vec::new(),
             stats: ServiceStats::default(),
+            alive: BTreeMap::new(),
+            _token: token,
         }
     }
 
@@ -232,7 +240,7 @@ impl Service {
                 None => {
                     obj.insert("ac_id".into(), Value::from(ac));
                 }
-                Some(v) if v.as_u64() == Some(u64::from(ac)) => {}
+                Some(v) if v.as_f64() == Some(f64::from(ac)) => {}
                 Some(v) => {
                     return Err((
                         Refusal::OtherAircraft,
@@ -468,6 +476,14 @@ impl Service {
                 continue;
             };
             let quality = fleet.link_quality(ac, now);
+            let live = quality.as_ref().is_some_and(|q| q.state == LinkState::Live);
+            if !live {
+                self.alive.remove(&ac);
+            } else if !self.alive.contains_key(&ac)
+                && let Some(t) = self.bus.token(&keys::alive(ac))
+            {
+                self.alive.insert(ac, t);
+            }
             let mut body = crate::viewer::link_json(state, quality.as_ref(), None, None);
             body["links"] = self
                 .gateway
