@@ -77,6 +77,9 @@ impl Refusal {
     }
 }
 
+/// A result, or why the request is refused (the reason, and a message for the client).
+type Checked<T> = Result<T, (Refusal, String)>;
+
 /// A token bucket per aircraft.
 struct Bucket {
     tokens: f64,
@@ -207,7 +210,7 @@ impl Service {
     }
 
     /// One command: checked, framed and sent.
-    fn command(&mut self, now: f64, key: &str, payload: &[u8]) -> Result<(), (Refusal, String)> {
+    fn command(&mut self, now: f64, key: &str, payload: &[u8]) -> Checked<()> {
         let (ac, name) = keys::parse_uplink(key).ok_or((
             Refusal::BadKey,
             "not pprz/<ac_id>/uplink/<MESSAGE>".to_owned(),
@@ -265,7 +268,7 @@ impl Service {
         ac: u8,
         desc: &pprz_messages::MessageDescriptor<'_>,
         payload: &[u8],
-    ) -> Result<(), (Refusal, String)> {
+    ) -> Checked<()> {
         let frames = self
             .gateway
             .uplink(now, ac, desc, payload)
@@ -281,7 +284,7 @@ impl Service {
     }
 
     /// Takes a command token of aircraft `ac`.
-    fn take_token(&mut self, now: f64, ac: u8) -> Result<(), (Refusal, String)> {
+    fn take_token(&mut self, now: f64, ac: u8) -> Checked<()> {
         let rate = self.rate;
         let b = self.buckets.entry(ac).or_insert(Bucket {
             tokens: rate,
@@ -356,7 +359,7 @@ impl Service {
         now: f64,
         key: &str,
         payload: Option<&[u8]>,
-    ) -> Result<Option<(u8, u8, f32)>, (Refusal, String)> {
+    ) -> Checked<Option<(u8, u8, f32)>> {
         let bad = |why: String| (Refusal::BadSetting, why);
         let (ac, name) = keys::parse_setting(key).ok_or((
             Refusal::BadKey,

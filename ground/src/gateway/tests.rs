@@ -156,13 +156,8 @@ fn a_link_that_cannot_send_is_never_chosen() {
     let desc = set.find_by_name("datalink", "SETTING").unwrap();
     let out = gw.uplink(0.1, 7, desc, &[0; 6]).unwrap();
     assert_eq!(out.iter().map(|o| o.0).collect::<Vec<_>>(), [1]);
-    let only_file = vec![GatewayLink::new(
-        "file",
-        set.clone(),
-        PprzV2::new().into(),
-        false,
-    )];
-    let mut gw = Gateway::new(set.clone(), only_file);
+    let only_file = vec![GatewayLink::new("file", set, PprzV2::new().into(), false)];
+    let mut gw = Gateway::new(set, only_file);
     assert!(gw.uplink(0.1, 7, desc, &[0; 6]).is_err());
 }
 

@@ -83,7 +83,7 @@ fn run(
             .map_err(|e| format!("link {}: {e}", spec.name))?;
         links.push(GatewayLink::new(
             &spec.name,
-            set.clone(),
+            set,
             spec.transport.any(),
             uplink.can_send(),
         ));
@@ -97,7 +97,7 @@ fn run(
         Some(t) => fleet.with_settings(t.clone()),
         None => fleet,
     };
-    let gateway = Gateway::new(fleet.set().clone(), links)
+    let gateway = Gateway::new(*fleet.set(), links)
         .with_fleet_monitor(fleet)
         .with_window(
             args.dedup_window,
