@@ -43,6 +43,7 @@
 #![warn(missing_docs)]
 #![deny(unsafe_code)]
 
+#[cfg(feature = "bus")]
 pub mod bus;
 pub mod cli;
 pub mod device;

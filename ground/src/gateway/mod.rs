@@ -34,8 +34,10 @@
 //! ```
 
 pub mod dedup;
+#[cfg(feature = "bus")]
 pub mod options;
 pub mod route;
+#[cfg(feature = "bus")]
 pub mod serve;
 
 use pprz_messages::MessageDescriptor;
