@@ -3,6 +3,8 @@
 //!
 //! `pprz-monitor` opens one from its options; `pprz-gateway` opens several, each
 //! described by a [`LinkSpec`] (`--link NAME=KIND:TARGET[,OPTION=VALUE]...`).
+//! `pprz-monitor --zenoh` reads a whole fleet from a gateway on the bus instead
+//! ([`open_bus`]).
 //!
 //! ```
 //! use pprz_ground::device::{Endpoint, LinkSpec};
@@ -19,9 +21,14 @@ use std::str::FromStr;
 use std::time::Duration;
 
 use clap::ValueEnum;
+use pprz_transports::{Framing, PprzV2};
+use zenoh::Wait;
+use zenoh::pubsub::Subscriber;
 
+use crate::bus::{Bus, BusConfig, keys};
 use crate::cli::{Transport, parse_baud};
 use crate::input::{self, DEFAULT_CAPACITY, InputQueue, Overflow};
+use crate::set::RuntimeSet;
 
 /// Where uplink frames are written.
 pub enum Uplink {
@@ -29,6 +36,8 @@ pub enum Uplink {
     Udp(UdpSocket, SocketAddr),
     /// The stream the link reads (TCP, serial port).
     Stream(Box<dyn Write + Send>),
+    /// Commands on the fleet bus ([`BusUplink`]).
+    Bus(Box<BusUplink>),
     /// The link cannot send (a file, standard input, UDP without an uplink address).
     None,
 }
@@ -42,6 +51,7 @@ impl Uplink {
         match self {
             Self::Udp(socket, to) => socket.send_to(frame, *to).map(drop),
             Self::Stream(w) => w.write_all(frame).and_then(|()| w.flush()),
+            Self::Bus(bus) => bus.send(frame),
             Self::None => Err(std::io::Error::other(
                 "no uplink: give an uplink address with UDP, or use TCP or a serial port",
             )),
@@ -61,6 +71,8 @@ pub enum Source {
     /// A byte stream, and what to do when its queue is full (a file waits; a live link
     /// drops the oldest reads).
     Stream(Box<dyn std::io::Read + Send>, Overflow),
+    /// A queue that something else fills (the bus's subscriber).
+    Queue(InputQueue),
 }
 
 impl Source {
@@ -77,6 +89,7 @@ impl Source {
                 input::spawn_stream(reader, q.clone());
                 q
             }
+            Self::Queue(q) => q,
         }
     }
 }
@@ -152,6 +165,114 @@ impl Endpoint {
             }
         }
     }
+}
+
+/// The uplink of a ground station on the fleet bus: each uplink frame (PPRZ v2, as
+/// [`uplink::frame`](crate::uplink::frame) builds it) is turned back into a command,
+/// the JSON of its datalink message put on `pprz/<destination>/uplink/<MESSAGE>`
+/// ([`keys::uplink`]), which the gateway frames and sends to the aircraft.
+///
+/// It holds the session: the subscriber that feeds the input of [`open_bus`] lives as
+/// long as it does.
+pub struct BusUplink {
+    bus: Bus,
+    set: RuntimeSet,
+    _frames: Subscriber<()>,
+}
+
+impl BusUplink {
+    /// Puts the command that `frame` carries.
+    ///
+    /// # Errors
+    /// The frame is no valid PPRZ v2 frame of a datalink message of the set, or Zenoh
+    /// refused the put.
+    pub fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        let (key, body) = command(&self.set, frame).map_err(std::io::Error::other)?;
+        let refused = self.bus.put_errors();
+        self.bus.put(&key, body, None);
+        if self.bus.put_errors() > refused {
+            return Err(std::io::Error::other(format!(
+                "zenoh refused the put on {key}"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The command an uplink frame carries: its key and the JSON of its fields.
+///
+/// ```
+/// use pprz_ground::{device, set::RuntimeSet, uplink};
+/// use pprz_transports::PprzV2;
+/// let set = RuntimeSet::parse("m.xml", r#"<protocol><msg_class name="datalink" id="2">
+///     <message name="SETTING" id="4"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/><field name="value" type="float"/></message>
+///     </msg_class></protocol>"#).unwrap();
+/// let f = uplink::frame(&set, PprzV2::new().into(), 8, "SETTING", &[("index", 2.0), ("value", 1.5)]).unwrap();
+/// let (key, body) = device::command(&set, &f).unwrap();
+/// assert_eq!(key, "pprz/8/uplink/SETTING");
+/// assert_eq!(body, r#"{"index":2,"ac_id":8,"value":1.5}"#);
+/// ```
+///
+/// # Errors
+/// Why the frame carries no command (not one valid PPRZ v2 frame, not a datalink
+/// message of the set, a payload that does not match the message).
+pub fn command(set: &RuntimeSet, frame: &[u8]) -> Result<(String, String), String> {
+    let (f, len) = PprzV2::new()
+        .parse(frame)
+        .map_err(|e| format!("not a PPRZ v2 frame: {e}"))?;
+    if len != frame.len() {
+        return Err(format!("{} bytes after the frame", frame.len() - len));
+    }
+    let dest = f.destination().unwrap_or(pprz_transports::BROADCAST_ID);
+    let desc = set
+        .find(f.class(), f.msg_id())
+        .filter(|d| d.class_name == "datalink")
+        .ok_or_else(|| {
+            format!(
+                "class {} message {} is no datalink message of the set",
+                f.class(),
+                f.msg_id()
+            )
+        })?;
+    let body =
+        crate::json::message(desc, f.payload()).map_err(|e| format!("{}: {e}", desc.name))?;
+    Ok((keys::uplink(dest, desc.name), body))
+}
+
+/// Opens a client session to the gateway at `endpoint` (e.g. `tcp/127.0.0.1:7447`):
+/// the input is every delivered frame of the fleet (`pprz/*/frame`, PPRZ v2), queued
+/// as a live link's reads are (the oldest dropped and counted when the queue is full);
+/// the uplink puts commands ([`BusUplink`]) built with the message set `set`.
+///
+/// # Errors
+/// A message naming the endpoint: Zenoh refused it, or nothing answers there (the
+/// session does not wait for a gateway to come up).
+pub fn open_bus(endpoint: &str, set: RuntimeSet) -> Result<(Source, Uplink), String> {
+    let shown = crate::escape::token(endpoint);
+    let bus = Bus::open(&BusConfig::client(endpoint)).map_err(|e| {
+        // Zenoh's messages end with the place in its source: not for the user.
+        let why = e.split("  at ").next().unwrap_or_default();
+        format!(
+            "cannot reach the gateway at {shown} (is pprz-gateway listening there?): {}",
+            crate::escape::lines(why)
+        )
+    })?;
+    let queue = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
+    let q = queue.clone();
+    let frames = bus
+        .session()
+        .declare_subscriber(keys::FRAMES_ALL)
+        .callback(move |sample| {
+            q.push(&sample.payload().to_bytes());
+        })
+        .wait()
+        .map_err(|e| format!("zenoh: cannot subscribe to {}: {e}", keys::FRAMES_ALL))?;
+    let uplink = BusUplink {
+        bus,
+        set,
+        _frames: frames,
+    };
+    Ok((Source::Queue(queue), Uplink::Bus(Box::new(uplink))))
 }
 
 /// Opens a file to replay: a directory is an error now, not a read error later.
