@@ -626,6 +626,46 @@ mod tests {
     }
 
     #[test]
+    fn zenoh_is_an_input_with_an_uplink_in_pprz2_without_secure() {
+        let zenoh = ["--zenoh", "tcp/127.0.0.1:7447"];
+        let with = |extra: &[&str]| {
+            let mut v = zenoh.to_vec();
+            v.extend_from_slice(extra);
+            parse(&v)
+        };
+        let a = with(&["--ping", "1", "--setting", "2=1", "--transport", "pprz2"]).unwrap();
+        assert_eq!(a.zenoh.as_deref(), Some("tcp/127.0.0.1:7447"));
+        assert_eq!(a.check(), Ok(()));
+        let e = with(&["--secure", "k"]).unwrap().check().unwrap_err();
+        assert!(e.contains("--secure does not apply to --zenoh"), "{e}");
+        for t in ["pprz1", "xbee", "xbee868", "pprzlog"] {
+            let e = with(&["--transport", t]).unwrap().check().unwrap_err();
+            assert!(e.contains("--zenoh carries PPRZ v2"), "{t}: {e}");
+        }
+        for other in [
+            &["--udp", "127.0.0.1:1"][..],
+            &["--tcp", "127.0.0.1:1"],
+            &["--file", "x"],
+            &["--stdin"],
+        ] {
+            let e = with(other).unwrap_err();
+            assert!(e.contains("cannot be used with"), "{other:?}: {e}");
+        }
+        for bad in [
+            "127.0.0.1:7447",
+            "udp/127.0.0.1:7447",
+            "tcp/",
+            "tcp/host",
+            "tcp/127.0.0.1:1 x",
+            "tcp/\u{1b}[2J:1",
+        ] {
+            let e = parse(&["--zenoh", bad]).unwrap_err();
+            assert!(e.contains("not a Zenoh TCP endpoint"), "{bad}: {e}");
+            assert!(!e.contains('\u{1b}'), "{e}");
+        }
+    }
+
+    #[test]
     fn one_or_several_aircraft() {
         let link = ["--tcp", "127.0.0.1:1"];
         let with = |extra: &[&str]| {

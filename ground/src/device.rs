@@ -436,6 +436,55 @@ mod tests {
     }
 
     #[test]
+    fn only_a_datalink_frame_of_the_set_is_a_command() {
+        use pprz_transports::{Encoder, MsgHeader, TxMeta};
+        let set = RuntimeSet::parse(
+            "m.xml",
+            r#"<protocol>
+            <msg_class name="telemetry" id="1"><message name="PONG" id="3"/></msg_class>
+            <msg_class name="datalink" id="2">
+              <message name="PING" id="8"/>
+              <message name="GET_SETTING" id="16"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/></message>
+            </msg_class></protocol>"#,
+        )
+        .unwrap();
+        let t = PprzV2::new();
+        let frame = |class, id, payload: &[u8]| {
+            let mut buf = [0u8; 64];
+            let meta = TxMeta::new(MsgHeader::new(0, 9, class, id));
+            let n = t.encode(&meta, payload, &mut buf).unwrap();
+            buf[..n].to_vec()
+        };
+        assert_eq!(
+            command(&set, &frame(2, 8, &[])),
+            Ok(("pprz/9/uplink/PING".into(), "{}".into()))
+        );
+        assert_eq!(
+            command(&set, &frame(2, 16, &[3, 9])),
+            Ok((
+                "pprz/9/uplink/GET_SETTING".into(),
+                r#"{"index":3,"ac_id":9}"#.into()
+            ))
+        );
+        let mut two = frame(2, 8, &[]);
+        two.extend(frame(2, 8, &[]));
+        let mut bad_sum = frame(2, 8, &[]);
+        *bad_sum.last_mut().unwrap() ^= 1;
+        for (f, says) in [
+            (frame(1, 3, &[]), "no datalink message"),
+            (frame(2, 99, &[]), "no datalink message"),
+            (frame(2, 16, &[3]), "GET_SETTING"),
+            (two, "bytes after the frame"),
+            (bad_sum, "not a PPRZ v2 frame"),
+            (Vec::new(), "not a PPRZ v2 frame"),
+            (vec![0x99], "not a PPRZ v2 frame"),
+        ] {
+            let e = command(&set, &f).unwrap_err();
+            assert!(e.contains(says), "{f:?}: {e}");
+        }
+    }
+
+    #[test]
     fn nonsense_is_refused_with_a_reason() {
         for (bad, says) in [
             ("udp:127.0.0.1:1", "NAME=KIND:TARGET"),
