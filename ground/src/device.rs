@@ -3,8 +3,9 @@
 //!
 //! `pprz-monitor` opens one from its options; `pprz-gateway` opens several, each
 //! described by a [`LinkSpec`] (`--link NAME=KIND:TARGET[,OPTION=VALUE]...`).
-//! `pprz-monitor --zenoh` reads a whole fleet from a gateway on the bus instead
-//! ([`open_bus`]).
+//! `pprz-monitor --zenoh` reads a whole fleet from a gateway on the fleet bus instead:
+//! a [`Source::Queue`] that the bus fills, and an [`Uplink::Commands`] that turns each
+//! uplink frame back into a command ([`command`]).
 //!
 //! ```
 //! use pprz_ground::device::{Endpoint, LinkSpec};
@@ -20,15 +21,11 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Duration;
 
-use clap::ValueEnum;
-use pprz_transports::{Framing, PprzV2};
-use zenoh::Wait;
-use zenoh::pubsub::Subscriber;
-
-use crate::bus::{Bus, BusConfig, keys};
 use crate::cli::{Transport, parse_baud};
 use crate::input::{self, DEFAULT_CAPACITY, InputQueue, Overflow};
 use crate::set::RuntimeSet;
+use clap::ValueEnum;
+use pprz_transports::{Framing, PprzV2};
 
 /// Where uplink frames are written.
 pub enum Uplink {
@@ -36,8 +33,8 @@ pub enum Uplink {
     Udp(UdpSocket, SocketAddr),
     /// The stream the link reads (TCP, serial port).
     Stream(Box<dyn Write + Send>),
-    /// Commands on the fleet bus ([`BusUplink`]).
-    Bus(Box<BusUplink>),
+    /// Commands (on the fleet bus): each frame turned back into one ([`CommandUplink`]).
+    Commands(Box<CommandUplink>),
     /// The link cannot send (a file, standard input, UDP without an uplink address).
     None,
 }
@@ -51,7 +48,7 @@ impl Uplink {
         match self {
             Self::Udp(socket, to) => socket.send_to(frame, *to).map(drop),
             Self::Stream(w) => w.write_all(frame).and_then(|()| w.flush()),
-            Self::Bus(bus) => bus.send(frame),
+            Self::Commands(c) => c.send(frame),
             Self::None => Err(std::io::Error::other(
                 "no uplink: give an uplink address with UDP, or use TCP or a serial port",
             )),
@@ -71,7 +68,7 @@ pub enum Source {
     /// A byte stream, and what to do when its queue is full (a file waits; a live link
     /// drops the oldest reads).
     Stream(Box<dyn std::io::Read + Send>, Overflow),
-    /// A queue that something else fills (the bus's subscriber).
+    /// A queue that something else fills (the fleet bus's subscriber).
     Queue(InputQueue),
 }
 
@@ -167,39 +164,47 @@ impl Endpoint {
     }
 }
 
-/// The uplink of a ground station on the fleet bus: each uplink frame (PPRZ v2, as
-/// [`uplink::frame`](crate::uplink::frame) builds it) is turned back into a command,
-/// the JSON of its datalink message put on `pprz/<destination>/uplink/<MESSAGE>`
-/// ([`keys::uplink`]), which the gateway frames and sends to the aircraft.
-///
-/// It holds the session: the subscriber that feeds the input of [`open_bus`] lives as
-/// long as it does.
-pub struct BusUplink {
-    bus: Bus,
-    set: RuntimeSet,
-    _frames: Subscriber<()>,
+/// A command: the datalink message an uplink frame carries, for the fleet bus
+/// (`pprz/<ac_id>/uplink/<MESSAGE>`, the JSON of its fields).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Command {
+    /// The aircraft: the frame's destination.
+    pub ac_id: u8,
+    /// The message's name.
+    pub message: &'static str,
+    /// Its fields, as a JSON object ([`json::message`](crate::json::message)).
+    pub fields: String,
 }
 
-impl BusUplink {
-    /// Puts the command that `frame` carries.
+/// Where commands go (a put on the fleet bus).
+pub type CommandSink = Box<dyn FnMut(Command) -> std::io::Result<()> + Send>;
+
+/// The uplink of a ground station that sends commands instead of frames: each uplink
+/// frame (PPRZ v2, as [`uplink::frame`](crate::uplink::frame) builds it) is turned back
+/// into the [`Command`] it carries, which the sink puts on the bus; the gateway frames
+/// it again for the aircraft.
+pub struct CommandUplink {
+    set: RuntimeSet,
+    sink: CommandSink,
+}
+
+impl CommandUplink {
+    /// Commands of the datalink messages of `set`, handed to `sink`.
+    pub fn new(set: RuntimeSet, sink: CommandSink) -> Self {
+        Self { set, sink }
+    }
+
+    /// Hands the command that `frame` carries to the sink.
     ///
     /// # Errors
-    /// The frame is no valid PPRZ v2 frame of a datalink message of the set, or Zenoh
-    /// refused the put.
+    /// The frame carries no command ([`command`]), or the sink failed.
     pub fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
-        let (key, body) = command(&self.set, frame).map_err(std::io::Error::other)?;
-        let refused = self.bus.put_errors();
-        self.bus.put(&key, body, None);
-        if self.bus.put_errors() > refused {
-            return Err(std::io::Error::other(format!(
-                "zenoh refused the put on {key}"
-            )));
-        }
-        Ok(())
+        let c = command(&self.set, frame).map_err(std::io::Error::other)?;
+        (self.sink)(c)
     }
 }
 
-/// The command an uplink frame carries: its key and the JSON of its fields.
+/// The command an uplink frame carries.
 ///
 /// ```
 /// use pprz_ground::{device, set::RuntimeSet, uplink};
@@ -208,22 +213,21 @@ impl BusUplink {
 ///     <message name="SETTING" id="4"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/><field name="value" type="float"/></message>
 ///     </msg_class></protocol>"#).unwrap();
 /// let f = uplink::frame(&set, PprzV2::new().into(), 8, "SETTING", &[("index", 2.0), ("value", 1.5)]).unwrap();
-/// let (key, body) = device::command(&set, &f).unwrap();
-/// assert_eq!(key, "pprz/8/uplink/SETTING");
-/// assert_eq!(body, r#"{"index":2,"ac_id":8,"value":1.5}"#);
+/// let c = device::command(&set, &f).unwrap();
+/// assert_eq!((c.ac_id, c.message), (8, "SETTING"));
+/// assert_eq!(c.fields, r#"{"index":2,"ac_id":8,"value":1.5}"#);
 /// ```
 ///
 /// # Errors
 /// Why the frame carries no command (not one valid PPRZ v2 frame, not a datalink
 /// message of the set, a payload that does not match the message).
-pub fn command(set: &RuntimeSet, frame: &[u8]) -> Result<(String, String), String> {
+pub fn command(set: &RuntimeSet, frame: &[u8]) -> Result<Command, String> {
     let (f, len) = PprzV2::new()
         .parse(frame)
         .map_err(|e| format!("not a PPRZ v2 frame: {e}"))?;
     if len != frame.len() {
         return Err(format!("{} bytes after the frame", frame.len() - len));
     }
-    let dest = f.destination().unwrap_or(pprz_transports::BROADCAST_ID);
     let desc = set
         .find(f.class(), f.msg_id())
         .filter(|d| d.class_name == "datalink")
@@ -234,45 +238,13 @@ pub fn command(set: &RuntimeSet, frame: &[u8]) -> Result<(String, String), Strin
                 f.msg_id()
             )
         })?;
-    let body =
+    let fields =
         crate::json::message(desc, f.payload()).map_err(|e| format!("{}: {e}", desc.name))?;
-    Ok((keys::uplink(dest, desc.name), body))
-}
-
-/// Opens a client session to the gateway at `endpoint` (e.g. `tcp/127.0.0.1:7447`):
-/// the input is every delivered frame of the fleet (`pprz/*/frame`, PPRZ v2), queued
-/// as a live link's reads are (the oldest dropped and counted when the queue is full);
-/// the uplink puts commands ([`BusUplink`]) built with the message set `set`.
-///
-/// # Errors
-/// A message naming the endpoint: Zenoh refused it, or nothing answers there (the
-/// session does not wait for a gateway to come up).
-pub fn open_bus(endpoint: &str, set: RuntimeSet) -> Result<(Source, Uplink), String> {
-    let shown = crate::escape::token(endpoint);
-    let bus = Bus::open(&BusConfig::client(endpoint)).map_err(|e| {
-        // Zenoh's messages end with the place in its source: not for the user.
-        let why = e.split("  at ").next().unwrap_or_default();
-        format!(
-            "cannot reach the gateway at {shown} (is pprz-gateway listening there?): {}",
-            crate::escape::lines(why)
-        )
-    })?;
-    let queue = InputQueue::new(DEFAULT_CAPACITY, Overflow::DropOldest);
-    let q = queue.clone();
-    let frames = bus
-        .session()
-        .declare_subscriber(keys::FRAMES_ALL)
-        .callback(move |sample| {
-            q.push(&sample.payload().to_bytes());
-        })
-        .wait()
-        .map_err(|e| format!("zenoh: cannot subscribe to {}: {e}", keys::FRAMES_ALL))?;
-    let uplink = BusUplink {
-        bus,
-        set,
-        _frames: frames,
-    };
-    Ok((Source::Queue(queue), Uplink::Bus(Box::new(uplink))))
+    Ok(Command {
+        ac_id: f.destination().unwrap_or(pprz_transports::BROADCAST_ID),
+        message: desc.name,
+        fields,
+    })
 }
 
 /// Opens a file to replay: a directory is an error now, not a read error later.
@@ -455,16 +427,16 @@ mod tests {
             let n = t.encode(&meta, payload, &mut buf).unwrap();
             buf[..n].to_vec()
         };
+        let ping = Command {
+            ac_id: 9,
+            message: "PING",
+            fields: "{}".into(),
+        };
+        assert_eq!(command(&set, &frame(2, 8, &[])), Ok(ping));
+        let get = command(&set, &frame(2, 16, &[3, 9])).unwrap();
         assert_eq!(
-            command(&set, &frame(2, 8, &[])),
-            Ok(("pprz/9/uplink/PING".into(), "{}".into()))
-        );
-        assert_eq!(
-            command(&set, &frame(2, 16, &[3, 9])),
-            Ok((
-                "pprz/9/uplink/GET_SETTING".into(),
-                r#"{"index":3,"ac_id":9}"#.into()
-            ))
+            (get.ac_id, get.message, get.fields.as_str()),
+            (9, "GET_SETTING", r#"{"index":3,"ac_id":9}"#)
         );
         let mut two = frame(2, 8, &[]);
         two.extend(frame(2, 8, &[]));

@@ -14,6 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+mod bus;
 mod record;
 
 use clap::Parser;
@@ -64,7 +65,7 @@ fn open_input(args: &Args, set: RuntimeSet) -> Result<(Source, UplinkSink, Input
         _ => {}
     }
     let (source, sink) = match &args.zenoh {
-        Some(endpoint) => device::open_bus(endpoint, set)?,
+        Some(endpoint) => bus::open(endpoint, set)?,
         None => args.link.endpoint().open()?,
     };
     Ok((source, sink, inputs))
