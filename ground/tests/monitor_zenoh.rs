@@ -172,7 +172,14 @@ fn telemetry_pings_and_settings_go_through_the_gateway() {
     let (stop, flying) = aircraft.fly(gateway.udp);
     // The gateway routes commands to the link it heard the aircraft on.
     std::thread::sleep(Duration::from_millis(200));
+    let dir = std::env::temp_dir().join(format!("pprz-monitor-zenoh-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (record, mcap) = (dir.join("fleet.log"), dir.join("fleet.mcap"));
     let (code, out, err) = run(monitor().args([
+        "--record",
+        record.to_str().unwrap(),
+        "--mcap",
+        mcap.to_str().unwrap(),
         "--messages",
         MESSAGES,
         "--zenoh",
@@ -204,6 +211,18 @@ fn telemetry_pings_and_settings_go_through_the_gateway() {
     let settings: Vec<_> = received.iter().filter(|r| (r.0, r.1) == (2, 4)).collect();
     assert_eq!(settings.len(), 1, "{received:?}");
     assert_eq!(settings[0].2, [2, 7, 0, 0, 0xC0, 0x3F]);
+    // The recordings take the fleet from the bus like any input.
+    let recorded = |what: &str| {
+        let line = err
+            .lines()
+            .find(|l| l.starts_with("recorded ") && l.contains(what))
+            .expect(&err);
+        line.split(' ').nth(1).unwrap().parse::<u32>().unwrap()
+    };
+    assert!(recorded(" frames to ") > 20, "{err}");
+    assert!(recorded(" messages to ") > 20, "{err}");
+    assert!(std::fs::metadata(&mcap).unwrap().len() > 0);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
