@@ -137,6 +137,13 @@ pub struct Args {
     /// The link to the aircraft and its messages.
     #[command(flatten)]
     pub link: LinkArgs,
+    /// Read a whole fleet from a pprz-gateway on the Zenoh bus: a client session to this
+    /// endpoint (e.g. tcp/127.0.0.1:7447) receives every message the gateway delivers
+    /// (`pprz/*/frame`, PPRZ v2), and PINGs and SETTINGs go as commands on
+    /// `pprz/<ac_id>/uplink/<MESSAGE>`. The gateway must be up: nothing listening there is
+    /// an error. Not with --secure nor another --transport than pprz2.
+    #[arg(long, value_name = "ENDPOINT", group = "input", value_parser = parse_zenoh_endpoint)]
+    pub zenoh: Option<String>,
     /// Aircraft id for PING/SETTING (the frames' destination and the SETTING's ac_id
     /// field); repeat it or separate ids with commas to PING and SET several aircraft
     /// (each PONG and DL_VALUE is matched to its source). With --secure, one aircraft
@@ -214,18 +221,30 @@ impl Args {
 
     /// Checks the combinations of options that clap cannot: PINGs, SETTINGs and the
     /// secure link need a link to the aircraft, and the secure link PPRZ v2 and one
-    /// aircraft (not broadcast, not the ground's id 0).
+    /// aircraft (not broadcast, not the ground's id 0); `--zenoh` takes PPRZ v2 only and
+    /// no secure link.
     ///
     /// # Errors
     /// A message naming the problem.
     pub fn check(&self) -> Result<(), String> {
+        if self.zenoh.is_some() {
+            if self.secure.is_some() {
+                return Err("--secure does not apply to --zenoh: the gateway holds the links to the aircraft (run the secure link on a monitor with a link of its own)".into());
+            }
+            if self.link.transport != Transport::Pprz2 {
+                return Err(
+                    "--zenoh carries PPRZ v2 frames: leave out --transport (or give pprz2)".into(),
+                );
+            }
+        }
         let wants_uplink = self.ping.is_some() || !self.setting.is_empty() || self.read_settings;
-        let has_uplink = self.link.tcp.is_some()
+        let has_uplink = self.zenoh.is_some()
+            || self.link.tcp.is_some()
             || self.link.serial.is_some()
             || (self.link.udp.is_some() && self.link.uplink.is_some());
         if wants_uplink && !has_uplink {
             return Err(
-                "--ping, --setting and --read-settings need a link to the aircraft: --tcp, --serial, or --udp with --uplink"
+                "--ping, --setting and --read-settings need a link to the aircraft: --tcp, --serial, --udp with --uplink, or --zenoh"
                     .into(),
             );
         }
@@ -318,6 +337,25 @@ pub fn parse_ping_period(s: &str) -> Result<f64, String> {
 pub fn parse_stale_after(s: &str) -> Result<f64, String> {
     use crate::monitor::{MAX_STALE_AFTER, MIN_STALE_AFTER};
     seconds(s, MIN_STALE_AFTER, true, MAX_STALE_AFTER)
+}
+
+/// `--zenoh`: a TCP endpoint of Zenoh, `tcp/HOST:PORT` (the only transport built in).
+///
+/// # Errors
+/// A message for the user.
+pub fn parse_zenoh_endpoint(s: &str) -> Result<String, String> {
+    let ok = s
+        .strip_prefix("tcp/")
+        .is_some_and(|rest| !rest.is_empty() && rest.contains(':'))
+        && s.bytes().all(|b| b.is_ascii_graphic());
+    if ok {
+        Ok(s.to_owned())
+    } else {
+        Err(format!(
+            "`{}` is not a Zenoh TCP endpoint (e.g. tcp/127.0.0.1:7447)",
+            crate::escape::token(s)
+        ))
+    }
 }
 
 /// `--baud`: from 1 to [`MAX_BAUD`].
@@ -585,6 +623,46 @@ mod tests {
                 .check()
                 .is_err()
         );
+    }
+
+    #[test]
+    fn zenoh_is_an_input_with_an_uplink_in_pprz2_without_secure() {
+        let zenoh = ["--zenoh", "tcp/127.0.0.1:7447"];
+        let with = |extra: &[&str]| {
+            let mut v = zenoh.to_vec();
+            v.extend_from_slice(extra);
+            parse(&v)
+        };
+        let a = with(&["--ping", "1", "--setting", "2=1", "--transport", "pprz2"]).unwrap();
+        assert_eq!(a.zenoh.as_deref(), Some("tcp/127.0.0.1:7447"));
+        assert_eq!(a.check(), Ok(()));
+        let e = with(&["--secure", "k"]).unwrap().check().unwrap_err();
+        assert!(e.contains("--secure does not apply to --zenoh"), "{e}");
+        for t in ["pprz1", "xbee", "xbee868", "pprzlog"] {
+            let e = with(&["--transport", t]).unwrap().check().unwrap_err();
+            assert!(e.contains("--zenoh carries PPRZ v2"), "{t}: {e}");
+        }
+        for other in [
+            &["--udp", "127.0.0.1:1"][..],
+            &["--tcp", "127.0.0.1:1"],
+            &["--file", "x"],
+            &["--stdin"],
+        ] {
+            let e = with(other).unwrap_err();
+            assert!(e.contains("cannot be used with"), "{other:?}: {e}");
+        }
+        for bad in [
+            "127.0.0.1:7447",
+            "udp/127.0.0.1:7447",
+            "tcp/",
+            "tcp/host",
+            "tcp/127.0.0.1:1 x",
+            "tcp/\u{1b}[2J:1",
+        ] {
+            let e = parse(&["--zenoh", bad]).unwrap_err();
+            assert!(e.contains("not a Zenoh TCP endpoint"), "{bad}: {e}");
+            assert!(!e.contains('\u{1b}'), "{e}");
+        }
     }
 
     #[test]

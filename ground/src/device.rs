@@ -3,6 +3,9 @@
 //!
 //! `pprz-monitor` opens one from its options; `pprz-gateway` opens several, each
 //! described by a [`LinkSpec`] (`--link NAME=KIND:TARGET[,OPTION=VALUE]...`).
+//! `pprz-monitor --zenoh` reads a whole fleet from a gateway on the fleet bus instead:
+//! a [`Source::Queue`] that the bus fills, and an [`Uplink::Commands`] that turns each
+//! uplink frame back into a command ([`command`]).
 //!
 //! ```
 //! use pprz_ground::device::{Endpoint, LinkSpec};
@@ -18,10 +21,11 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Duration;
 
-use clap::ValueEnum;
-
 use crate::cli::{Transport, parse_baud};
 use crate::input::{self, DEFAULT_CAPACITY, InputQueue, Overflow};
+use crate::set::RuntimeSet;
+use clap::ValueEnum;
+use pprz_transports::{Framing, PprzV2};
 
 /// Where uplink frames are written.
 pub enum Uplink {
@@ -29,6 +33,8 @@ pub enum Uplink {
     Udp(UdpSocket, SocketAddr),
     /// The stream the link reads (TCP, serial port).
     Stream(Box<dyn Write + Send>),
+    /// Commands (on the fleet bus): each frame turned back into one ([`CommandUplink`]).
+    Commands(Box<CommandUplink>),
     /// The link cannot send (a file, standard input, UDP without an uplink address).
     None,
 }
@@ -42,6 +48,7 @@ impl Uplink {
         match self {
             Self::Udp(socket, to) => socket.send_to(frame, *to).map(drop),
             Self::Stream(w) => w.write_all(frame).and_then(|()| w.flush()),
+            Self::Commands(c) => c.send(frame),
             Self::None => Err(std::io::Error::other(
                 "no uplink: give an uplink address with UDP, or use TCP or a serial port",
             )),
@@ -61,6 +68,8 @@ pub enum Source {
     /// A byte stream, and what to do when its queue is full (a file waits; a live link
     /// drops the oldest reads).
     Stream(Box<dyn std::io::Read + Send>, Overflow),
+    /// A queue that something else fills (the fleet bus's subscriber).
+    Queue(InputQueue),
 }
 
 impl Source {
@@ -77,6 +86,7 @@ impl Source {
                 input::spawn_stream(reader, q.clone());
                 q
             }
+            Self::Queue(q) => q,
         }
     }
 }
@@ -152,6 +162,89 @@ impl Endpoint {
             }
         }
     }
+}
+
+/// A command: the datalink message an uplink frame carries, for the fleet bus
+/// (`pprz/<ac_id>/uplink/<MESSAGE>`, the JSON of its fields).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Command {
+    /// The aircraft: the frame's destination.
+    pub ac_id: u8,
+    /// The message's name.
+    pub message: &'static str,
+    /// Its fields, as a JSON object ([`json::message`](crate::json::message)).
+    pub fields: String,
+}
+
+/// Where commands go (a put on the fleet bus).
+pub type CommandSink = Box<dyn FnMut(Command) -> std::io::Result<()> + Send>;
+
+/// The uplink of a ground station that sends commands instead of frames: each uplink
+/// frame (PPRZ v2, as [`uplink::frame`](crate::uplink::frame) builds it) is turned back
+/// into the [`Command`] it carries, which the sink puts on the bus; the gateway frames
+/// it again for the aircraft.
+pub struct CommandUplink {
+    set: RuntimeSet,
+    sink: CommandSink,
+}
+
+impl CommandUplink {
+    /// Commands of the datalink messages of `set`, handed to `sink`.
+    pub fn new(set: RuntimeSet, sink: CommandSink) -> Self {
+        Self { set, sink }
+    }
+
+    /// Hands the command that `frame` carries to the sink.
+    ///
+    /// # Errors
+    /// The frame carries no command ([`command`]), or the sink failed.
+    pub fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        let c = command(&self.set, frame).map_err(std::io::Error::other)?;
+        (self.sink)(c)
+    }
+}
+
+/// The command an uplink frame carries.
+///
+/// ```
+/// use pprz_ground::{device, set::RuntimeSet, uplink};
+/// use pprz_transports::PprzV2;
+/// let set = RuntimeSet::parse("m.xml", r#"<protocol><msg_class name="datalink" id="2">
+///     <message name="SETTING" id="4"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/><field name="value" type="float"/></message>
+///     </msg_class></protocol>"#).unwrap();
+/// let f = uplink::frame(&set, PprzV2::new().into(), 8, "SETTING", &[("index", 2.0), ("value", 1.5)]).unwrap();
+/// let c = device::command(&set, &f).unwrap();
+/// assert_eq!((c.ac_id, c.message), (8, "SETTING"));
+/// assert_eq!(c.fields, r#"{"index":2,"ac_id":8,"value":1.5}"#);
+/// ```
+///
+/// # Errors
+/// Why the frame carries no command (not one valid PPRZ v2 frame, not a datalink
+/// message of the set, a payload that does not match the message).
+pub fn command(set: &RuntimeSet, frame: &[u8]) -> Result<Command, String> {
+    let (f, len) = PprzV2::new()
+        .parse(frame)
+        .map_err(|e| format!("not a PPRZ v2 frame: {e}"))?;
+    if len != frame.len() {
+        return Err(format!("{} bytes after the frame", frame.len() - len));
+    }
+    let desc = set
+        .find(f.class(), f.msg_id())
+        .filter(|d| d.class_name == "datalink")
+        .ok_or_else(|| {
+            format!(
+                "class {} message {} is no datalink message of the set",
+                f.class(),
+                f.msg_id()
+            )
+        })?;
+    let fields =
+        crate::json::message(desc, f.payload()).map_err(|e| format!("{}: {e}", desc.name))?;
+    Ok(Command {
+        ac_id: f.destination().unwrap_or(pprz_transports::BROADCAST_ID),
+        message: desc.name,
+        fields,
+    })
 }
 
 /// Opens a file to replay: a directory is an error now, not a read error later.
@@ -312,6 +405,55 @@ mod tests {
             "s=stdin:".parse::<LinkSpec>().unwrap().endpoint,
             Endpoint::Stdin
         );
+    }
+
+    #[test]
+    fn only_a_datalink_frame_of_the_set_is_a_command() {
+        use pprz_transports::{Encoder, MsgHeader, TxMeta};
+        let set = RuntimeSet::parse(
+            "m.xml",
+            r#"<protocol>
+            <msg_class name="telemetry" id="1"><message name="PONG" id="3"/></msg_class>
+            <msg_class name="datalink" id="2">
+              <message name="PING" id="8"/>
+              <message name="GET_SETTING" id="16"><field name="index" type="uint8"/><field name="ac_id" type="uint8"/></message>
+            </msg_class></protocol>"#,
+        )
+        .unwrap();
+        let t = PprzV2::new();
+        let frame = |class, id, payload: &[u8]| {
+            let mut buf = [0u8; 64];
+            let meta = TxMeta::new(MsgHeader::new(0, 9, class, id));
+            let n = t.encode(&meta, payload, &mut buf).unwrap();
+            buf[..n].to_vec()
+        };
+        let ping = Command {
+            ac_id: 9,
+            message: "PING",
+            fields: "{}".into(),
+        };
+        assert_eq!(command(&set, &frame(2, 8, &[])), Ok(ping));
+        let get = command(&set, &frame(2, 16, &[3, 9])).unwrap();
+        assert_eq!(
+            (get.ac_id, get.message, get.fields.as_str()),
+            (9, "GET_SETTING", r#"{"index":3,"ac_id":9}"#)
+        );
+        let mut two = frame(2, 8, &[]);
+        two.extend(frame(2, 8, &[]));
+        let mut bad_sum = frame(2, 8, &[]);
+        *bad_sum.last_mut().unwrap() ^= 1;
+        for (f, says) in [
+            (frame(1, 3, &[]), "no datalink message"),
+            (frame(2, 99, &[]), "no datalink message"),
+            (frame(2, 16, &[3]), "GET_SETTING"),
+            (two, "bytes after the frame"),
+            (bad_sum, "not a PPRZ v2 frame"),
+            (Vec::new(), "not a PPRZ v2 frame"),
+            (vec![0x99], "not a PPRZ v2 frame"),
+        ] {
+            let e = command(&set, &f).unwrap_err();
+            assert!(e.contains(says), "{f:?}: {e}");
+        }
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! `pprz-monitor`: watch one or several Paparazzi-compatible aircraft live, from UDP,
-//! TCP, a serial port, a file or standard input, with any `messages.xml`.
+//! TCP, a serial port, a file or standard input, or a whole fleet from a
+//! `pprz-gateway` on the Zenoh bus, with any `messages.xml`.
 //!
 //! Exit status: 0 after a complete run (end of input, `--duration`, Ctrl-C), 1 when
 //! the input, the output or the recording failed, 2 for invalid options (an unusable
@@ -13,6 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+mod bus;
 mod record;
 
 use clap::Parser;
@@ -33,8 +35,9 @@ use record::{FileId, Recorder};
 /// with a description.
 type Inputs = Vec<(FileId, String)>;
 
-/// Opens the input; returns it, the uplink, and the input files.
-fn open_input(args: &Args) -> Result<(Source, UplinkSink, Inputs), String> {
+/// Opens the input (with `--zenoh`, a session on the bus whose commands are built
+/// with `set`); returns it, the uplink, and the input files.
+fn open_input(args: &Args, set: RuntimeSet) -> Result<(Source, UplinkSink, Inputs), String> {
     let mut inputs = Vec::new();
     if let Ok(id) = FileId::of_path(&args.link.messages) {
         inputs.push((
@@ -54,15 +57,17 @@ fn open_input(args: &Args) -> Result<(Source, UplinkSink, Inputs), String> {
                 .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
             inputs.push((id, format!("the --file input {}", path.display())));
         }
-        (None, None) if !args.link.given() || args.link.stdin => {
+        (None, None) if args.zenoh.is_none() && (!args.link.given() || args.link.stdin) => {
             if let Some(id) = FileId::of_stdin() {
                 inputs.push((id, "the file standard input reads".to_owned()));
             }
         }
         _ => {}
     }
-    let endpoint = args.link.endpoint();
-    let (source, sink) = endpoint.open()?;
+    let (source, sink) = match &args.zenoh {
+        Some(endpoint) => bus::open(endpoint, set)?,
+        None => args.link.endpoint().open()?,
+    };
     Ok((source, sink, inputs))
 }
 
@@ -358,7 +363,7 @@ fn main() -> ExitCode {
 fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<(), String> {
     let set = load_set(&args.link.messages)?;
     let transport: AnyTransport = args.link.transport.any();
-    let (source, uplink_sink, mut inputs) = open_input(args)?;
+    let (source, uplink_sink, mut inputs) = open_input(args, set)?;
     let recorder = open_recorder(args, &mut inputs, transport)?;
     let has_uplink = !matches!(uplink_sink, UplinkSink::None);
     let viewer = open_viewer(args, &inputs, has_uplink, prepared.table.as_ref())?;
