@@ -24,7 +24,7 @@
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, TcpListener, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -492,5 +492,246 @@ fn thirty_two_aircraft_positions_reach_a_subscriber_with_the_monitors_values() {
             assert_eq!(fields[f].to_string(), want[f], "{key} {f}: {line}");
         }
     }
+    let _ = gw.stop();
+}
+
+/// Sends GPS_INT of aircraft `ac` every `gap` until stopped, on `first` and then (the
+/// same frame, 2 ms later) on `second`: `first` always brings it first. The number sent.
+fn heartbeat(
+    links: Vec<Link>,
+    ac: u8,
+    gps_int_id: u8,
+    gap: Duration,
+    stop: Arc<AtomicBool>,
+) -> JoinHandle<u32> {
+    std::thread::spawn(move || {
+        let mut rng = Rng::new(u64::from(ac));
+        let mut n = 0u32;
+        while !stop.load(Ordering::SeqCst) {
+            let f = frame(ac, 1, gps_int_id, &gps_int(&mut rng, n));
+            for (i, l) in links.iter().enumerate() {
+                if i > 0 {
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                l.send(&f);
+            }
+            n += 1;
+            std::thread::sleep(gap);
+        }
+        n
+    })
+}
+
+/// A copy of a link's aircraft side (same socket, same gateway port).
+fn link_copy(l: &Link) -> Link {
+    Link {
+        name: l.name,
+        socket: l.socket.try_clone().unwrap(),
+        gateway: l.gateway,
+    }
+}
+
+#[test]
+fn a_setting_put_on_the_bus_reaches_the_aircraft_on_its_first_link_and_its_value_comes_back() {
+    let who = "pprz-ground gateway_setting_round_trip";
+    let Some(tools) = tools(who) else { return };
+    let (a, b) = (Link::new("radio-a"), Link::new("radio-b"));
+    let gw = Gateway::start(&tools.messages, &[&a, &b], &[]);
+    let (log_a, log_b) = (a.listen(tools.ids, true), b.listen(tools.ids, true));
+    // Aircraft 7 is heard on both links, on radio-b first.
+    let stop = Arc::new(AtomicBool::new(false));
+    let beat = heartbeat(
+        vec![link_copy(&b), link_copy(&a)],
+        7,
+        tools.ids.gps_int,
+        Duration::from_millis(50),
+        stop.clone(),
+    );
+    std::thread::sleep(Duration::from_millis(200));
+
+    let mut client = Client::start(&tools, &gw.endpoint, &["setting", "7", "2", "1.5", "2.5"]);
+    let end = client.wait_for(40, |v| v["event"] == "end");
+    stop.store(true, Ordering::SeqCst);
+    beat.join().unwrap();
+    assert!(end.is_some(), "{:?}", client.seen);
+    let lines = client.finish();
+    let event = |name: &str, value: Option<f64>| {
+        lines
+            .iter()
+            .find(|v| v["event"] == name && value.is_none_or(|x| v["value"] == x))
+            .unwrap_or_else(|| panic!("no {name} in {lines:?}"))
+            .clone()
+    };
+    // The DL_VALUE the aircraft sent in answer to the command, on the bus.
+    let dl = event("dl_value", None);
+    assert_eq!(dl["seen"], true, "{dl}");
+    // Queries: set 1.5 (in force), set 2.5 (answered on its DL_VALUE), read.
+    for (e, value) in [
+        (event("query", Some(1.5)), 1.5),
+        (event("query", Some(2.5)), 2.5),
+        (event("read", None), 2.5),
+    ] {
+        let replies = e["replies"].as_array().unwrap();
+        assert_eq!(replies.len(), 1, "{e}");
+        let ok = &replies[0]["ok"];
+        assert_eq!(ok["ac_id"], 7, "{e}");
+        assert_eq!(ok["index"], 2, "{e}");
+        assert_eq!(ok["value"], value, "{e}");
+    }
+
+    // Every SETTING went on radio-b, none on radio-a: (index, ac_id, value).
+    let settings = |log: &UplinkLog| -> Vec<(u8, u8, f32)> {
+        log.frames()
+            .iter()
+            .filter(|(c, id, p)| *c == 2 && *id == tools.ids.setting && p.len() == 6)
+            .map(|(_, _, p)| (p[0], p[1], f32::from_le_bytes([p[2], p[3], p[4], p[5]])))
+            .collect()
+    };
+    assert_eq!(
+        settings(&log_b),
+        [(2, 7, 1.5), (2, 7, 1.5), (2, 7, 2.5)],
+        "{:?}",
+        log_b.frames()
+    );
+    assert!(log_a.frames().is_empty(), "{:?}", log_a.frames());
+    let err = gw.stop();
+    assert!(err.contains("\"commands\":3"), "{err}");
+    assert!(err.contains("\"settings_answered\":3"), "{err}");
+}
+
+/// The counters of the latest gateway stats sample that satisfies `pred`.
+fn stats_where(client: &mut Client, seconds: u64, pred: impl Fn(&Value) -> bool) -> Value {
+    let is_stats = |v: &Value| {
+        v["event"] == "sample" && v["key"].as_str().is_some_and(|k| k.ends_with("/stats"))
+    };
+    let found = client.wait_for(seconds, |v| {
+        is_stats(v) && serde_json::from_str(v["payload"].as_str().unwrap()).is_ok_and(|s| pred(&s))
+    });
+    let last = client.seen.iter().rev().find(|v| is_stats(v)).cloned();
+    let v = found.unwrap_or_else(|| panic!("no such counters; the last: {last:?}"));
+    serde_json::from_str(v["payload"].as_str().unwrap()).unwrap()
+}
+
+#[test]
+fn two_lossy_links_deliver_every_frame_once_and_count_what_each_lost() {
+    let who = "pprz-ground gateway_redundant_links";
+    let Some(tools) = tools(who) else { return };
+    const N: u32 = 2000;
+    let (a, b) = (Link::new("radio-a"), Link::new("radio-b"));
+    let gw = Gateway::start(&tools.messages, &[&a, &b], &[]);
+    let mut client = Client::start(
+        &tools,
+        &gw.endpoint,
+        &["subscribe", "pprz/7/telemetry/GPS_INT"],
+    );
+    client.ready();
+
+    // Each frame is lost on each link with probability 1/5, independently; radio-b
+    // carries it 3 ms after radio-a.
+    let mut rng = Rng::new(0x0DED_0BAD);
+    let frames: Vec<Vec<u8>> = (0..N)
+        .map(|i| frame(7, 1, tools.ids.gps_int, &gps_int(&mut rng, i)))
+        .collect();
+    let lost: Vec<(bool, bool)> = (0..N).map(|_| (rng.below(5) == 0, rng.below(5) == 0)).collect();
+    let delay = Duration::from_millis(3);
+    let gap = Duration::from_millis(1);
+    let start = Instant::now();
+    let mut events: Vec<(Duration, &Link, usize)> = Vec::new();
+    for (i, &(lost_a, lost_b)) in lost.iter().enumerate() {
+        let at = gap * i as u32;
+        if !lost_a {
+            events.push((at, &a, i));
+        }
+        if !lost_b {
+            events.push((at + delay, &b, i));
+        }
+    }
+    events.sort_by_key(|e| e.0);
+    for (at, link, i) in events {
+        if let Some(wait) = at.checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        link.send(&frames[i]);
+    }
+
+    let only_a = lost.iter().filter(|l| **l == (false, true)).count() as u64;
+    let only_b = lost.iter().filter(|l| **l == (true, false)).count() as u64;
+    let both = lost.iter().filter(|l| **l == (false, false)).count() as u64;
+    let union = only_a + only_b + both;
+    // Once every merging window closed: the exact counters.
+    let stats = stats_where(&mut client, 20, |s| {
+        s["delivered"] == union && s["remembered"] == 0
+    });
+    let lines = client.finish();
+    let links = stats["links"].as_array().unwrap();
+    let (la, lb) = (&links[0], &links[1]);
+    assert_eq!((&la["link"], &lb["link"]), (&"radio-a".into(), &"radio-b".into()));
+    assert_eq!(la["alone"], only_a, "{stats}");
+    assert_eq!(lb["alone"], only_b, "{stats}");
+    assert_eq!(la["missed"], only_b, "{stats}");
+    assert_eq!(lb["missed"], only_a, "{stats}");
+    let n = |v: &Value| v.as_u64().unwrap();
+    assert_eq!(n(&la["duplicates"]) + n(&lb["duplicates"]), both, "{stats}");
+    assert_eq!(n(&la["first"]) + n(&lb["first"]), union, "{stats}");
+    assert_eq!(stats["evicted"], 0, "{stats}");
+
+    // The subscriber: each content at most once, at least 95 % of them (theory 96 %).
+    let mut tows = BTreeMap::<u64, usize>::new();
+    for (_, fields, _) in samples(&lines, "/GPS_INT") {
+        *tows.entry(fields["tow"].as_u64().unwrap()).or_default() += 1;
+    }
+    let repeated: Vec<_> = tows.iter().filter(|(_, c)| **c > 1).collect();
+    assert!(repeated.is_empty(), "delivered twice: {repeated:?}");
+    assert!(
+        tows.len() as u64 >= u64::from(N) * 95 / 100,
+        "{} of {N} (links carried {union})",
+        tows.len()
+    );
+    assert!(tows.keys().all(|&t| {
+        let (la, lb) = lost[t as usize];
+        !(la && lb)
+    }));
+    eprintln!(
+        "redundant links: {N} frames, radio-a alone {only_a}, radio-b alone {only_b}, both {both}; the client received {}",
+        tows.len()
+    );
+    let _ = gw.stop();
+}
+
+#[test]
+fn a_second_session_sees_the_same_fleet() {
+    let who = "pprz-ground gateway_two_sessions";
+    let Some(tools) = tools(who) else { return };
+    let link = Link::new("radio");
+    let gw = Gateway::start(&tools.messages, &[&link], &[]);
+    let keys = ["subscribe", "pprz/*/telemetry/*"];
+    let mut first = Client::start(&tools, &gw.endpoint, &keys);
+    let peer: Vec<&str> = ["--peer"].into_iter().chain(keys).collect();
+    let mut second = Client::start(&tools, &gw.endpoint, &peer);
+    first.ready();
+    second.ready();
+    let mut rng = Rng::new(0x5EC0_4D);
+    let mut frames = Vec::new();
+    for round in 0..2 {
+        for ac in 40..48u8 {
+            frames.push(frame(ac, 1, tools.ids.gps_int, &gps_int(&mut rng, round)));
+            let value = [round as u8, 0, 0, 0x80, 0x3F];
+            frames.push(frame(ac, 1, tools.ids.dl_value, &value));
+        }
+    }
+    send_paced(&link, &frames, Duration::from_micros(500));
+    let n = frames.len();
+    assert_eq!(first.wait_samples(20, "/telemetry/", n), n);
+    assert_eq!(second.wait_samples(20, "/telemetry/", n), n);
+    let fleet = |c: Client| {
+        let lines = c.finish();
+        let mut s = samples(&lines, "/telemetry/");
+        s.sort_by(|x, y| (&x.0, &x.2).cmp(&(&y.0, &y.2)));
+        s
+    };
+    let (one, two) = (fleet(first), fleet(second));
+    assert_eq!(one, two);
+    let aircraft: BTreeSet<u8> = one.iter().map(|(k, _, _)| key_ac(k)).collect();
+    assert_eq!(aircraft, (40..48).collect());
     let _ = gw.stop();
 }
