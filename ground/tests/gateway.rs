@@ -735,3 +735,108 @@ fn a_second_session_sees_the_same_fleet() {
     assert_eq!(aircraft, (40..48).collect());
     let _ = gw.stop();
 }
+
+#[test]
+fn hostile_commands_are_refused_by_reason_and_a_flood_is_rate_limited_while_telemetry_flows() {
+    let who = "pprz-ground gateway_hostile_commands";
+    let Some(tools) = tools(who) else { return };
+    const FLOOD: u64 = 5000;
+    const RATE: f64 = 20.0;
+    let link = Link::new("radio");
+    let started = Instant::now();
+    let mut gw = Gateway::start(&tools.messages, &[&link], &["--uplink-rate", "20"]);
+    let uplink = link.listen(tools.ids, false);
+    let mut downlink = Client::start(
+        &tools,
+        &gw.endpoint,
+        &["subscribe", "pprz/7/telemetry/GPS_INT"],
+    );
+    downlink.ready();
+    // Aircraft 7's telemetry, 500 a second, all the while.
+    let stop = Arc::new(AtomicBool::new(false));
+    let beat = heartbeat(
+        vec![link_copy(&link)],
+        7,
+        tools.ids.gps_int,
+        Duration::from_millis(2),
+        stop.clone(),
+    );
+
+    let mut hostile = Client::start(&tools, &gw.endpoint, &["hostile", "7", "5000"]);
+    let end = hostile.wait_for(60, |v| v["event"] == "end");
+    stop.store(true, Ordering::SeqCst);
+    let sent = beat.join().unwrap();
+    assert!(end.is_some(), "{:?}", hostile.seen);
+    let lines = hostile.finish();
+    // Each hostile command: refused, with its reason, on pprz/gateway/gw/refused.
+    let mut reasons = BTreeMap::<String, u64>::new();
+    for e in lines.iter().filter(|v| v["event"] == "refused") {
+        assert_eq!(e["answer"]["reason"], e["want"], "{e}");
+        assert_eq!(e["answer"]["key"], e["key"], "{e}");
+        *reasons
+            .entry(e["want"].as_str().unwrap().to_owned())
+            .or_default() += 1;
+    }
+    assert_eq!(reasons.values().sum::<u64>(), 10, "{lines:?}");
+    let flood = lines.iter().find(|v| v["event"] == "flood").unwrap();
+    eprintln!("hostile: {flood}");
+
+    // The downlink kept flowing: at least 99 % of the telemetry sent during the flood.
+    let received = downlink.wait_samples(20, "/GPS_INT", sent as usize);
+    assert!(
+        received as f64 >= f64::from(sent) * 0.99,
+        "{received} of {sent} telemetry messages"
+    );
+    // The counters: every hostile command by its reason; every flood command taken,
+    // refused for the rate, or dropped as a flood of the request queue.
+    let stats = stats_where(&mut downlink, 20, |s| {
+        let n = |v: &Value| v.as_u64().unwrap_or(0);
+        n(&s["refused"]["rate"]) + n(&s["flooded"]) + n(&s["commands"]) == FLOOD
+    });
+    for (reason, count) in &reasons {
+        assert_eq!(stats["refused"][reason], *count, "{reason}: {stats}");
+    }
+    // The rate limit held: at most a burst plus the rate over the gateway's life.
+    let elapsed = started.elapsed().as_secs_f64();
+    let settings = uplink
+        .frames()
+        .iter()
+        .filter(|(c, id, _)| *c == 2 && *id == tools.ids.setting)
+        .count();
+    assert_eq!(stats["commands"], settings as u64, "{stats}");
+    assert!(settings >= 1);
+    assert!(
+        settings as f64 <= RATE * elapsed + RATE,
+        "{settings} SETTINGs in {elapsed:.1} s"
+    );
+    eprintln!("hostile: {settings} SETTINGs sent in {elapsed:.1} s; {stats}");
+    assert!(gw.running(), "the gateway ended");
+    drop(downlink);
+    let err = gw.stop();
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn nonsense_command_lines_exit_with_status_2_and_a_message() {
+    let gateway = || {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_pprz-gateway"));
+        cmd.stdin(Stdio::null());
+        cmd
+    };
+    let link = "a=udp:127.0.0.1:9,uplink=127.0.0.1:10";
+    let cases: [(&[&str], &str); 7] = [
+        (&["--dedup-window", "0"], "window 0 is out of range"),
+        (&["--dedup-window", "nan"], "out of range"),
+        (&["--uplink-rate", "-1"], "rate -1 is out of range"),
+        (&["--link", "bad"], "NAME=KIND:TARGET"),
+        (&["--link", link, "--link", link], "two links are named a"),
+        (&["--link", link, "--udp", "127.0.0.1:11"], "not both"),
+        (&["--name", "a/b"], "gateway name"),
+    ];
+    for (args, message) in cases {
+        let (code, out, err) = run(gateway().args(args));
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(message), "{args:?}: {err}");
+        assert!(out.is_empty(), "{args:?}: {out}");
+    }
+}
