@@ -5,6 +5,7 @@
     client.py ENDPOINT [--peer] subscribe KEYEXPR... [--seconds S]
     client.py ENDPOINT setting AC INDEX VALUE SECOND_VALUE
     client.py ENDPOINT hostile AC FLOOD
+    client.py ENDPOINT queries AC INDEX N
 
 Every session: client mode (or peer with --peer) connected to ENDPOINT only,
 multicast scouting off, no listen endpoint. Output: one JSON object per line on
@@ -18,7 +19,7 @@ or S seconds (default 60) pass.
 
 setting: the uplink round trip of a SETTING command and two settings queries
 (see the events printed). hostile: refused commands of each kind, then FLOOD
-valid commands as fast as possible.
+valid commands as fast as possible. queries: N settings queries at once.
 """
 
 import argparse
@@ -201,6 +202,24 @@ def hostile(session, args):
     del sub
 
 
+def queries(session, args):
+    """N settings queries at once, each setting a value the aircraft is not asked to
+    answer; their replies grouped (ok, or the error text)."""
+    Ready(session).wait()
+    key = f"pprz/{args.ac}/settings/{args.index}"
+    handlers = [session.get(key, payload=json.dumps({"value": 10 + i}), timeout=10)
+                for i in range(args.n)]
+    outcome = {}
+    for h in handlers:
+        for r in h:
+            j = reply_json(r)
+            label = "ok" if "ok" in j else j["err"]
+            if label.startswith("no DL_VALUE"):
+                label = "no DL_VALUE"
+            outcome[label] = outcome.get(label, 0) + 1
+    emit({"event": "queries", "outcome": outcome})
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("endpoint")
@@ -217,10 +236,15 @@ def main():
     s = sub.add_parser("hostile")
     s.add_argument("ac", type=int)
     s.add_argument("flood", type=int)
+    s = sub.add_parser("queries")
+    s.add_argument("ac", type=int)
+    s.add_argument("index", type=int)
+    s.add_argument("n", type=int)
     args = p.parse_args()
     session = open_session(args.endpoint, args.peer)
     try:
-        {"subscribe": subscribe, "setting": setting, "hostile": hostile}[args.command](
+        {"subscribe": subscribe, "setting": setting, "hostile": hostile,
+         "queries": queries}[args.command](
             session, args)
     finally:
         session.close()
