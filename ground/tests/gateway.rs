@@ -720,7 +720,7 @@ fn a_second_session_sees_the_same_fleet() {
     let mut second = Client::start(&tools, &gw.endpoint, &peer);
     first.ready();
     second.ready();
-    let mut rng = Rng::new(0x5EC0_4D);
+    let mut rng = Rng::new(0x005E_C04D);
     let mut frames = Vec::new();
     for round in 0..2 {
         for ac in 40..48u8 {

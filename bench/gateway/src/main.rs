@@ -100,7 +100,7 @@ fn parse_args() -> Result<Args, String> {
             _ => return Err(format!("unknown option {flag}")),
         }
     }
-    if !(1..=2).contains(&a.links) || !(a.seconds > 0.0 && a.seconds <= 60.0) {
+    if !((1..=2).contains(&a.links) && a.seconds > 0.0 && a.seconds <= 60.0) {
         return Err("--links 1 or 2; --seconds 0 to 60".into());
     }
     Ok(a)
