@@ -790,6 +790,9 @@ fn hostile_commands_are_refused_by_reason_and_a_flood_is_rate_limited_while_tele
     assert_eq!(reasons.values().sum::<u64>(), 10, "{lines:?}");
     let flood = lines.iter().find(|v| v["event"] == "flood").unwrap();
     eprintln!("hostile: {flood}");
+    assert_eq!(flood["answered"], true, "{flood}");
+    // Read queries that found the request queue full (dropped and counted as flooded).
+    let dropped_reads = flood["read_tries"].as_u64().unwrap() - 1;
 
     // The downlink kept flowing: at least 99 % of the telemetry sent during the flood.
     let received = downlink.wait_samples(20, "/GPS_INT", sent as usize);
@@ -801,7 +804,9 @@ fn hostile_commands_are_refused_by_reason_and_a_flood_is_rate_limited_while_tele
     // refused for the rate, or dropped as a flood of the request queue.
     let stats = stats_where(&mut downlink, 20, |s| {
         let n = |v: &Value| v.as_u64().unwrap_or(0);
-        n(&s["refused"]["rate"]) + n(&s["flooded"]) + n(&s["commands"]) == FLOOD
+        n(&s["settings_answered"]) == 1
+            && n(&s["refused"]["rate"]) + n(&s["flooded"]) + n(&s["commands"])
+                == FLOOD + dropped_reads
     });
     for (reason, count) in &reasons {
         assert_eq!(stats["refused"][reason], *count, "{reason}: {stats}");

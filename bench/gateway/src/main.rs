@@ -221,13 +221,14 @@ fn status_kb(pid: u32, field: &str) -> u64 {
 fn cpu_seconds(pid: u32) -> f64 {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
     let after = stat.rsplit_once(')').map(|x| x.1).unwrap_or("");
-    let f: Vec<u64> = after
-        .split_whitespace()
-        .filter_map(|x| x.parse().ok())
-        .collect();
-    // utime and stime are fields 14 and 15; after the name, 12 and 13 (state is not a
-    // number, so 11 and 12 here).
-    let ticks = f.get(11).copied().unwrap_or(0) + f.get(12).copied().unwrap_or(0);
+    // After the name come fields 3 (state) onwards: utime and stime are 14 and 15.
+    let f: Vec<&str> = after.split_whitespace().collect();
+    let field = |k: usize| {
+        f.get(k - 3)
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    let ticks = field(14) + field(15);
     ticks as f64 / 100.0
 }
 

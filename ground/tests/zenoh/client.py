@@ -192,8 +192,19 @@ def hostile(session, args):
     for _ in range(args.flood):
         session.put(f"pprz/{ac}/uplink/SETTING", body,
                     congestion_control=zenoh.CongestionControl.BLOCK)
-    emit({"event": "flood", "n": args.flood, "seconds": time.monotonic() - start})
-    time.sleep(0.5)
+    seconds = time.monotonic() - start
+    # A read query after the flood: the gateway takes requests in order, so its answer
+    # means every command before it was taken, refused or dropped (counted). A query
+    # dropped because the queue was full gets no answer: try again.
+    tries = 0
+    while tries < 20:
+        tries += 1
+        replies = query(session, f"pprz/{ac}/settings/3", None, timeout=2.0)
+        if replies:
+            break
+    emit({"event": "flood", "n": args.flood, "seconds": seconds, "read_tries": tries,
+          "answered": bool(replies)})
+    time.sleep(0.2)
     with got:
         reasons = {}
         for r in refused:
