@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Installs what the independent Foxglove checkers need; idempotent, silent on success.
+# Installs what the independent checkers of the ground tests need (Foxglove, fleet bus); idempotent, silent on success.
 #
 #   ground/tests/foxglove/setup.sh
 #
 # * a Python venv at ${PPRZ_FOXGLOVE_VENV:-<repo>/target/foxglove-venv} with
-#   requirements.txt (PyPI's mcap and jsonschema), for check_mcap.py;
+#   requirements.txt (PyPI's mcap and jsonschema, for check_mcap.py; eclipse-zenoh, for
+#   the fleet bus clients in ground/tests/zenoh/);
 # * node_modules/ beside the scripts, from package-lock.json (npm ci), for ws_client.mjs.
 #
 # Each part is redone only when its pinned versions changed (or it is broken). Needs
@@ -57,7 +58,7 @@ fi
 want="$(digest "$here/requirements.txt")"
 stamp="$venv/.pprz-requirements.sha256"
 if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ] \
-    || ! "$venv/bin/python" -c 'import mcap, jsonschema' >/dev/null 2>&1; then
+    || ! "$venv/bin/python" -c 'import mcap, jsonschema, zenoh' >/dev/null 2>&1; then
     if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -m pip --version >/dev/null 2>&1; then
         python3 -c 'import ensurepip, venv' >/dev/null 2>&1 \
             || die "python3 cannot create a venv with pip: install python3-venv (Debian 12: apt-get install python3-venv)"
@@ -67,8 +68,8 @@ if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ] \
     rm -f "$stamp"
     quiet "$venv/bin/python" -m pip install --disable-pip-version-check --no-input \
         --require-virtualenv -r "$here/requirements.txt"
-    "$venv/bin/python" -c 'import mcap, jsonschema' \
-        || die "the venv $venv cannot import mcap and jsonschema after installing them"
+    "$venv/bin/python" -c 'import mcap, jsonschema, zenoh' \
+        || die "the venv $venv cannot import mcap, jsonschema and zenoh after installing them"
     printf '%s\n' "$want" >"$stamp"
 fi
 
