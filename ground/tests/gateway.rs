@@ -861,7 +861,6 @@ fn nonsense_command_lines_exit_with_status_2_and_a_message() {
 /// SETTING before it checks the bound (`Service::setting_query` calls
 /// `setting_request`, which sends, and refuses afterwards), so the aircraft gets 70.
 #[test]
-#[ignore = "gateway bug: a settings query refused as too_many_queries still sends its SETTING"]
 fn settings_queries_beyond_the_bound_are_refused_before_anything_is_sent() {
     let who = "pprz-ground gateway_too_many_queries";
     let Some(tools) = tools(who) else { return };

@@ -319,8 +319,15 @@ impl Service {
     fn setting_query(&mut self, now: f64, query: Query) {
         let key = query.key_expr().as_str().to_owned();
         let payload = query.payload().map(|p| p.to_bytes().into_owned());
+        let sets = payload.as_ref().is_some_and(|p| !p.is_empty());
+        if sets && self.pending.len() >= MAX_PENDING_SETTINGS {
+            let why = format!("more than {MAX_PENDING_SETTINGS} settings queries waiting");
+            let _ = query.reply_err(why.clone()).wait();
+            self.refuse(&key, Refusal::TooManyQueries, &why);
+            return;
+        }
         match self.setting_request(now, &key, payload.as_deref()) {
-            Ok(Some((ac, index, value))) if self.pending.len() < MAX_PENDING_SETTINGS => {
+            Ok(Some((ac, index, value))) => {
                 self.pending.push(Pending {
                     query,
                     ac,
@@ -328,11 +335,6 @@ impl Service {
                     value,
                     deadline: now + SETTING_TIMEOUT,
                 });
-            }
-            Ok(Some(_)) => {
-                let why = format!("more than {MAX_PENDING_SETTINGS} settings queries waiting");
-                let _ = query.reply_err(why.clone()).wait();
-                self.refuse(&key, Refusal::TooManyQueries, &why);
             }
             Ok(None) => {
                 let answer =
