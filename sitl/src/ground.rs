@@ -228,6 +228,7 @@ impl Ground<'_> {
             self.merge.tick(now, publish);
             self.show(t, aircraft_side);
         }
+        self.merge.stop();
         if let Some(v) = self.viewer {
             eprintln!("{}", v.counts());
             if let Err(e) = v.finish() {

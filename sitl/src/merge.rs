@@ -45,6 +45,9 @@ pub struct Merge {
     kind: Kind,
     /// Messages delivered per aircraft (source id).
     delivered: BTreeMap<u8, u64>,
+    /// Per aircraft, the messages that had reached the radios' ground ends (before
+    /// the frame loss) when the ground stopped ([`Merge::stop`]).
+    aired: Option<Box<[u64; 256]>>,
 }
 
 impl Merge {
@@ -53,6 +56,7 @@ impl Merge {
         Self {
             kind: Kind::Single(monitor),
             delivered: BTreeMap::new(),
+            aired: None,
         }
     }
 
@@ -97,6 +101,7 @@ impl Merge {
         Ok(Self {
             kind,
             delivered: BTreeMap::new(),
+            aired: None,
         })
     }
 
@@ -133,6 +138,21 @@ impl Merge {
         match &self.kind {
             Kind::Served(s) => Some(s.stats_json()),
             _ => None,
+        }
+    }
+
+    /// The ground stopped taking the links in: what had reached the radios' ground ends
+    /// by then is noted (the aircraft run on while the summary is made).
+    pub fn stop(&mut self) {
+        self.aired = Some(Box::new(crate::bridge::arrivals().aired_by));
+    }
+
+    /// Messages from aircraft `ac` that had reached a radio's ground end (before the
+    /// frame loss, each once) when the ground stopped, or by now.
+    pub fn aired(&self, ac: u8) -> u64 {
+        match &self.aired {
+            Some(a) => a[usize::from(ac)],
+            None => crate::bridge::arrivals().aired_by[usize::from(ac)],
         }
     }
 

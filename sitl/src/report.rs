@@ -219,13 +219,12 @@ fn gateway_figures(args: &Args, aircraft: &Aircraft, merge: &Merge) -> Option<Ga
         })
         .collect();
     let ids: Vec<u8> = aircraft.healths().iter().map(|&(ac, _)| ac).collect();
-    let arrivals = bridge::arrivals();
     let each = ids
         .into_iter()
         .map(|ac| AircraftDelivery {
             ac_id: ac,
             sent: aircraft.ground_devices(ac).iter().map(|s| s.sent).collect(),
-            aired: arrivals.aired_by[usize::from(ac)],
+            aired: merge.aired(ac),
             delivered: merge.delivered(ac),
             fleet_frames: merge
                 .monitor()
@@ -233,7 +232,6 @@ fn gateway_figures(args: &Args, aircraft: &Aircraft, merge: &Merge) -> Option<Ga
                 .map_or(0, |a| a.frames()),
         })
         .collect();
-    drop(arrivals);
     let (lost_down, lost_up) = bridge::frames_lost();
     Some(GatewayFigures {
         radios: args.radios,
