@@ -232,7 +232,11 @@ pub fn start(
 
 /// With `--radios 2`, the second radio to the ground of the fleet's aircraft number
 /// `index`, cut by the outages like the first.
-fn second_radio(args: &Args, plan: &RadioPlan, index: u8) -> Result<Option<&'static Radio>, String> {
+fn second_radio(
+    args: &Args,
+    plan: &RadioPlan,
+    index: u8,
+) -> Result<Option<&'static Radio>, String> {
     if plan.radios < 2 {
         return Ok(None);
     }

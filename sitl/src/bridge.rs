@@ -137,7 +137,14 @@ impl Arrivals {
     /// A message of `source` with `key` fields reached link `link`'s ground end at
     /// `now` (seconds): counted once in `aired`; then, unless `lost`, once in `kept`.
     /// Whether it is a first arrival after the loss (to record).
-    fn arrived(&mut self, now: f64, link: usize, source: u8, key: (u8, u8, &[u8]), lost: bool) -> bool {
+    fn arrived(
+        &mut self,
+        now: f64,
+        link: usize,
+        source: u8,
+        key: (u8, u8, &[u8]),
+        lost: bool,
+    ) -> bool {
         let k = self.aired.key(source, key.0, key.1, key.2);
         if self.aired.check(now, link, source, k).delivered() {
             self.aired_by[usize::from(source)] += 1;

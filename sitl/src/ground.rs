@@ -307,7 +307,9 @@ impl Ground<'_> {
                 ("value", value),
             ];
             if self.send(ac, "SETTING", &values) {
-                self.merge.monitor_mut().setting_sent(Some(ac), t, index, value);
+                self.merge
+                    .monitor_mut()
+                    .setting_sent(Some(ac), t, index, value);
             }
         }
         self.fleet = fleet;

@@ -214,7 +214,10 @@ impl Merge {
                 let Ok(frame) = uplink::frame(m.set(), transport, ac, name, values) else {
                     return Vec::new();
                 };
-                return m.seal_uplink(&frame).map(|f| vec![(0, f)]).unwrap_or_default();
+                return m
+                    .seal_uplink(&frame)
+                    .map(|f| vec![(0, f)])
+                    .unwrap_or_default();
             }
             Kind::Gateway(g) => &mut **g,
             Kind::Served(s) => s.gateway_mut(),

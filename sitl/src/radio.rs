@@ -73,9 +73,18 @@ pub struct RadioPlan {
 fn check_redundant(args: &Args, xbee: bool) -> Result<(), String> {
     if args.radios > 1 {
         let refused = [
-            (xbee, "--transport xbee (the second radio carries PPRZ v2 frames)"),
-            (args.relay, "--relay (aircraft 7's second radio is the relay's)"),
-            (args.secure.is_some(), "--secure (the secure link is one radio's)"),
+            (
+                xbee,
+                "--transport xbee (the second radio carries PPRZ v2 frames)",
+            ),
+            (
+                args.relay,
+                "--relay (aircraft 7's second radio is the relay's)",
+            ),
+            (
+                args.secure.is_some(),
+                "--secure (the secure link is one radio's)",
+            ),
             (
                 args.settings_flash.is_some(),
                 "--settings-flash (the aircraft reading two radios keeps no store)",

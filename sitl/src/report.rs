@@ -226,10 +226,7 @@ fn gateway_figures(args: &Args, aircraft: &Aircraft, merge: &Merge) -> Option<Ga
             sent: aircraft.ground_devices(ac).iter().map(|s| s.sent).collect(),
             aired: merge.aired(ac),
             delivered: merge.delivered(ac),
-            fleet_frames: merge
-                .monitor()
-                .aircraft_state(ac)
-                .map_or(0, |a| a.frames()),
+            fleet_frames: merge.monitor().aircraft_state(ac).map_or(0, |a| a.frames()),
         })
         .collect();
     let (lost_down, lost_up) = bridge::frames_lost();

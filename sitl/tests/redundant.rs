@@ -85,8 +85,22 @@ fn two_lossy_radios_deliver_96_percent_once() {
     let json = run_json(
         "radios2",
         &[
-            "--fleet", "4", "--radios", "2", "--frame-loss", "0.2", "--duration", "48",
-            "--speed", "8", "--ping-rate", "0.2", "--lost-timeout", "60", "--seed", "7",
+            "--fleet",
+            "4",
+            "--radios",
+            "2",
+            "--frame-loss",
+            "0.2",
+            "--duration",
+            "48",
+            "--speed",
+            "8",
+            "--ping-rate",
+            "0.2",
+            "--lost-timeout",
+            "60",
+            "--seed",
+            "7",
         ],
     );
     let g = &json["gateway"];
@@ -94,7 +108,12 @@ fn two_lossy_radios_deliver_96_percent_once() {
     let links = g["links"].as_array().expect("links");
     let names: Vec<&str> = links.iter().filter_map(|l| l["link"].as_str()).collect();
     assert_eq!(names, ["radio-a", "radio-b"]);
-    let sum = |field: &str| links.iter().map(|l| uint(l, &format!("/{field}"))).sum::<u64>();
+    let sum = |field: &str| {
+        links
+            .iter()
+            .map(|l| uint(l, &format!("/{field}")))
+            .sum::<u64>()
+    };
     // Copies were dropped; every message delivered was a first.
     assert!(sum("duplicates") > 100, "{g:#}");
     assert!(sum("alone") > 0 && sum("missed") > 0, "{g:#}");
@@ -106,9 +125,17 @@ fn two_lossy_radios_deliver_96_percent_once() {
     for a in g["aircraft"].as_array().unwrap() {
         // The fleet monitor decoded each delivered message once: no duplicate reached it.
         assert_eq!(uint(a, "/fleet_frames"), uint(a, "/delivered"), "{a:#}");
-        let sent: Vec<u64> = a["sent"].as_array().unwrap().iter().filter_map(Value::as_u64).collect();
+        let sent: Vec<u64> = a["sent"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(Value::as_u64)
+            .collect();
         assert_eq!(sent.len(), 2, "{a:#}");
-        assert!(sent[1] + 20 >= sent[0] && sent[0] >= uint(a, "/aired") - 5, "{a:#}");
+        assert!(
+            sent[1] + 20 >= sent[0] && sent[0] >= uint(a, "/aired") - 5,
+            "{a:#}"
+        );
     }
     for &(ac, aired, got) in &each {
         // 96 % expected; three standard deviations below for ~900 messages.
@@ -116,9 +143,15 @@ fn two_lossy_radios_deliver_96_percent_once() {
         assert!(got <= aired, "aircraft {ac}: {got} of {aired}");
     }
     // The whole fleet: at least 95 % (3600 messages: 96 % +- 0.3 %).
-    assert!(delivered * 100 >= aired * 95, "{delivered} of {aired}\n{g:#}");
+    assert!(
+        delivered * 100 >= aired * 95,
+        "{delivered} of {aired}\n{g:#}"
+    );
     let lost = uint(g, "/lost_frames_down");
-    assert!(lost * 100 > aired * 2 * 15 && lost * 100 < aired * 2 * 25, "{g:#}");
+    assert!(
+        lost * 100 > aired * 2 * 15 && lost * 100 < aired * 2 * 25,
+        "{g:#}"
+    );
 }
 
 /// One radio losing 20 % of its frames: about 80 % delivered, no copies.
@@ -127,8 +160,18 @@ fn one_lossy_radio_delivers_80_percent() {
     let json = run_json(
         "radios1",
         &[
-            "--fleet", "2", "--frame-loss", "0.2", "--duration", "24", "--speed", "4",
-            "--ping-rate", "0.2", "--lost-timeout", "60",
+            "--fleet",
+            "2",
+            "--frame-loss",
+            "0.2",
+            "--duration",
+            "24",
+            "--speed",
+            "4",
+            "--ping-rate",
+            "0.2",
+            "--lost-timeout",
+            "60",
         ],
     );
     let g = &json["gateway"];
@@ -136,7 +179,10 @@ fn one_lossy_radio_delivers_80_percent() {
     assert_eq!(uint(g, "/links/0/duplicates"), 0, "{g:#}");
     for (ac, aired, got) in deliveries(&json) {
         let share = got as f64 / aired as f64;
-        assert!((0.74..0.86).contains(&share), "aircraft {ac}: {got} of {aired}");
+        assert!(
+            (0.74..0.86).contains(&share),
+            "aircraft {ac}: {got} of {aired}"
+        );
     }
 }
 
@@ -155,7 +201,10 @@ fn redundant_options_are_checked() {
         (&["--radios", "3"], "1 to 2 radios"),
         (&["--frame-loss", "0.95"], "0 to 0.9"),
         (&["--radios", "2", "--fleet", "2", "--relay"], "--relay"),
-        (&["--radios", "2", "--transport", "xbee"], "--transport xbee"),
+        (
+            &["--radios", "2", "--transport", "xbee"],
+            "--transport xbee",
+        ),
         (&["--zenoh", "tcp/127.0.0.1:1", "--headless"], "--headless"),
     ];
     for (args, says) in cases {
@@ -254,7 +303,11 @@ fn the_fleet_on_the_bus_takes_a_setting() {
         if put_at.is_none() && seen.len() == 3 && key == "pprz/8/telemetry/DL_VALUE" {
             let v: Value = serde_json::from_slice(&payload).expect("JSON");
             if v["index"] == 2 && v["value"] == 2.5 {
-                bus.put("pprz/8/uplink/SETTING", r#"{"index": 2, "value": 1.5}"#, None);
+                bus.put(
+                    "pprz/8/uplink/SETTING",
+                    r#"{"index": 2, "value": 1.5}"#,
+                    None,
+                );
                 put_at = Some(Instant::now());
             }
         }
