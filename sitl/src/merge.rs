@@ -33,7 +33,7 @@ const BUS_NAME: &str = "sitl";
 /// What takes the radios in.
 enum Kind {
     /// One byte stream, one monitor.
-    Single(Monitor),
+    Single(Box<Monitor>),
     /// The gateway over the radios' links.
     Gateway(Box<Gateway>),
     /// The gateway service on the bus.
@@ -54,7 +54,7 @@ impl Merge {
     /// One byte stream into `monitor`.
     pub fn single(monitor: Monitor) -> Self {
         Self {
-            kind: Kind::Single(monitor),
+            kind: Kind::Single(Box::new(monitor)),
             delivered: BTreeMap::new(),
             aired: None,
         }
@@ -69,10 +69,10 @@ impl Merge {
         table: Option<&std::sync::Arc<SettingsTable>>,
         sockets: &[UdpSocket],
     ) -> Result<Self, String> {
-        let set = fleet.set().clone();
+        let set = *fleet.set();
         let links = LINK_NAMES[..usize::from(args.radios)]
             .iter()
-            .map(|name| GatewayLink::new(name, set.clone(), PprzV2::new().into(), true))
+            .map(|name| GatewayLink::new(name, set, PprzV2::new().into(), true))
             .collect();
         let gateway = Gateway::new(set, links).with_fleet_monitor(fleet);
         let kind = match &args.zenoh {
@@ -222,7 +222,7 @@ impl Merge {
             Kind::Gateway(g) => &mut **g,
             Kind::Served(s) => s.gateway_mut(),
         };
-        let set = gateway.fleet().set().clone();
+        let set = *gateway.fleet().set();
         let Some(desc) = set.find_by_name("datalink", name) else {
             return Vec::new();
         };
