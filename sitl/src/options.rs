@@ -104,8 +104,8 @@ pub struct Args {
     /// Radios from each aircraft to the ground, 1 or 2: with 2, each aircraft sends its
     /// telemetry on both (radio A to `--ground`/`--uplink`, radio B to
     /// `--ground-b`/`--uplink-b`), each radio with its own seeded errors and losses, and
-    /// the in-process ground merges them with the gateway. PPRZ v2, without `--relay`,
-    /// `--secure` or `--settings-flash`.
+    /// the in-process ground merges them with the gateway. PPRZ v2, without `--relay`
+    /// or `--secure`.
     #[arg(long, default_value_t = 1, value_parser = parse_radios)]
     pub radios: u8,
     /// Probability that a frame is lost, 0 to 0.9, on every radio to the ground and in

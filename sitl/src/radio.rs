@@ -85,10 +85,6 @@ fn check_redundant(args: &Args, xbee: bool) -> Result<(), String> {
                 args.secure.is_some(),
                 "--secure (the secure link is one radio's)",
             ),
-            (
-                args.settings_flash.is_some(),
-                "--settings-flash (the aircraft reading two radios keeps no store)",
-            ),
         ];
         if let Some((_, why)) = refused.iter().find(|(on, _)| *on) {
             return Err(format!("--radios 2 cannot run with {why}"));
