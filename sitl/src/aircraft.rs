@@ -7,10 +7,17 @@
 //! `--settings-flash`, XBee, the relay's second radio). The fleet's other aircraft
 //! (`--fleet N`) are built alike by [`wing`], on the heap and leaked (they live as long
 //! as the run): each its radio, its frame arena, its downlink and its link health.
+//!
+//! With `--radios 2`, every aircraft has a second radio to the ground (device 1 of its
+//! downlink, which routes its telemetry to both devices); what the ground sends up
+//! either radio is merged, frame by frame, into the application's one reader
+//! ([`uplink_merge`]), so a frame on either radio keeps its link health Up. The
+//! application replies (PONG) on radio A.
 
 use std::convert::Infallible;
 
 use embassy_executor::{Executor, Spawner};
+use embassy_sync::mutex::Mutex;
 use embassy_sync::pipe::Pipe;
 use embassy_time::{Duration, Instant, Ticker};
 use embedded_io_async::Read;
@@ -39,8 +46,12 @@ use crate::{clock, link, record};
 /// Aircraft 7's downlink: device 0 its radio to the ground, device 1 its radio to
 /// aircraft 8 (`--relay`; unused otherwise).
 pub type Dl = Downlink<'static, M, 2, 32>;
-/// The downlink of every other aircraft of the fleet: its one radio.
-pub type WingDl = Downlink<'static, M, 1, 32>;
+/// The downlink of every other aircraft of the fleet: device 0 its radio to the ground,
+/// device 1 its second radio (`--radios 2`; unused otherwise).
+pub type WingDl = Downlink<'static, M, 2, 32>;
+
+/// The uplink frames of an aircraft's two radios, merged for its application's reader.
+type UplinkPipe = Pipe<M, 1024>;
 
 /// Bytes of each aircraft's frame arena.
 const ARENA_BYTES: usize = 8192;
@@ -76,7 +87,9 @@ pub struct Wing {
     /// Its radio: to the ground, or (`relayed`) to aircraft 7. Endpoint A is the
     /// aircraft.
     pub radio: &'static Radio,
-    /// Its downlink (device 0: the radio).
+    /// Its second radio to the ground (`--radios 2`). Endpoint A is the aircraft.
+    pub radio_b: Option<&'static Radio>,
+    /// Its downlink (device 0: the radio; device 1: the second radio).
     pub downlink: &'static WingDl,
     /// Its link health (its application's reader drives it, its failsafe watches it).
     pub health: &'static LinkHealth<M>,
@@ -93,6 +106,8 @@ pub struct Aircraft {
     pub radio_device: Device<'static>,
     /// Its radio to the ground.
     pub radio: &'static Radio,
+    /// Its second radio to the ground (`--radios 2`; device 1 of the downlink).
+    pub radio_b: Option<&'static Radio>,
     /// Aircraft 7's link health (its application's reader drives it, its failsafe
     /// watches it).
     pub health: &'static LinkHealth<M>,
@@ -109,22 +124,42 @@ impl Aircraft {
     }
 
     /// The radios to the ground: aircraft 7's, then every other aircraft's own (not
-    /// one relayed through 7).
+    /// one relayed through 7), on link 0; with `--radios 2` their second radios after,
+    /// on link 1.
     pub fn ground_radios(&self) -> Vec<GroundRadio> {
-        let mut all = vec![GroundRadio {
-            ac: AC_ID,
-            radio: self.radio,
-        }];
-        all.extend(
-            self.wings
-                .iter()
-                .filter(|w| !w.relayed)
-                .map(|w| GroundRadio {
-                    ac: w.id,
-                    radio: w.radio,
-                }),
-        );
+        let own = |ac: u8, link: usize, radio: &'static Radio| GroundRadio {
+            ac,
+            link,
+            seed_index: if link == 0 {
+                ac - AC_ID
+            } else {
+                fleet::second_radio(ac - AC_ID)
+            },
+            radio,
+        };
+        let mut all = vec![own(AC_ID, 0, self.radio)];
+        let reaching = || self.wings.iter().filter(|w| !w.relayed);
+        all.extend(reaching().map(|w| own(w.id, 0, w.radio)));
+        if let Some(b) = self.radio_b {
+            all.push(own(AC_ID, 1, b));
+        }
+        all.extend(reaching().filter_map(|w| Some(own(w.id, 1, w.radio_b?))));
         all
+    }
+
+    /// The radio devices of aircraft `ac` to the ground, by link: its `DeviceStats`
+    /// (device 0, and device 1 with `--radios 2`).
+    pub fn ground_devices(&self, ac: u8) -> Vec<pprz_telemetry::DeviceStats> {
+        let (stats, two): (&dyn Fn(usize) -> Option<pprz_telemetry::DeviceStats>, bool) =
+            if ac == AC_ID {
+                (&|i| self.downlink.stats(i), self.radio_b.is_some())
+            } else if let Some(w) = self.wing(ac) {
+                (&|i| w.downlink.stats(i), w.radio_b.is_some())
+            } else {
+                return Vec::new();
+            };
+        let links = if two { 2 } else { 1 };
+        (0..links).filter_map(stats).collect()
     }
 
     /// `--relay`: the aircraft 7 relays for.
@@ -146,14 +181,15 @@ pub fn start(
     plan: &RadioPlan,
     responder: Option<Responder>,
     store: Option<&'static mut SitlStore>,
-    udp: HostDevice,
+    udp: Vec<HostDevice>,
 ) -> Result<Aircraft, String> {
     let radio: &'static Radio = RADIO.init(SimLink::new(plan.sim_config(args.flow_control, 0)));
     link::cut(radio, &args.outage)?;
+    let radio_b = second_radio(args, plan, 0)?;
     let health: &'static LinkHealth<M> = HEALTH.init(link::health(args));
     let downlink: &'static Dl = DOWNLINK.init(
         Downlink::new(&ARENA, AC_ID, [plan.device_config(), plan.device_config()])
-            .with_routes(fleet::routes(args.relay)),
+            .with_routes(fleet::routes(args.relay, plan.radios)),
     );
     let [radio_port, link_port] = downlink.ports().map_err(|e| e.to_string())?;
     let radio_device = radio_port.device();
@@ -168,6 +204,7 @@ pub fn start(
         downlink,
         radio_device,
         radio,
+        radio_b,
         health,
         wings: Box::leak(wings.into_boxed_slice()),
     };
@@ -183,6 +220,7 @@ pub fn start(
         xbee: plan.xbee(),
         flood: plan.flood_bytes_per_s,
         udp,
+        loss: (plan.frame_loss, plan.seed),
     };
     clock::pace(args.speed);
     std::thread::spawn(move || {
@@ -190,6 +228,22 @@ pub fn start(
         executor.run(|spawner| tasks.spawn(spawner))
     });
     Ok(aircraft)
+}
+
+/// With `--radios 2`, the second radio to the ground of the fleet's aircraft number
+/// `index`, cut by the outages like the first.
+fn second_radio(
+    args: &Args,
+    plan: &RadioPlan,
+    index: u8,
+) -> Result<Option<&'static Radio>, String> {
+    if plan.radios < 2 {
+        return Ok(None);
+    }
+    let config = plan.sim_config(args.flow_control, fleet::second_radio(index));
+    let radio: &'static Radio = Box::leak(Box::new(SimLink::new(config)));
+    link::cut(radio, &args.outage)?;
+    Ok(Some(radio))
 }
 
 /// The application's configuration: the flood (over XBee, [`xbee_flood`] sends it
@@ -210,7 +264,7 @@ fn config(plan: &RadioPlan, health: &'static LinkHealth<M>) -> Config {
 /// port of its radio device: its radio (radio number `index`, the same as aircraft 7's,
 /// its errors seeded apart, cut by the outages when it reaches the ground), its frame
 /// arena, downlink and link health. With `--relay`, aircraft 8's radio joins it to 7.
-fn wing(args: &Args, plan: &RadioPlan, index: u8) -> Result<(Wing, Port<'static>), String> {
+fn wing(args: &Args, plan: &RadioPlan, index: u8) -> Result<(Wing, [Port<'static>; 2]), String> {
     let relayed = args.relay && index == 1;
     let radio: &'static Radio = Box::leak(Box::new(SimLink::new(
         plan.sim_config(args.flow_control, index),
@@ -220,18 +274,22 @@ fn wing(args: &Args, plan: &RadioPlan, index: u8) -> Result<(Wing, Port<'static>
     }
     let arena: &'static FrameArena<M, ARENA_BYTES> = Box::leak(Box::new(FrameArena::new()));
     let id = fleet::id(index);
-    let downlink: &'static WingDl =
-        Box::leak(Box::new(Downlink::new(arena, id, [plan.device_config()])));
-    let [port] = downlink.ports().map_err(|e| e.to_string())?;
+    let radio_b = second_radio(args, plan, index)?;
+    let downlink: &'static WingDl = Box::leak(Box::new(
+        Downlink::new(arena, id, [plan.device_config(), plan.device_config()])
+            .with_routes(fleet::routes(false, plan.radios)),
+    ));
+    let ports = downlink.ports().map_err(|e| e.to_string())?;
     let health: &'static LinkHealth<M> = Box::leak(Box::new(link::health(args)));
     let wing = Wing {
         id,
         radio,
+        radio_b,
         downlink,
         health,
         relayed,
     };
-    Ok((wing, port))
+    Ok((wing, ports))
 }
 
 /// Everything the executor's tasks take, moved to its thread.
@@ -241,14 +299,17 @@ struct Tasks {
     radio: &'static Radio,
     aircraft: Aircraft,
     /// The ports of the other aircraft's radio devices, in the order of `aircraft.wings`.
-    wing_ports: Vec<Port<'static>>,
+    wing_ports: Vec<[Port<'static>; 2]>,
     config: Config,
     responder: Option<Responder>,
     /// `--settings-flash`: aircraft 7's store (one aircraft only).
     store: Option<&'static mut SitlStore>,
     xbee: bool,
     flood: u32,
-    udp: HostDevice,
+    /// The UDP side of each link's radios (link 0, and link 1 with `--radios 2`).
+    udp: Vec<HostDevice>,
+    /// `--frame-loss` and `--seed`, for the radios' ground ends.
+    loss: (f64, u64),
 }
 
 impl Tasks {
@@ -264,10 +325,16 @@ impl Tasks {
             spawner.spawn(link::watch(AC_ID, health).unwrap());
         }
         spawner.spawn(radio_writer(self.radio_port, air_tx, layer).unwrap());
-        for (wing, port) in self.aircraft.wings.iter().zip(self.wing_ports) {
-            spawn_wing(spawner, wing, port, config);
+        for (wing, ports) in self.aircraft.wings.iter().zip(self.wing_ports) {
+            spawn_wing(spawner, wing, ports, config);
         }
-        if let Some(wing) = self.aircraft.relayed() {
+        if let Some(b) = self.aircraft.radio_b {
+            let (air_b, _) = b.endpoints();
+            let (rx_b, tx_b) = air_b.split();
+            spawner.spawn(radio_writer(self.link_port, tx_b, None).unwrap());
+            let pipe = spawn_merge(spawner, air_rx, rx_b);
+            spawner.spawn(aircraft_merged(AC_ID, radio_device, pipe, config, self.store).unwrap());
+        } else if let Some(wing) = self.aircraft.relayed() {
             // Aircraft 7 at the other end of 8's radio (endpoint B).
             let (_, side_7) = wing.radio.endpoints();
             let (rx_7, tx_7) = side_7.split();
@@ -290,15 +357,18 @@ impl Tasks {
         let mode = BridgeMode {
             xbee: self.xbee,
             secure,
+            frame_loss: self.loss.0,
+            seed: self.loss.1,
         };
         bridge::spawn(spawner, &self.aircraft.ground_radios(), self.udp, mode);
     }
 }
 
 /// Spawns the tasks of one of the fleet's other aircraft: its link health's record,
-/// its radio device's writer and its application (with aircraft 7's `config` but its
+/// its radio devices' writers and its application (with aircraft 7's `config` but its
 /// own health).
-fn spawn_wing(spawner: Spawner, wing: &'static Wing, port: Port<'static>, config: Config) {
+fn spawn_wing(spawner: Spawner, wing: &'static Wing, ports: [Port<'static>; 2], config: Config) {
+    let [port, port_b] = ports;
     let (air, _) = wing.radio.endpoints();
     let (rx, tx) = air.split();
     let device = port.device();
@@ -308,12 +378,75 @@ fn spawn_wing(spawner: Spawner, wing: &'static Wing, port: Port<'static>, config
     };
     spawner.spawn(link::watch(wing.id, wing.health).unwrap());
     spawner.spawn(radio_writer(port, tx, None).unwrap());
-    spawner.spawn(aircraft(wing.id, device, rx, config, None).unwrap());
+    match wing.radio_b {
+        Some(b) => {
+            let (air_b, _) = b.endpoints();
+            let (rx_b, tx_b) = air_b.split();
+            spawner.spawn(radio_writer(port_b, tx_b, None).unwrap());
+            let pipe = spawn_merge(spawner, rx, rx_b);
+            spawner.spawn(aircraft_merged(wing.id, device, pipe, config, None).unwrap());
+        }
+        None => spawner.spawn(aircraft(wing.id, device, rx, config, None).unwrap()),
+    }
+}
+
+/// Spawns the merge of an aircraft's two radios' uplinks ([`uplink_merge`]); returns
+/// the pipe its application reads.
+fn spawn_merge(
+    spawner: Spawner,
+    rx_a: SimRx<'static, M, RADIO_RING>,
+    rx_b: SimRx<'static, M, RADIO_RING>,
+) -> &'static UplinkPipe {
+    let pipe: &'static UplinkPipe = Box::leak(Box::new(Pipe::new()));
+    let lock: &'static Mutex<M, ()> = Box::leak(Box::new(Mutex::new(())));
+    spawner.spawn(uplink_merge(rx_a, pipe, lock).unwrap());
+    spawner.spawn(uplink_merge(rx_b, pipe, lock).unwrap());
+    pipe
+}
+
+/// One radio's uplink into the aircraft's merged reader (`--radios 2`): each valid
+/// PPRZ v2 frame whole, one radio at a time (`lock`), so the frames of the two radios
+/// never mix. A damaged frame stops here.
+#[embassy_executor::task(pool_size = 2 * MAX_FLEET as usize)]
+async fn uplink_merge(
+    mut rx: SimRx<'static, M, RADIO_RING>,
+    pipe: &'static UplinkPipe,
+    lock: &'static Mutex<M, ()>,
+) {
+    let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+    let mut buf = [0u8; 256];
+    let mut frames = Vec::new();
+    loop {
+        let Ok(n) = rx.read(&mut buf).await;
+        let mut input = &buf[..n];
+        frames.clear();
+        while let Some(f) = decoder.feed(&mut input) {
+            frames.extend_from_slice(f.raw());
+        }
+        if !frames.is_empty() {
+            let _guard = lock.lock().await;
+            pipe.write_all(&frames).await;
+        }
+    }
+}
+
+/// Aircraft `ac`'s application reading the merged uplink of its two radios, with its
+/// settings in `store`, if given.
+#[embassy_executor::task(pool_size = MAX_FLEET as usize)]
+async fn aircraft_merged(
+    ac: u8,
+    radio: Device<'static>,
+    rx: &'static UplinkPipe,
+    config: Config,
+    store: Option<&'static mut SitlStore>,
+) {
+    let Err(e) = record::as_aircraft(ac, run_aircraft(radio, rx, config, store)).await;
+    panic!("the aircraft application cannot start: {e}");
 }
 
 /// A radio device's writer (sealing every frame with `secure`, if given): one per
 /// aircraft, and aircraft 7's second with `--relay`.
-#[embassy_executor::task(pool_size = MAX_FLEET as usize + 1)]
+#[embassy_executor::task(pool_size = 2 * MAX_FLEET as usize)]
 async fn radio_writer(
     mut port: Port<'static>,
     tx: SimTx<'static, M, RADIO_RING>,

@@ -8,19 +8,28 @@
 //! and holds every radio's ground-side writer. With one radio, the bytes go on as they
 //! came (damaged frames too, for the ground to count); with several, whole frames only,
 //! so that the frames of two radios never mix in the ground's byte stream.
+//!
+//! With `--radios 2` there are two links, each a UDP socket of its own: link 0 (radio
+//! A of every aircraft: `--ground`, `--uplink`) and link 1 (radio B: `--ground-b`,
+//! `--uplink-b`). `--frame-loss` drops whole frames here, each frame drawn apart on each
+//! radio and direction ([`Loss`]). The record counts each message that reached a
+//! radio's ground end once, however many radios brought it ([`Arrivals`]).
 
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{LazyLock, Mutex as StdMutex, MutexGuard};
 
 use embassy_executor::Spawner;
 use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant, Timer};
 use embedded_io_async::{Read, Write};
 use pprz_devices::host::{HostDevice, HostRx, HostTx};
+use pprz_devices::rng::SplitMix64;
 use pprz_devices::sim::{SimRx, SimTx};
 use pprz_example_app::{AC_ID, M};
+use pprz_ground::gateway::dedup::{DEFAULT_CAPACITY, DEFAULT_WINDOW, Dedup};
 use pprz_telemetry::pprz_transports::{AnyTransport, Decoder, Encoder, MAX_FRAME_LEN, PprzV2};
 
-use crate::fleet::MAX_FLEET;
+use crate::fleet::{self, MAX_FLEET};
 use crate::options::TransportArg;
 use crate::radio::{RADIO_RING, Radio};
 use crate::record;
@@ -29,20 +38,127 @@ use crate::record;
 /// less than the ground sent): read by [`uplink_datagrams_dropped`].
 static UPLINK_DROPPED: AtomicU64 = AtomicU64::new(0);
 
+/// Frames `--frame-loss` dropped, down (aircraft to ground) and up.
+static LOST: [AtomicU64; 2] = [AtomicU64::new(0), AtomicU64::new(0)];
+
 /// Uplink datagrams the radios' ground end dropped so far because its UDP input was
 /// full: they never went up a radio.
 pub fn uplink_datagrams_dropped() -> u64 {
     UPLINK_DROPPED.load(Ordering::Relaxed)
 }
 
-/// One radio to the ground: the aircraft at its other end and the radio. An aircraft
-/// with two radios would have two of these, with its id in both.
+/// Frames `--frame-loss` dropped so far: (down, up), every radio together.
+pub fn frames_lost() -> (u64, u64) {
+    (
+        LOST[0].load(Ordering::Relaxed),
+        LOST[1].load(Ordering::Relaxed),
+    )
+}
+
+/// One radio to the ground: the aircraft at its other end, the link it belongs to and
+/// the radio. An aircraft with two radios has two of these, with its id in both.
 #[derive(Clone, Copy)]
 pub struct GroundRadio {
     /// The aircraft it carries the frames of (and those it relays).
     pub ac: u8,
+    /// The ground's link it arrives on: 0 (radio A, `--ground`) or 1 (radio B).
+    pub link: usize,
+    /// Its index among the run's radios, from which its seeds derive.
+    pub seed_index: u8,
     /// The radio (endpoint A the aircraft, B the ground).
     pub radio: &'static Radio,
+}
+
+/// `--frame-loss` on one radio in one direction: each frame lost with probability `p`,
+/// drawn from a generator of its own.
+struct Loss {
+    p: f64,
+    rng: SplitMix64,
+    /// 0 down, 1 up: where the losses are counted.
+    direction: usize,
+}
+
+impl Loss {
+    /// The losses of radio `seed_index` going `up` (or down).
+    fn new(mode: BridgeMode, seed_index: u8, up: bool) -> Self {
+        Self {
+            p: mode.frame_loss,
+            rng: SplitMix64::new(fleet::loss_seed(mode.seed, seed_index, up)),
+            direction: usize::from(up),
+        }
+    }
+
+    /// Whether the next frame is lost (counted).
+    fn lose(&mut self) -> bool {
+        if self.p <= 0.0 {
+            return false;
+        }
+        // 53 random bits: a uniform draw in [0, 1).
+        let u = (self.rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        let lost = u < self.p;
+        if lost {
+            LOST[self.direction].fetch_add(1, Ordering::Relaxed);
+        }
+        lost
+    }
+}
+
+/// The messages that reached the radios' ground ends, each counted once however many
+/// radios brought it (the gateway's merging: [`Dedup`]): before the frame loss
+/// (`aired`, what the aircraft got through the air) and after it (recorded as
+/// received).
+pub struct Arrivals {
+    aired: Dedup,
+    kept: Dedup,
+    /// Per aircraft: messages that reached a radio's ground end before the frame loss,
+    /// counted once.
+    pub aired_by: [u64; 256],
+    /// Per aircraft: messages kept after the frame loss, counted once.
+    pub kept_by: [u64; 256],
+}
+
+static ARRIVALS: LazyLock<StdMutex<Arrivals>> = LazyLock::new(|| {
+    StdMutex::new(Arrivals {
+        aired: Dedup::new(2, DEFAULT_WINDOW, DEFAULT_CAPACITY),
+        kept: Dedup::new(2, DEFAULT_WINDOW, DEFAULT_CAPACITY),
+        aired_by: [0; 256],
+        kept_by: [0; 256],
+    })
+});
+
+/// The arrivals so far (a panic elsewhere does not make them unreadable).
+pub fn arrivals() -> MutexGuard<'static, Arrivals> {
+    ARRIVALS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+impl Arrivals {
+    /// A message of `source` with `key` fields reached link `link`'s ground end at
+    /// `now` (seconds): counted once in `aired`; then, unless `lost`, once in `kept`.
+    /// Whether it is a first arrival after the loss (to record).
+    fn arrived(
+        &mut self,
+        now: f64,
+        link: usize,
+        source: u8,
+        key: (u8, u8, &[u8]),
+        lost: bool,
+    ) -> bool {
+        let k = self.aired.key(source, key.0, key.1, key.2);
+        if self.aired.check(now, link, source, k).delivered() {
+            self.aired_by[usize::from(source)] += 1;
+        }
+        if lost {
+            self.kept.expire(now);
+            return false;
+        }
+        let first = self.kept.check(now, link, source, k).delivered();
+        if first {
+            self.kept_by[usize::from(source)] += 1;
+        }
+        first
+    }
 }
 
 /// The UDP socket's sending half, shared by the radios' downlink tasks.
@@ -55,6 +171,10 @@ pub struct BridgeMode {
     pub xbee: bool,
     /// `--secure`: the frames are sealed (the ground records them once opened).
     pub secure: bool,
+    /// `--frame-loss`: the probability that a frame is lost, each radio and direction.
+    pub frame_loss: f64,
+    /// `--seed`: the losses' seeds derive from it.
+    pub seed: u64,
 }
 
 impl BridgeMode {
@@ -69,32 +189,49 @@ impl BridgeMode {
     }
 }
 
-/// Spawns the bridge of `radios` to `udp`: a downlink task per radio and the uplink
-/// gateway.
-pub fn spawn(spawner: Spawner, radios: &[GroundRadio], udp: HostDevice, mode: BridgeMode) {
-    let (udp_rx, udp_tx) = udp.split();
-    let out: &'static UdpOut = Box::leak(Box::new(Mutex::new(udp_tx)));
-    let whole_frames = radios.len() > 1;
-    let mut uplinks = Vec::with_capacity(radios.len());
-    for r in radios {
-        let (_, ground) = r.radio.endpoints();
-        let (rx, tx) = ground.split();
-        spawner.spawn(downlink_bridge(rx, out, mode, whole_frames).unwrap());
-        uplinks.push((r.ac, tx));
+/// Spawns the bridge of `radios` to the UDP sockets of their links (`udp[link]`): a
+/// downlink task per radio and an uplink gateway per link.
+pub fn spawn(spawner: Spawner, radios: &[GroundRadio], udp: Vec<HostDevice>, mode: BridgeMode) {
+    for (link, udp) in udp.into_iter().enumerate() {
+        let on_link: Vec<&GroundRadio> = radios.iter().filter(|r| r.link == link).collect();
+        let (udp_rx, udp_tx) = udp.split();
+        let out: &'static UdpOut = Box::leak(Box::new(Mutex::new(udp_tx)));
+        let whole_frames = on_link.len() > 1 || mode.frame_loss > 0.0;
+        let mut uplinks = Vec::with_capacity(on_link.len());
+        for r in on_link {
+            let (_, ground) = r.radio.endpoints();
+            let (rx, tx) = ground.split();
+            let end = GroundEnd {
+                link,
+                whole_frames,
+                loss: Loss::new(mode, r.seed_index, false),
+            };
+            spawner.spawn(downlink_bridge(rx, out, mode, end).unwrap());
+            uplinks.push((r.ac, tx, Loss::new(mode, r.seed_index, true)));
+        }
+        spawner.spawn(uplink_gateway(udp_rx, uplinks, mode).unwrap());
     }
-    spawner.spawn(uplink_gateway(udp_rx, uplinks, mode).unwrap());
+}
+
+/// One radio's ground end, down: its link, whether it sends whole frames only, and its
+/// frame loss.
+struct GroundEnd {
+    link: usize,
+    whole_frames: bool,
+    loss: Loss,
 }
 
 /// The ground end of one radio, down: decodes what comes down (for the record, and to
-/// re-frame XBee as PPRZ v2 for UDP) and sends it on to the ground's UDP port, as it
-/// came or (`whole_frames`) frame by frame.
-#[embassy_executor::task(pool_size = MAX_FLEET as usize)]
+/// re-frame XBee as PPRZ v2 for UDP), drops the frames `--frame-loss` loses, and sends
+/// the rest on to its link's UDP port, as it came or (`whole_frames`) frame by frame.
+#[embassy_executor::task(pool_size = 2 * MAX_FLEET as usize)]
 async fn downlink_bridge(
     mut radio_rx: SimRx<'static, M, RADIO_RING>,
     udp: &'static UdpOut,
     mode: BridgeMode,
-    whole_frames: bool,
+    mut end: GroundEnd,
 ) {
+    let whole_frames = end.whole_frames;
     let mut decoder: Decoder<AnyTransport> = Decoder::new(mode.transport());
     let v2 = PprzV2::new();
     let mut buf = [0u8; 256];
@@ -106,8 +243,14 @@ async fn downlink_bridge(
         let mut input = &buf[..n];
         out.clear();
         while let Some(f) = decoder.feed(&mut input) {
+            let lost = end.loss.lose();
+            let key = (f.class(), f.msg_id(), f.payload());
+            let first = arrivals().arrived(seconds(now), end.link, f.source(), key, lost);
+            if lost {
+                continue;
+            }
             // Secure frames are opened by the ground, which records them.
-            if !mode.secure {
+            if !mode.secure && first {
                 record::received(f.source(), f.class(), f.msg_id(), f.payload(), now);
             }
             if mode.xbee {
@@ -134,14 +277,14 @@ async fn downlink_bridge(
 /// The uplink: each frame from the ground's UDP goes up the radio(s) of the aircraft it
 /// is for, and up every radio when no radio carries its destination (broadcast, or an
 /// aircraft behind a relay). With one radio, the bytes go up as they came.
-#[embassy_executor::task]
+#[embassy_executor::task(pool_size = 2)]
 async fn uplink_gateway(
     mut udp_rx: HostRx,
-    mut radios: Vec<(u8, SimTx<'static, M, RADIO_RING>)>,
+    mut radios: Vec<(u8, SimTx<'static, M, RADIO_RING>, Loss)>,
     mode: BridgeMode,
 ) {
     let radio_transport = mode.transport();
-    let raw = !mode.xbee && radios.len() == 1;
+    let raw = !mode.xbee && radios.len() == 1 && mode.frame_loss <= 0.0;
     let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
     let mut buf = [0u8; 256];
     let mut encoded = [0u8; MAX_FRAME_LEN];
@@ -174,15 +317,20 @@ async fn uplink_gateway(
                 f.raw()
             };
             let to = f.destination();
-            let carried = radios.iter().any(|(ac, _)| Some(*ac) == to);
-            for (ac, tx) in &mut radios {
-                if !carried || Some(*ac) == to {
+            let carried = radios.iter().any(|(ac, _, _)| Some(*ac) == to);
+            for (ac, tx, loss) in &mut radios {
+                if (!carried || Some(*ac) == to) && !loss.lose() {
                     let _ = tx.write_all(bytes).await;
                 }
             }
         }
-        if raw && let Some((_, tx)) = radios.first_mut() {
+        if raw && let Some((_, tx, _)) = radios.first_mut() {
             let _ = tx.write_all(&buf[..n]).await;
         }
     }
+}
+
+/// Seconds of an instant of the simulation's clock.
+fn seconds(t: Instant) -> f64 {
+    t.as_micros() as f64 / 1e6
 }

@@ -17,14 +17,19 @@ pub const SECOND_AC_ID: u8 = AC_ID + 1;
 /// (and any other) through the first, broadcast on both.
 static RELAY_ROUTES: [(u8, Targets); 1] = [(SECOND_AC_ID, Targets::only(1))];
 
-/// Aircraft 7's routes: relaying (`--relay`), [`RELAY_ROUTES`]; otherwise everything on
-/// its radio to the ground (device 1 stays idle).
-pub fn routes(relay: bool) -> Routes<'static> {
+/// An aircraft's routes: aircraft 7 relaying (`--relay`), [`RELAY_ROUTES`]; otherwise
+/// everything on its radio to the ground (device 0), and with `radios` 2 on its second
+/// radio too (device 1, idle with one radio).
+pub fn routes(relay: bool, radios: u8) -> Routes<'static> {
     if relay {
-        Routes::new(&RELAY_ROUTES, Targets::only(0))
-    } else {
-        Routes::new(&[], Targets::only(0)).broadcast(Targets::only(0))
+        return Routes::new(&RELAY_ROUTES, Targets::only(0));
     }
+    let ground = if radios > 1 {
+        Targets::only(0).with(1)
+    } else {
+        Targets::only(0)
+    };
+    Routes::new(&[], ground).broadcast(ground)
 }
 
 /// The id of the fleet's aircraft number `index` (0: aircraft 7).
@@ -47,6 +52,23 @@ pub fn radio_seed(seed: u64, index: u8) -> u64 {
     SplitMix64::new(start).next_u64()
 }
 
+/// The seed index of the second radio (`--radios 2`) of the fleet's aircraft number
+/// `index`: after every first radio, so every radio of the run has its own.
+pub fn second_radio(index: u8) -> u8 {
+    MAX_FLEET + index
+}
+
+/// The seed of the frame losses (`--frame-loss`) of radio number `radio` in one
+/// direction: apart from its bit errors' seed and from the other direction's.
+pub fn loss_seed(seed: u64, radio: u8, up: bool) -> u64 {
+    let salt: u64 = if up {
+        0x5550_4C49_4E4B_0001
+    } else {
+        0x444F_574E_4C4B_0002
+    };
+    radio_seed(seed ^ salt, radio)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -64,5 +86,9 @@ mod tests {
         // Reproducible, and another --seed gives other seeds.
         assert_eq!(radio_seed(7, 3), seeds[3]);
         assert_ne!(radio_seed(8, 3), seeds[3]);
+        // The second radios and the losses have seeds of their own.
+        assert!(!seeds.contains(&radio_seed(7, second_radio(0))));
+        assert_ne!(loss_seed(7, 0, true), loss_seed(7, 0, false));
+        assert!(!seeds.contains(&loss_seed(7, 0, false)));
     }
 }

@@ -4,6 +4,8 @@
 //! `ap_mode` back to NAV at `--resume-nav`, sends the SETTINGs of `--setting` at their
 //! times, serves `--foxglove`, and shows the live table or one line per message, the
 //! settings named after `--settings`. Its clock is the simulation's (the aircraft's).
+//! With `--radios 2`, `--frame-loss` or `--zenoh` it listens on each radio's link and
+//! merges them with the gateway ([`crate::merge`]).
 
 use std::net::UdpSocket;
 use std::sync::Arc;
@@ -18,11 +20,12 @@ use pprz_ground::monitor::Monitor;
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::SettingsTable;
-use pprz_ground::uplink;
 use pprz_ground::viewer::{LevelFigures, Viewer, unix_ns};
 use pprz_messages::Message;
 use pprz_secure::GroundKeys;
 use pprz_telemetry::pprz_transports::{AnyTransport, Framing, PprzV2};
+
+use crate::merge::{self, Merge};
 
 use crate::fleet::{self, SECOND_AC_ID};
 use crate::options::{Args, TimedSetting};
@@ -42,7 +45,8 @@ const SETTING: (u8, f64) = (2, 2.5);
 /// What the ground opens before the aircraft starts: its UDP socket (so no telemetry is
 /// missed), the message set it decodes with and the settings files' table.
 pub struct Station {
-    socket: UdpSocket,
+    /// One socket per link: radio A's (`--ground`), radio B's (`--ground-b`).
+    sockets: Vec<UdpSocket>,
     set: RuntimeSet,
     table: Option<Arc<SettingsTable>>,
 }
@@ -52,14 +56,20 @@ impl Station {
     /// warnings); fails with the message to print.
     pub fn open(args: &Args) -> Result<Self, String> {
         let table = load_settings(args)?;
-        let socket = UdpSocket::bind(args.ground).map_err(|e| {
-            format!(
-                "cannot listen on {} ({e}); is another ground station running? Use --ground/--uplink or --headless",
-                args.ground
-            )
-        })?;
+        let mut sockets = Vec::new();
+        for addr in merge::ground_addresses(args) {
+            sockets.push(UdpSocket::bind(addr).map_err(|e| {
+                format!(
+                    "cannot listen on {addr} ({e}); is another ground station running? Use --ground/--uplink (--ground-b/--uplink-b) or --headless"
+                )
+            })?);
+        }
         let set = RuntimeSet::load(&args.messages).map_err(|e| e.to_string())?;
-        Ok(Self { socket, set, table })
+        Ok(Self {
+            sockets,
+            set,
+            table,
+        })
     }
 
     /// The monitor (with the ground's end of `--secure`) and the viewer of `--foxglove`,
@@ -75,6 +85,11 @@ impl Station {
                 .map_err(|e| e.to_string())?,
             None => monitor,
         };
+        let merge = if args.gateway() {
+            Merge::gateway(args, monitor, self.table.as_ref(), &self.sockets)?
+        } else {
+            Merge::single(monitor)
+        };
         let viewer = match args.foxglove {
             Some(addr) => {
                 let mut viewer = Viewer::new();
@@ -89,11 +104,14 @@ impl Station {
             }
             None => None,
         };
-        let secure = monitor.secure_status().is_some();
+        let secure = merge.monitor().secure_status().is_some();
         Ok(Ground {
             args,
-            socket: self.socket,
-            monitor,
+            sockets: self.sockets,
+            uplinks: merge::uplink_addresses(args),
+            merge,
+            clock: 0.0,
+            next_publish: 0.0,
             viewer,
             transport: PprzV2::new().into(),
             fleet: fleet::ids(args.fleet),
@@ -138,8 +156,16 @@ fn render_period(speed: f64) -> f64 {
 /// The running ground station.
 pub struct Ground<'a> {
     args: &'a Args,
-    socket: UdpSocket,
-    monitor: Monitor,
+    /// One socket per link (radio A's, radio B's).
+    sockets: Vec<UdpSocket>,
+    /// Where each link's uplink frames go.
+    uplinks: Vec<std::net::SocketAddr>,
+    /// What takes the links in: the monitor, or the gateway.
+    merge: Merge,
+    /// The simulated time of the current turn, seconds.
+    clock: f64,
+    /// When the bus gets the gateway's figures next (`--zenoh`).
+    next_publish: f64,
     viewer: Option<Viewer>,
     /// What the ground speaks on UDP: PPRZ v2.
     transport: AnyTransport,
@@ -161,49 +187,62 @@ pub struct Ground<'a> {
 
 impl Ground<'_> {
     /// Runs until the end of the run (`--duration`, or `stop`, set by Ctrl-C), from
-    /// `start`; `aircraft_side` gives the viewer each aircraft's own figures. Returns the
-    /// monitor, for the summary.
+    /// `start`; `aircraft_side` gives the viewer each aircraft's own figures. Returns
+    /// what took the links in (the monitor or the gateway), for the summary.
     pub fn run(
         mut self,
         aircraft_side: &dyn Fn(u8) -> Option<[LevelFigures; 3]>,
         stop: &AtomicBool,
         start: StdInstant,
-    ) -> Monitor {
+    ) -> Merge {
         let speed = self.args.speed;
         // The simulation's clock, so that what the ground sends at a time of the run
         // (a PING at 10 s, the SETTING of `--resume-nav`) meets the radio at that time.
         let sim_now = || Instant::now().as_micros() as f64 / 1e6;
         let wall_limit = self.args.duration / speed;
-        let _ = self
-            .socket
-            .set_read_timeout(Some(StdDuration::from_millis(20)));
+        // One link waits for a datagram up to 20 ms; with two, each up to 1 ms in turn.
+        let wait = if self.sockets.len() > 1 { 1 } else { 20 };
+        for socket in &self.sockets {
+            let _ = socket.set_read_timeout(Some(StdDuration::from_millis(wait)));
+        }
         let mut buf = [0u8; 2048];
         while !stop.load(Ordering::SeqCst) && start.elapsed().as_secs_f64() < wall_limit {
             let t = sim_now();
+            self.clock = t;
             self.exchange_keys(t);
             self.ping(t);
             self.set_once(t);
             self.resume_nav(t);
             self.timed_settings(t);
             self.serve_viewer_requests(t);
-            self.receive(&mut buf, &sim_now);
-            // Stale aircraft and expired requests, also while nothing arrives.
-            self.monitor.tick(sim_now());
+            for link in 0..self.sockets.len() {
+                self.receive(link, &mut buf, &sim_now);
+            }
+            // Stale aircraft and expired requests, also while nothing arrives; the bus's
+            // requests and, once a second, its figures.
+            let now = sim_now();
+            let publish = now >= self.next_publish;
+            if publish {
+                self.next_publish = now + 1.0;
+            }
+            self.merge.tick(now, publish);
             self.show(t, aircraft_side);
         }
+        self.merge.stop();
         if let Some(v) = self.viewer {
             eprintln!("{}", v.counts());
             if let Err(e) = v.finish() {
                 eprintln!("sitl: {e}");
             }
         }
-        self.monitor
+        self.merge
     }
 
     /// The key exchange (`--secure`): message 1 until answered, message 3.
     fn exchange_keys(&mut self, t: f64) {
-        for frame in self.monitor.poll_secure(t) {
-            let _ = self.socket.send_to(&frame, self.args.uplink);
+        let frames = self.merge.monitor_mut().poll_secure(t);
+        for frame in frames {
+            let _ = self.sockets[0].send_to(&frame, self.args.uplink);
         }
     }
 
@@ -215,7 +254,7 @@ impl Ground<'_> {
         while t >= self.next_ping {
             for &ac in &fleet {
                 if self.send(ac, "PING", &[]) {
-                    self.monitor.ping_sent(Some(ac), t);
+                    self.merge.monitor_mut().ping_sent(Some(ac), t);
                     if self.secure {
                         record::uplink(ac, Ping::CLASS_ID, Ping::ID, &[], Instant::now());
                     }
@@ -228,7 +267,7 @@ impl Ground<'_> {
 
     /// The SETTING of every aircraft, once, at [`SETTING_AT_S`].
     fn set_once(&mut self, t: f64) {
-        if self.setting_sent || t < SETTING_AT_S || !self.monitor.uplink_ready() {
+        if self.setting_sent || t < SETTING_AT_S || !self.merge.monitor().uplink_ready() {
             return;
         }
         let (index, value) = SETTING;
@@ -240,7 +279,7 @@ impl Ground<'_> {
     /// uplink is cut then).
     fn resume_nav(&mut self, t: f64) {
         let due = self.args.resume_nav.is_some_and(|at| t >= at);
-        if self.resume_sent || !due || !self.monitor.uplink_ready() {
+        if self.resume_sent || !due || !self.merge.monitor().uplink_ready() {
             return;
         }
         self.set_all(t, link::AP_MODE_SETTING, f64::from(link::NAV));
@@ -250,7 +289,7 @@ impl Ground<'_> {
     /// `--setting`: each SETTING due by `t`, once (lost if the uplink is cut then).
     fn timed_settings(&mut self, t: f64) {
         while let Some(s) = self.timed.get(self.timed_sent).copied() {
-            if t < s.at_s || !self.monitor.uplink_ready() {
+            if t < s.at_s || !self.merge.monitor().uplink_ready() {
                 return;
             }
             self.set_all(t, s.index, s.value);
@@ -268,7 +307,9 @@ impl Ground<'_> {
                 ("value", value),
             ];
             if self.send(ac, "SETTING", &values) {
-                self.monitor.setting_sent(Some(ac), t, index, value);
+                self.merge
+                    .monitor_mut()
+                    .setting_sent(Some(ac), t, index, value);
             }
         }
         self.fleet = fleet;
@@ -283,9 +324,9 @@ impl Ground<'_> {
         for request in requests {
             let (name, values) = request.message();
             if self.send(request.ac_id(), name, &values) {
-                request.sent(&mut self.monitor, t);
+                request.sent(self.merge.monitor_mut(), t);
             } else if let Some(v) = self.viewer.as_mut() {
-                let why = if self.monitor.uplink_ready() {
+                let why = if self.merge.monitor().uplink_ready() {
                     "the uplink failed"
                 } else {
                     "no secure session yet"
@@ -296,30 +337,34 @@ impl Ground<'_> {
     }
 
     /// Sends the uplink message `name` with `values` to aircraft `ac` (sealed on a
-    /// secure link), if the uplink is ready; whether it was sent.
+    /// secure link), if the uplink is ready, on the link(s) its route takes; whether it
+    /// was sent.
     fn send(&mut self, ac: u8, name: &str, values: &[(&str, f64)]) -> bool {
-        if !self.monitor.uplink_ready() {
+        if !self.merge.monitor().uplink_ready() {
             return false;
         }
-        let Ok(frame) = uplink::frame(self.monitor.set(), self.transport, ac, name, values) else {
-            return false;
-        };
-        let Ok(frame) = self.monitor.seal_uplink(&frame) else {
-            return false;
-        };
-        self.socket.send_to(&frame, self.args.uplink).is_ok()
+        let frames = self
+            .merge
+            .frames(self.clock, self.transport, ac, name, values);
+        let mut sent = false;
+        for (link, frame) in frames {
+            if let (Some(socket), Some(to)) = (self.sockets.get(link), self.uplinks.get(link)) {
+                sent |= socket.send_to(&frame, to).is_ok();
+            }
+        }
+        sent
     }
 
     /// The telemetry of one datagram, if one comes within the socket's timeout: to the
     /// monitor (at the simulated time of its arrival), the `--lines` output, the viewer
     /// and (secure link) the record.
-    fn receive(&mut self, buf: &mut [u8], sim_now: &dyn Fn() -> f64) {
-        let Ok((n, _)) = self.socket.recv_from(buf) else {
+    fn receive(&mut self, link: usize, buf: &mut [u8], sim_now: &dyn Fn() -> f64) {
+        let Ok((n, _)) = self.sockets[link].recv_from(buf) else {
             return;
         };
         let now = sim_now();
         let (lines, secure, viewer) = (self.args.lines, self.secure, &mut self.viewer);
-        self.monitor.feed(now, &buf[..n], |m| {
+        self.merge.feed(link, now, &buf[..n], |m| {
             if lines {
                 println!("{}", m.line);
             }
@@ -343,13 +388,13 @@ impl Ground<'_> {
     /// The live table when due, and the viewer's link statistics every simulated second.
     fn show(&mut self, t: f64, aircraft_side: &dyn Fn(u8) -> Option<[LevelFigures; 3]>) {
         if !self.args.lines && t >= self.next_render {
-            print!("\x1b[2J\x1b[H{}", self.monitor.render(t));
+            print!("\x1b[2J\x1b[H{}", self.merge.monitor().render(t));
             self.next_render = t + render_period(self.args.speed);
         }
         if let Some(v) = self.viewer.as_mut()
             && t >= self.next_link
         {
-            v.link_stats(unix_ns(), &self.monitor, t, aircraft_side);
+            v.link_stats(unix_ns(), self.merge.monitor(), t, aircraft_side);
             self.next_link = t + self.args.speed;
         }
     }
@@ -363,8 +408,16 @@ pub fn wait_headless(args: &Args, stop: &AtomicBool, start: StdInstant) {
         _ if args.relay => format!("aircraft {AC_ID} and {SECOND_AC_ID} (through {AC_ID})"),
         n => format!("aircraft {AC_ID} to {}", fleet::id(n - 1)),
     };
+    let second = if args.radios > 1 {
+        format!(
+            "; radio B: telemetry to UDP {}, uplink on UDP {}",
+            args.ground_b, args.uplink_b
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "{who} running: telemetry to UDP {}, uplink on UDP {} (Ctrl-C to stop)",
+        "{who} running: telemetry to UDP {}, uplink on UDP {}{second} (Ctrl-C to stop)",
         args.ground, args.uplink
     );
     let wall_limit = args.duration / args.speed;

@@ -29,7 +29,9 @@
 //! ground ends on one UDP socket); [`ground`] (the ground station in this process,
 //! with [`keys`] for `--secure`); [`link`] (the outages of `--outage`, each aircraft's
 //! link health and its failsafe); [`persist`] (`--settings-flash`, the persistent
-//! settings, and `--setting`); [`record`], [`report`] and [`summary`] (the figures).
+//! settings, and `--setting`); [`record`], [`report`] and [`summary`] (the figures);
+//! [`merge`] (`--radios 2`, `--frame-loss`, `--zenoh`: the ground's radios merged by
+//! the gateway).
 
 mod aircraft;
 mod bridge;
@@ -39,6 +41,7 @@ mod fleet;
 mod ground;
 mod keys;
 mod link;
+mod merge;
 mod options;
 mod persist;
 mod radio;
@@ -55,12 +58,12 @@ use clap::error::ErrorKind;
 use clap::{CommandFactory, Parser};
 use pprz_devices::host::{HostConfig, HostDevice};
 use pprz_example_app::AC_ID;
-use pprz_ground::monitor::Monitor;
 use pprz_secure::Responder;
 
 use crate::aircraft::Aircraft;
 use crate::ground::Station;
 use crate::keys::SitlKeys;
+use crate::merge::Merge;
 use crate::options::Args;
 use crate::radio::RadioPlan;
 use crate::report::JsonFile;
@@ -123,13 +126,18 @@ fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
     } else {
         Some(Station::open(args).map_err(Failure::new)?)
     };
-    let udp =
-        HostDevice::udp_bind(args.uplink, args.ground, HostConfig::default()).map_err(|e| {
+    let mut udp = Vec::new();
+    for (uplink, ground) in merge::uplink_addresses(args)
+        .into_iter()
+        .zip(merge::ground_addresses(args))
+    {
+        let device = HostDevice::udp_bind(uplink, ground, HostConfig::default()).map_err(|e| {
             Failure::new(format!(
-                "cannot bind the aircraft's uplink port {}: {e}",
-                args.uplink
+                "cannot bind the aircraft's uplink port {uplink}: {e}"
             ))
         })?;
+        udp.push(device);
+    }
     let (responder, ground_keys) = match keys {
         Some(k) => (Some(Responder::new(AC_ID, k.aircraft)), k.ground),
         None => (None, None),
@@ -137,7 +145,7 @@ fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
     let aircraft = aircraft::start(args, plan, responder, store, udp).map_err(Failure::sitl)?;
     let stop = stop_on_ctrl_c();
     let start = StdInstant::now();
-    let monitor = match station {
+    let merge = match station {
         Some(station) => Some(run_ground(
             args,
             station,
@@ -152,7 +160,7 @@ fn run(args: &Args, plan: &RadioPlan) -> Result<(), Failure> {
         }
     };
     let now = start.elapsed().as_secs_f64() * args.speed;
-    let summary = report::print(args, plan, &aircraft, monitor.as_ref(), now);
+    let summary = report::print(args, plan, &aircraft, merge.as_ref(), now);
     match json {
         Some(file) => file.write(&summary).map_err(Failure::sitl),
         None => Ok(()),
@@ -188,7 +196,7 @@ fn run_ground(
     aircraft: &Aircraft,
     stop: &AtomicBool,
     start: StdInstant,
-) -> Result<Monitor, Failure> {
+) -> Result<Merge, Failure> {
     let ground = station.start(args, keys).map_err(Failure::sitl)?;
     let side = |ac: u8| figures::aircraft_levels(ac, aircraft);
     Ok(ground.run(&side, stop, start))

@@ -101,6 +101,31 @@ pub struct Args {
     /// joins it to aircraft 7, and 7 relays between its two radios.
     #[arg(long)]
     pub relay: bool,
+    /// Radios from each aircraft to the ground, 1 or 2: with 2, each aircraft sends its
+    /// telemetry on both (radio A to `--ground`/`--uplink`, radio B to
+    /// `--ground-b`/`--uplink-b`), each radio with its own seeded errors and losses, and
+    /// the in-process ground merges them with the gateway. PPRZ v2, without `--relay`
+    /// or `--secure`.
+    #[arg(long, default_value_t = 1, value_parser = parse_radios)]
+    pub radios: u8,
+    /// Probability that a frame is lost, 0 to 0.9, on every radio to the ground and in
+    /// each direction, each frame drawn apart (seeded from `--seed` and the radio):
+    /// the in-process ground then merges its radios with the gateway. PPRZ v2.
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = parse_frame_loss)]
+    pub frame_loss: f64,
+    /// With `--radios 2`: where the ground listens for radio B's telemetry.
+    #[arg(long, default_value = "127.0.0.1:4244")]
+    pub ground_b: SocketAddr,
+    /// With `--radios 2`: where radio B's bridge listens for uplink frames.
+    #[arg(long, default_value = "127.0.0.1:4245")]
+    pub uplink_b: SocketAddr,
+    /// Serve the simulated fleet on a Zenoh bus: the in-process ground runs the gateway
+    /// service on a peer session listening on this endpoint (e.g. `tcp/127.0.0.1:7447`;
+    /// multicast scouting off), publishing `pprz/<ac>/telemetry/<MSG>` and taking
+    /// commands on `pprz/<ac>/uplink/<MSG>`. Needs the in-process ground, PPRZ v2 and no
+    /// `--secure`.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh: Option<String>,
     /// Seed of the simulated radios' errors (bit errors, XBee failures): each radio's
     /// seed is derived from it and the radio's index, so runs are reproducible and the
     /// radios independent.
@@ -373,6 +398,26 @@ fn parse_fleet(s: &str) -> Result<u8, String> {
 /// `--bit-error-rate`: 0 (no errors) to one bit in a hundred.
 fn parse_bit_error_rate(s: &str) -> Result<f64, String> {
     number_in(s, 0.0, 0.01)
+}
+
+/// `--radios`: 1 or 2 radios per aircraft.
+fn parse_radios(s: &str) -> Result<u8, String> {
+    integer_in(s, 1, 2)
+        .map(|n| n as u8)
+        .map_err(|e| format!("{e} radios"))
+}
+
+/// `--frame-loss`: 0 (none) to 0.9.
+fn parse_frame_loss(s: &str) -> Result<f64, String> {
+    number_in(s, 0.0, 0.9)
+}
+
+impl Args {
+    /// Whether the in-process ground merges its radios with the gateway: two radios,
+    /// a frame loss or a bus (one plain radio keeps the monitor of one byte stream).
+    pub fn gateway(&self) -> bool {
+        self.radios > 1 || self.frame_loss > 0.0 || self.zenoh.is_some()
+    }
 }
 
 /// `--ping-rate`: at most 10 kHz (a flood), at least one PING every 10 s.

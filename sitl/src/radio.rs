@@ -63,6 +63,43 @@ pub struct RadioPlan {
     pub bit_error_rate: f64,
     /// `--seed`: each radio's seed derives from it.
     pub seed: u64,
+    /// `--radios`: radios from each aircraft to the ground (1 or 2).
+    pub radios: u8,
+    /// `--frame-loss`: the probability that a frame is lost on a radio to the ground.
+    pub frame_loss: f64,
+}
+
+/// The checks of `--radios`, `--frame-loss` and `--zenoh` with the other options.
+fn check_redundant(args: &Args, xbee: bool) -> Result<(), String> {
+    if args.radios > 1 {
+        let refused = [
+            (
+                xbee,
+                "--transport xbee (the second radio carries PPRZ v2 frames)",
+            ),
+            (
+                args.relay,
+                "--relay (aircraft 7's second radio is the relay's)",
+            ),
+            (
+                args.secure.is_some(),
+                "--secure (the secure link is one radio's)",
+            ),
+        ];
+        if let Some((_, why)) = refused.iter().find(|(on, _)| *on) {
+            return Err(format!("--radios 2 cannot run with {why}"));
+        }
+    }
+    if args.gateway() && args.secure.is_some() {
+        return Err(
+            "--secure needs one plain radio: --radios 2, --frame-loss and --zenoh merge the radios with the gateway, which has no secure link"
+                .to_owned(),
+        );
+    }
+    if args.zenoh.is_some() && args.headless {
+        return Err("--zenoh serves the in-process ground's gateway: drop --headless (or run pprz-gateway beside it)".to_owned());
+    }
+    Ok(())
 }
 
 /// The checks of `--fleet` and `--relay` with the other options.
@@ -111,6 +148,7 @@ impl RadioPlan {
             return Err("--foxglove serves the in-process ground's telemetry: drop --headless (or run pprz-monitor --foxglove beside it)".into());
         }
         check_fleet(args, xbee)?;
+        check_redundant(args, xbee)?;
         if args.secure.is_some() && xbee {
             return Err(
                 "--secure needs --transport pprz2 (the secure link is Paparazzi's secure PPRZ v2)"
@@ -157,6 +195,8 @@ impl RadioPlan {
             secure: args.secure.is_some(),
             bit_error_rate: args.bit_error_rate,
             seed: args.seed,
+            radios: args.radios,
+            frame_loss: args.frame_loss,
         })
     }
 

@@ -9,6 +9,8 @@ use embassy_time::Instant;
 use pprz_default::messages::MESSAGES;
 use pprz_devices::sim::Direction;
 use pprz_ground::monitor::Monitor;
+
+use crate::merge::{AircraftDelivery, GatewayFigures, LinkFigures, Merge};
 use pprz_telemetry::DeviceStats;
 use pprz_telemetry::pprz_messages::priority;
 
@@ -65,15 +67,17 @@ pub fn print(
     args: &Args,
     plan: &RadioPlan,
     aircraft: &Aircraft,
-    monitor: Option<&Monitor>,
+    merge: Option<&Merge>,
     now: f64,
 ) -> Summary {
+    let monitor = merge.map(Merge::monitor);
     if let Some(m) = monitor
         && !args.lines
     {
         print!("\x1b[2J\x1b[H{}", m.render(now));
     }
-    let summary = collect_summary(args, plan, aircraft);
+    let mut summary = collect_summary(args, plan, aircraft);
+    summary.gateway = merge.and_then(|m| gateway_figures(args, aircraft, m));
     print!("{}", summary.text());
     if let Some(line) = crate::persist::summary_line(args) {
         print!("{line}");
@@ -188,7 +192,54 @@ pub fn collect_summary(args: &Args, plan: &RadioPlan, aircraft: &Aircraft) -> Su
         secure: plan.secure.then(secure_figures),
         fleet,
         link: link::figures(args, aircraft),
+        gateway: None,
     }
+}
+
+/// The gateway's figures, when it merged the radios: per link, and per aircraft what
+/// it sent and what was delivered.
+fn gateway_figures(args: &Args, aircraft: &Aircraft, merge: &Merge) -> Option<GatewayFigures> {
+    let gateway = merge.gateway_of()?;
+    let links = gateway
+        .links()
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let m = gateway.link_merge(i);
+            let d = l.monitor().decoder_stats();
+            LinkFigures {
+                link: l.name().to_owned(),
+                frames: d.frames.into(),
+                checksum_errors: d.checksum_errors.into(),
+                first: m.first,
+                duplicates: m.duplicates,
+                alone: m.alone,
+                missed: m.missed,
+            }
+        })
+        .collect();
+    let ids: Vec<u8> = aircraft.healths().iter().map(|&(ac, _)| ac).collect();
+    let each = ids
+        .into_iter()
+        .map(|ac| AircraftDelivery {
+            ac_id: ac,
+            sent: aircraft.ground_devices(ac).iter().map(|s| s.sent).collect(),
+            aired: merge.aired(ac),
+            delivered: merge.delivered(ac),
+            fleet_frames: merge.monitor().aircraft_state(ac).map_or(0, |a| a.frames()),
+        })
+        .collect();
+    let (lost_down, lost_up) = bridge::frames_lost();
+    Some(GatewayFigures {
+        radios: args.radios,
+        frame_loss: args.frame_loss,
+        lost_frames_down: lost_down,
+        lost_frames_up: lost_up,
+        dedup_window_s: gateway.dedup().window(),
+        links,
+        aircraft: each,
+        bus: merge.bus_stats(),
+    })
 }
 
 /// The radio devices to the ground, their statistics summed: aircraft 7's radio, and

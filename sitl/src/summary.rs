@@ -37,6 +37,9 @@ pub struct Summary {
     /// The link to the ground: each aircraft's link health and what the ground saw of
     /// its failsafe, with the outages of the run.
     pub link: LinkFigures,
+    /// The gateway merging the ground's radios (`--radios 2`, `--frame-loss`,
+    /// `--zenoh`; `None`, JSON `null`, otherwise).
+    pub gateway: Option<crate::merge::GatewayFigures>,
 }
 
 /// The link to the ground, per aircraft: the health the aircraft kept (from its own
@@ -517,6 +520,9 @@ impl Summary {
             fleet.text(&mut s);
         }
         self.link.text(&mut s);
+        if let Some(gateway) = &self.gateway {
+            gateway.text(&mut s);
+        }
         s
     }
 

@@ -158,6 +158,12 @@ impl Gateway {
         &self.fleet
     }
 
+    /// The monitor of the merged stream, to note the requests a ground station sends
+    /// through the gateway ([`Monitor::ping_sent`], [`Monitor::setting_sent`]).
+    pub fn fleet_mut(&mut self) -> &mut Monitor {
+        &mut self.fleet
+    }
+
     /// What link `link` delivered, duplicated, delivered alone and missed.
     pub fn link_merge(&self, link: usize) -> LinkMerge {
         self.dedup.link(link)

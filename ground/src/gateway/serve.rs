@@ -165,6 +165,11 @@ impl Service {
         &self.gateway
     }
 
+    /// The gateway, to feed a ground station's own requests through it.
+    pub fn gateway_mut(&mut self) -> &mut Gateway {
+        &mut self.gateway
+    }
+
     /// The counters.
     pub fn stats(&self) -> &ServiceStats {
         &self.stats
@@ -177,6 +182,18 @@ impl Service {
 
     /// Bytes from link `link` at `now`: each message delivered is published.
     pub fn feed(&mut self, link: usize, now: f64, bytes: &[u8]) {
+        self.feed_with(link, now, bytes, |_| {});
+    }
+
+    /// [`feed`](Self::feed), `deliver` also getting each message delivered (after it
+    /// is published), for a ground station that runs the service in its own loop.
+    pub fn feed_with(
+        &mut self,
+        link: usize,
+        now: f64,
+        bytes: &[u8],
+        mut deliver: impl FnMut(&Delivered<'_>),
+    ) {
         let Self {
             gateway,
             bus,
@@ -186,6 +203,7 @@ impl Service {
         gateway.feed(link, now, bytes, |d| {
             stats.delivered += 1;
             publish(bus, d);
+            deliver(d);
         });
         if !self.pending.is_empty() {
             self.answer_settings(now);
