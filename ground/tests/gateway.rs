@@ -202,15 +202,18 @@ impl Link {
     }
 }
 
-/// The frames a link's uplink received: (class, id, payload).
+/// A frame a link's uplink received: (class, id, payload).
+type UplinkFrame = (u8, u8, Vec<u8>);
+
+/// The frames a link's uplink received.
 struct UplinkLog {
     stop: Arc<AtomicBool>,
-    frames: Arc<Mutex<Vec<(u8, u8, Vec<u8>)>>>,
+    frames: Arc<Mutex<Vec<UplinkFrame>>>,
     thread: Option<JoinHandle<()>>,
 }
 
 impl UplinkLog {
-    fn frames(&self) -> Vec<(u8, u8, Vec<u8>)> {
+    fn frames(&self) -> Vec<UplinkFrame> {
         self.frames.lock().unwrap().clone()
     }
 }
