@@ -64,7 +64,7 @@ impl GatewayLink {
     pub fn new(name: &str, set: RuntimeSet, transport: AnyTransport, can_send: bool) -> Self {
         Self {
             name: name.to_owned(),
-            monitor: Monitor::new(set, transport),
+            monitor: Monitor::new(set, transport).without_text(),
             transport,
             can_send,
         }
@@ -76,7 +76,7 @@ impl GatewayLink {
     }
 
     /// The link's monitor: its byte, frame and error counters, and its view of each
-    /// aircraft.
+    /// aircraft (without the messages' text: [`Monitor::without_text`]).
     pub fn monitor(&self) -> &Monitor {
         &self.monitor
     }

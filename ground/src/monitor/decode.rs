@@ -213,20 +213,30 @@ impl Monitor {
             if let Some(a) = aircraft {
                 a.unknown += 1;
             }
-            let line = format::line(source, class, id, None, payload);
+            let line = if self.text {
+                format::line(source, class, id, None, payload)
+            } else {
+                String::new()
+            };
             return Handled {
                 line,
                 message: None,
                 valid: false,
             };
         };
-        let body = format::fields(desc, payload);
-        let mut line = format::known_line(source, desc, &body);
+        let (body, mut line) = if self.text {
+            let body = format::fields(desc, payload);
+            let line = format::known_line(source, desc, &body);
+            (body, line)
+        } else {
+            (String::new(), String::new())
+        };
         let ok = dynamic::check(desc, payload).is_ok();
         let dl_value = (ok && desc.name == "DL_VALUE")
             .then(|| dl_value_fields(desc, payload))
             .flatten();
         if let Some((index, _, _)) = dl_value
+            && self.text
             && let Some(name) = self.table.as_deref().and_then(|t| t.unique_name(index))
         {
             line.push_str(" setting=");

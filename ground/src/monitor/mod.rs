@@ -173,6 +173,8 @@ pub struct Monitor {
     clock: f64,
     /// The settings files' table: names, bounds, units and labels of the indices.
     table: Option<Arc<SettingsTable>>,
+    /// Whether messages get their text forms (the line, the latest values).
+    text: bool,
 }
 
 impl Monitor {
@@ -206,6 +208,7 @@ impl Monitor {
             stale_after: DEFAULT_STALE_AFTER,
             clock: 0.0,
             table: None,
+            text: true,
         }
     }
 
@@ -226,5 +229,19 @@ impl Monitor {
     pub fn replaying(mut self) -> Self {
         self.replay = true;
         self
+    }
+
+    /// The same monitor without the text forms of the messages: each [`Decoded`]'s
+    /// `line` and each message's latest values ([`MessageStats::last`]) stay empty.
+    /// Everything else is decoded and counted. For a monitor whose text nobody reads
+    /// (a gateway's links), it saves formatting every field of every message.
+    pub fn without_text(mut self) -> Self {
+        self.text = false;
+        self
+    }
+
+    /// Whether messages get their text forms ([`without_text`](Self::without_text)).
+    pub fn has_text(&self) -> bool {
+        self.text
     }
 }

@@ -591,3 +591,35 @@ fn aircraft_only_addressed_take_no_place_of_aircraft_heard() {
     feed(&mut m, 3.0, &frame_from(120, 0, 215, b"x"));
     assert_eq!(m.aircraft_state(120).unwrap().frames(), 1);
 }
+
+#[test]
+fn without_text_a_monitor_counts_the_same_and_formats_nothing() {
+    let mut plain = monitor();
+    let mut quiet = monitor().without_text();
+    let lla = frame(9, &123_456_789i32.to_le_bytes());
+    quiet.setting_sent(None, 0.0, 2, 1.5);
+    plain.setting_sent(None, 0.0, 2, 1.5);
+    for m in [&mut plain, &mut quiet] {
+        feed(m, 0.1, &lla);
+        feed(m, 0.2, &dl_value(2, 1.5));
+    }
+    assert_eq!(feed(&mut quiet, 0.3, &lla), [""]);
+    assert_eq!(
+        feed(&mut plain, 0.3, &lla),
+        ["7 telemetry GPS_LLA lat=123456789 [1e7deg] 12.3456789 deg"].map(String::from)
+    );
+    let (p, q) = (
+        plain.aircraft_state(7).unwrap(),
+        quiet.aircraft_state(7).unwrap(),
+    );
+    assert_eq!(
+        (p.frames(), p.setting_values()),
+        (q.frames(), q.setting_values())
+    );
+    assert_eq!(
+        plain.settings().acknowledged(),
+        quiet.settings().acknowledged()
+    );
+    assert!(quiet.messages().values().all(|m| m.last.is_empty()));
+    assert!(!quiet.has_text() && plain.has_text());
+}

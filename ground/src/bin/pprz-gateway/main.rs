@@ -90,7 +90,9 @@ fn run(
         queues.push(Some(source.start()));
         uplinks.push(uplink);
     }
+    // Nobody reads the messages' text here: the bus carries their JSON.
     let fleet = Monitor::new(set, PprzV2::new().into())
+        .without_text()
         .with_stale_after(args.stale_after)
         .map_err(|e| e.to_string())?;
     let fleet = match &table {
