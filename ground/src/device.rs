@@ -27,6 +27,11 @@ use crate::set::RuntimeSet;
 use clap::ValueEnum;
 use pprz_transports::{Framing, PprzV2};
 
+/// The receive buffer asked for a UDP link, in bytes: datagrams wait there while the
+/// reader is busy (50 000 frames a second of about 40 bytes fill the Linux default of
+/// 208 KiB in about 5 ms). The system may grant less.
+pub const UDP_RECEIVE_BUFFER: usize = 4 << 20;
+
 /// Where uplink frames are written.
 pub enum Uplink {
     /// Datagrams to an address.
@@ -126,6 +131,8 @@ impl Endpoint {
             Self::Udp { listen, uplink } => {
                 let socket = UdpSocket::bind(listen)
                     .map_err(|e| format!("cannot bind UDP {listen}: {e}"))?;
+                // Best effort: the system may cap it (Linux: net.core.rmem_max).
+                let _ = socket2::SockRef::from(&socket).set_recv_buffer_size(UDP_RECEIVE_BUFFER);
                 let recv = socket.try_clone().map_err(|e| e.to_string())?;
                 let sink = match uplink {
                     Some(to) => Uplink::Udp(socket, *to),

@@ -11,7 +11,7 @@ use std::net::{SocketAddr, UdpSocket};
 use pprz_ground::bus::{Bus, BusConfig};
 use pprz_ground::device::Uplink;
 use pprz_ground::gateway::serve::Service;
-use pprz_ground::gateway::{Gateway, GatewayLink};
+use pprz_ground::gateway::{Arrival, Gateway, GatewayLink};
 use pprz_ground::monitor::{Decoded, Monitor};
 use pprz_ground::settings::SettingsTable;
 use pprz_ground::uplink;
@@ -178,7 +178,7 @@ impl Merge {
         match &mut self.kind {
             Kind::Single(m) => m.feed(now, bytes, count),
             Kind::Gateway(g) => g.feed(link, now, bytes, |d| count(d.message)),
-            Kind::Served(s) => s.feed_with(link, now, bytes, |d| count(d.message)),
+            Kind::Served(s) => s.arrive(link, now, Arrival::Bytes(bytes), |d| count(d.message)),
         }
     }
 

@@ -43,6 +43,7 @@ pub mod serve;
 use pprz_messages::MessageDescriptor;
 use pprz_transports::{AnyTransport, Encoder, GROUND_ID, MsgHeader, PprzV2, TxMeta};
 
+use crate::input::Drops;
 use crate::monitor::{Decoded, Monitor};
 use crate::set::RuntimeSet;
 use crate::uplink::{self, UplinkError};
@@ -85,6 +86,15 @@ impl GatewayLink {
     pub fn can_send(&self) -> bool {
         self.can_send
     }
+}
+
+/// What a link brought.
+#[derive(Debug, Clone, Copy)]
+pub enum Arrival<'a> {
+    /// Bytes read.
+    Bytes(&'a [u8]),
+    /// Input dropped (a queue overflowed) just before the next bytes.
+    Gap(Drops),
 }
 
 /// A message the gateway delivers.
@@ -186,6 +196,30 @@ impl Gateway {
         link: usize,
         now: f64,
         bytes: &[u8],
+        deliver: impl FnMut(&Delivered<'_>),
+    ) {
+        self.arrive(link, now, Arrival::Bytes(bytes), deliver);
+    }
+
+    /// Input of link `link` was dropped just before its next bytes: the link's monitor
+    /// counts it and delivers the frames held behind the one it abandons
+    /// ([`Monitor::input_gap`]).
+    pub fn input_gap(
+        &mut self,
+        link: usize,
+        now: f64,
+        dropped: Drops,
+        deliver: impl FnMut(&Delivered<'_>),
+    ) {
+        self.arrive(link, now, Arrival::Gap(dropped), deliver);
+    }
+
+    /// What arrived on link `link` at `now`, decoded by the link's monitor and merged.
+    pub fn arrive(
+        &mut self,
+        link: usize,
+        now: f64,
+        arrival: Arrival<'_>,
         mut deliver: impl FnMut(&Delivered<'_>),
     ) {
         let Self {
@@ -198,9 +232,11 @@ impl Gateway {
         let Some(l) = links.get_mut(link) else {
             return;
         };
-        l.monitor.feed(now, bytes, |d| {
-            merge(now, link, d, dedup, routes, fleet, &mut deliver);
-        });
+        let on_message = |d: &Decoded<'_>| merge(now, link, d, dedup, routes, fleet, &mut deliver);
+        match arrival {
+            Arrival::Bytes(bytes) => l.monitor.feed(now, bytes, on_message),
+            Arrival::Gap(dropped) => l.monitor.input_gap(now, dropped, on_message),
+        }
     }
 
     /// The clock moved to `now` without input: closes merging windows and marks the

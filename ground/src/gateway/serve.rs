@@ -23,7 +23,7 @@ use zenoh::Wait;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::query::Query;
 
-use super::{Delivered, Gateway};
+use super::{Arrival, Delivered, Gateway};
 use crate::bus::{Bus, Request, keys};
 use crate::cli::SettingArg;
 use crate::device::Uplink;
@@ -182,16 +182,24 @@ impl Service {
 
     /// Bytes from link `link` at `now`: each message delivered is published.
     pub fn feed(&mut self, link: usize, now: f64, bytes: &[u8]) {
-        self.feed_with(link, now, bytes, |_| {});
+        self.arrive(link, now, Arrival::Bytes(bytes), |_| {});
     }
 
-    /// [`feed`](Self::feed), `deliver` also getting each message delivered (after it
-    /// is published), for a ground station that runs the service in its own loop.
-    pub fn feed_with(
+    /// Input of link `link` was dropped before the next bytes (its queue overflowed):
+    /// counted by the link's monitor, the frame being assembled abandoned.
+    pub fn input_gap(&mut self, link: usize, now: f64, dropped: crate::input::Drops) {
+        if !dropped.is_empty() {
+            self.arrive(link, now, Arrival::Gap(dropped), |_| {});
+        }
+    }
+
+    /// What arrived on link `link` at `now`; each message delivered is published, then
+    /// given to `deliver` (for a ground station that runs the service in its own loop).
+    pub fn arrive(
         &mut self,
         link: usize,
         now: f64,
-        bytes: &[u8],
+        arrival: Arrival<'_>,
         mut deliver: impl FnMut(&Delivered<'_>),
     ) {
         let Self {
@@ -200,7 +208,7 @@ impl Service {
             stats,
             ..
         } = self;
-        gateway.feed(link, now, bytes, |d| {
+        gateway.arrive(link, now, arrival, |d| {
             stats.delivered += 1;
             publish(bus, d);
             deliver(d);

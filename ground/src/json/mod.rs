@@ -96,7 +96,7 @@ pub fn alt_key(desc: &MessageDescriptor<'_>, index: usize) -> Option<String> {
         desc.fields.iter().any(|o| o.name == k)
             || desc.fields[..index]
                 .iter()
-                .any(|o| has_alt(o) && format!("{}_alt", o.name) == k)
+                .any(|o| has_alt(o) && k.strip_suffix("_alt") == Some(o.name))
     };
     while taken(&key) {
         key.push('_');

@@ -4,6 +4,8 @@
 //! Exit status: 0 after a complete run (all inputs ended, `--duration`, Ctrl-C), 1
 //! when the bus or a link failed to open, 2 for invalid options.
 
+use std::io::ErrorKind;
+use std::net::UdpSocket;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -11,11 +13,12 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use pprz_ground::bus::Bus;
+use pprz_ground::device::Source;
 use pprz_ground::device::Uplink;
 use pprz_ground::gateway::options::GatewayArgs;
 use pprz_ground::gateway::serve::Service;
 use pprz_ground::gateway::{Gateway, GatewayLink};
-use pprz_ground::input::{InputQueue, Pop};
+use pprz_ground::input::{DATAGRAM_BUFFER, End, InputQueue, Pop};
 use pprz_ground::monitor::Monitor;
 use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::SettingsTable;
@@ -27,6 +30,77 @@ const REQUESTS_PER_TURN: usize = 64;
 
 /// How often the figures are published, in seconds.
 const TICK: f64 = 1.0;
+
+/// How long the loop sleeps when no input came: the latency it may add.
+const IDLE_SLEEP: Duration = Duration::from_micros(200);
+
+/// Datagrams read from one UDP link per loop turn at most.
+const DATAGRAMS_PER_TURN: usize = 64;
+
+/// A link's input as the loop reads it.
+enum Input {
+    /// A UDP socket read by the loop itself (non-blocking): no thread between the
+    /// socket and the gateway, no hand-over per datagram.
+    Udp(UdpSocket, Vec<u8>),
+    /// A stream read by a thread of its own into a queue.
+    Queue(InputQueue),
+    /// The input ended.
+    Ended,
+}
+
+impl Input {
+    fn of(source: Source) -> Result<Self, String> {
+        match source {
+            Source::Udp(socket) => {
+                socket
+                    .set_nonblocking(true)
+                    .map_err(|e| format!("UDP socket: {e}"))?;
+                Ok(Self::Udp(socket, vec![0; DATAGRAM_BUFFER]))
+            }
+            stream => Ok(Self::Queue(stream.start())),
+        }
+    }
+
+    /// Feeds what arrived on link `i` to the service; whether anything did.
+    fn poll(&mut self, service: &mut Service, i: usize, now: f64, name: &str) -> bool {
+        match self {
+            Self::Udp(socket, buf) => {
+                for n in 0..DATAGRAMS_PER_TURN {
+                    match socket.recv_from(buf) {
+                        Ok((len, _)) => service.feed(i, now, &buf[..len]),
+                        Err(e) if e.kind() == ErrorKind::WouldBlock => return n > 0,
+                        Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                        Err(e) => {
+                            eprintln!("pprz-gateway: link {name}: {e}");
+                            *self = Self::Ended;
+                            return n > 0;
+                        }
+                    }
+                }
+                true
+            }
+            Self::Queue(q) => match q.pop(Duration::ZERO) {
+                Pop::Data {
+                    bytes,
+                    dropped_before,
+                } => {
+                    service.input_gap(i, now, dropped_before);
+                    service.feed(i, now, &bytes);
+                    true
+                }
+                Pop::Idle => false,
+                Pop::End(end) => {
+                    if let End::Error(e) = end {
+                        eprintln!("pprz-gateway: link {name}: {e}");
+                    }
+                    *self = Self::Ended;
+                    false
+                }
+            },
+            Self::Ended => false,
+        }
+    }
+}
 
 fn main() -> ExitCode {
     let args = GatewayArgs::parse();
@@ -73,7 +147,7 @@ fn run(
     table: Option<Arc<SettingsTable>>,
     specs: &[pprz_ground::device::LinkSpec],
 ) -> Result<(), String> {
-    let mut queues: Vec<Option<InputQueue>> = Vec::new();
+    let mut inputs: Vec<Input> = Vec::new();
     let mut uplinks: Vec<Uplink> = Vec::new();
     let mut links = Vec::new();
     for spec in specs {
@@ -87,7 +161,7 @@ fn run(
             spec.transport.any(),
             uplink.can_send(),
         ));
-        queues.push(Some(source.start()));
+        inputs.push(Input::of(source)?);
         uplinks.push(uplink);
     }
     // Nobody reads the messages' text here: the bus carries their JSON.
@@ -122,35 +196,22 @@ fn run(
     loop {
         let now = start.elapsed().as_secs_f64();
         let mut busy = false;
-        for (i, slot) in queues.iter_mut().enumerate() {
-            let Some(q) = slot else { continue };
-            match q.pop(Duration::ZERO) {
-                Pop::Data { bytes, .. } => {
-                    service.feed(i, now, &bytes);
-                    busy = true;
-                }
-                Pop::Idle => {}
-                Pop::End(end) => {
-                    if let pprz_ground::input::End::Error(e) = end {
-                        eprintln!("pprz-gateway: link {}: {e}", specs[i].name);
-                    }
-                    *slot = None;
-                }
-            }
+        for (i, input) in inputs.iter_mut().enumerate() {
+            busy |= input.poll(&mut service, i, now, &specs[i].name);
         }
         service.serve_requests(now, REQUESTS_PER_TURN);
         if now >= next_tick {
             service.tick(now);
             next_tick = now + TICK;
         }
-        let ended = queues.iter().all(Option::is_none);
+        let ended = inputs.iter().all(|i| matches!(i, Input::Ended));
         let timed_out = args.duration.is_some_and(|d| now >= d);
         if ended || timed_out || stop.load(Ordering::SeqCst) {
             service.tick(now);
             break;
         }
         if !busy {
-            std::thread::sleep(Duration::from_micros(500));
+            std::thread::sleep(IDLE_SLEEP);
         }
     }
     let summary = service.stats_json();
