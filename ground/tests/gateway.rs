@@ -52,6 +52,8 @@ struct Tools {
     python: PathBuf,
     messages: PathBuf,
     ids: Ids,
+    /// Messages in the set (each has a schema on the bus).
+    message_count: usize,
 }
 
 /// Message ids of the reference set.
@@ -92,6 +94,7 @@ fn tools(who: &str) -> Option<Tools> {
         python,
         messages,
         ids,
+        message_count: set.set().messages().len(),
     })
 }
 
@@ -450,7 +453,7 @@ fn thirty_two_aircraft_positions_reach_a_subscriber_with_the_monitors_values() {
     let mut client = Client::start(
         &tools,
         &gw.endpoint,
-        &["subscribe", "pprz/*/telemetry/GPS_INT"],
+        &["subscribe", "--schemas", "pprz/*/telemetry/GPS_INT"],
     );
     client.ready();
 
@@ -500,6 +503,24 @@ fn thirty_two_aircraft_positions_reach_a_subscriber_with_the_monitors_values() {
             assert_eq!(fields[f].to_string(), want[f], "{key} {f}: {line}");
         }
     }
+    // The gateway serves a JSON Schema for every message of the set, and each sample
+    // is valid against its message's (checked by the Python jsonschema package).
+    let served = lines.iter().find(|v| v["event"] == "schemas").unwrap();
+    assert_eq!(
+        served["count"].as_u64(),
+        Some(tools.message_count as u64),
+        "{served}"
+    );
+    let checked: Vec<&Value> = lines
+        .iter()
+        .filter(|v| {
+            v["event"] == "sample" && v["key"].as_str().is_some_and(|k| k.ends_with("/GPS_INT"))
+        })
+        .collect();
+    assert!(
+        checked.iter().all(|v| v["schema"] == "valid"),
+        "{checked:?}"
+    );
     let _ = gw.stop();
 }
 

@@ -84,7 +84,7 @@ impl Merge {
                     connect: Vec::new(),
                     multicast: false,
                 };
-                let bus = Bus::open(&config)?.serving()?;
+                let bus = Bus::open(&config)?.serving()?.serving_schemas(set)?;
                 let mut uplinks = Vec::with_capacity(sockets.len());
                 for (socket, to) in sockets.iter().zip(uplink_addresses(args)) {
                     let socket = socket.try_clone().map_err(|e| e.to_string())?;

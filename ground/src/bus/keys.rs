@@ -8,6 +8,7 @@
 //! | `pprz/<ac_id>/alive` | a liveliness token, present while the aircraft is live |
 //! | `pprz/<ac_id>/uplink/<MESSAGE>` | a command: the message's fields as a JSON object |
 //! | `pprz/<ac_id>/settings/<name>` | a query: read a setting, or set it (payload `{"value": x}`) |
+//! | `pprz/schema/<class>/<MESSAGE>` | a query: the JSON Schema of the message's JSON |
 //! | `pprz/gateway/<name>` | a liveliness token, present while the gateway runs |
 //! | `pprz/gateway/<name>/link/<link>` | one link's figures, as JSON, once a second |
 //! | `pprz/gateway/<name>/refused` | a refused command: its key, the reason, the counts |
@@ -35,12 +36,20 @@ pub const UPLINK_ALL: &str = "pprz/*/uplink/*";
 /// Every settings query: `pprz/*/settings/*`.
 pub const SETTINGS_ALL: &str = "pprz/*/settings/*";
 
+/// Every schema: `pprz/schema/**`.
+pub const SCHEMAS_ALL: &str = "pprz/schema/**";
+
 /// Every delivered frame: `pprz/*/frame`.
 pub const FRAMES_ALL: &str = "pprz/*/frame";
 
 /// A decoded message of aircraft `ac`.
 pub fn message(ac: u8, class: &str, name: &str) -> String {
     format!("{ROOT}/{ac}/{}/{}", topic_part(class), topic_part(name))
+}
+
+/// The JSON Schema of message `name` of class `class`.
+pub fn schema(class: &str, name: &str) -> String {
+    format!("{ROOT}/schema/{}/{}", topic_part(class), topic_part(name))
 }
 
 /// The PPRZ v2 frames of aircraft `ac`.

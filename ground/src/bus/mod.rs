@@ -119,6 +119,7 @@ pub struct Bus {
     put_errors: u64,
     _commands: Option<Subscriber<()>>,
     _settings: Option<Queryable<()>>,
+    _schemas: Option<Queryable<()>>,
 }
 
 impl Bus {
@@ -138,6 +139,7 @@ impl Bus {
             put_errors: 0,
             _commands: None,
             _settings: None,
+            _schemas: None,
         })
     }
 
@@ -170,6 +172,42 @@ impl Bus {
         self.requests = Some(rx);
         self._commands = Some(commands);
         self._settings = Some(settings);
+        Ok(self)
+    }
+
+    /// The same session answering schema queries on `pprz/schema/<class>/<MESSAGE>`
+    /// ([`keys::SCHEMAS_ALL`]) with the JSON Schema of each message of `set` the query's
+    /// key expression names (`pprz/schema/**`: every message): the schemas of the
+    /// messages' JSON, as the viewer publishes them. Answered on Zenoh's own threads.
+    ///
+    /// # Errors
+    /// Zenoh refused the declaration.
+    pub fn serving_schemas(mut self, set: crate::set::RuntimeSet) -> Result<Self, String> {
+        let messages: Vec<(
+            zenoh::key_expr::KeyExpr<'static>,
+            &'static pprz_messages::MessageDescriptor<'static>,
+        )> = set
+            .set()
+            .messages()
+            .iter()
+            .filter_map(|d| {
+                let key = keys::schema(d.class_name, d.name);
+                Some((zenoh::key_expr::KeyExpr::try_from(key).ok()?, d))
+            })
+            .collect();
+        let queryable = self
+            .session
+            .declare_queryable(keys::SCHEMAS_ALL)
+            .callback(move |query| {
+                for (key, desc) in &messages {
+                    if query.key_expr().intersects(key) {
+                        let _ = query.reply(key.clone(), crate::json::schema(desc)).wait();
+                    }
+                }
+            })
+            .wait()
+            .map_err(|e| format!("zenoh: {e}"))?;
+        self._schemas = Some(queryable);
         Ok(self)
     }
 

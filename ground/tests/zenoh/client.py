@@ -91,8 +91,42 @@ class Ready:
             sys.exit(1)
 
 
+def schemas(session):
+    """The gateway's JSON Schemas of every message, by (class, message), as validators."""
+    import jsonschema
+
+    out = {}
+    for reply in session.get("pprz/schema/**", timeout=10.0):
+        if reply.ok is None:
+            continue
+        _, _, cls, name = str(reply.ok.key_expr).split("/")
+        schema = json.loads(text(reply.ok.payload))
+        jsonschema.Draft202012Validator.check_schema(schema)
+        out[(cls, name)] = jsonschema.Draft202012Validator(schema)
+    emit({"event": "schemas", "count": len(out)})
+    return out
+
+
+def checked(validators):
+    """A sample handler that validates each message's JSON against its schema."""
+
+    def on(sample):
+        event = sample_json(sample)
+        parts = event["key"].split("/")
+        validator = validators.get((parts[2], parts[3])) if len(parts) == 4 else None
+        if validator is None:
+            event["schema"] = None
+        else:
+            errors = [e.message for e in validator.iter_errors(json.loads(event["payload"]))]
+            event["schema"] = "invalid: " + "; ".join(errors) if errors else "valid"
+        emit(event)
+
+    return on
+
+
 def subscribe(session, args):
-    subs = [session.declare_subscriber(k, lambda s: emit(sample_json(s))) for k in args.keys]
+    handler = checked(schemas(session)) if args.schemas else (lambda s: emit(sample_json(s)))
+    subs = [session.declare_subscriber(k, handler) for k in args.keys]
     stats = session.declare_subscriber(STATS, lambda s: emit(sample_json(s)))
     ready = Ready(session)
     ready.wait()
@@ -239,6 +273,11 @@ def main():
     s = sub.add_parser("subscribe")
     s.add_argument("keys", nargs="+")
     s.add_argument("--seconds", type=float, default=60.0)
+    s.add_argument(
+        "--schemas",
+        action="store_true",
+        help="validate each message's JSON against the schema the gateway serves",
+    )
     s = sub.add_parser("setting")
     s.add_argument("ac", type=int)
     s.add_argument("index", type=int)

@@ -181,7 +181,9 @@ fn run(
         )
         .with_policy(args.uplink_policy.into());
     let bus_config = args.bus();
-    let bus = Bus::open(&bus_config)?.serving()?;
+    let bus = Bus::open(&bus_config)?
+        .serving()?
+        .serving_schemas(*gateway.fleet().set())?;
     for endpoint in &bus_config.listen {
         eprintln!("zenoh: listening on {endpoint}");
     }
