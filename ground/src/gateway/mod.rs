@@ -6,9 +6,9 @@
 //! * Every message decoded on a link goes through [`dedup`]: a copy of a message that
 //!   another link delivered is counted and dropped.
 //! * A delivered message is framed again in PPRZ v2 (its source, destination, class,
-//!   id and payload, whatever the framing it came in) and decoded by one more
-//!   monitor, the fleet's: its figures are those of the merged stream, and that frame
-//!   is what the bus carries for tools that decode frames.
+//!   id and payload, whatever the framing it came in) and handed, decoded, to one more
+//!   monitor, the fleet's ([`Monitor::message`]): its figures are those of the merged
+//!   stream, and that frame is what the bus carries for tools that decode frames.
 //! * [`route`] notes which link brought each aircraft's messages first;
 //!   [`Gateway::uplink`] frames a command for each link it takes.
 //!
@@ -303,7 +303,7 @@ fn merge(
     let Some(frame) = pprz_v2(d) else {
         return;
     };
-    fleet.feed(now, &frame, |message| {
+    fleet.message(now, d, &frame, |message| {
         deliver(&Delivered {
             link,
             verdict,

@@ -89,6 +89,31 @@ impl Monitor {
         }
     }
 
+    /// A message another decoder delivered (a gateway's link), carried in `frame`: counted
+    /// and handled as if this monitor had decoded that frame from its input, without
+    /// decoding it again; `on_message` gets it with `frame` as its raw frame. Not for a
+    /// secure link (the message is taken as authenticated by whoever decoded it).
+    pub fn message(
+        &mut self,
+        now: f64,
+        m: &Decoded<'_>,
+        frame: &[u8],
+        mut on_message: impl FnMut(&Decoded<'_>),
+    ) {
+        self.advance(now);
+        self.bytes += frame.len() as u64;
+        self.byte_rate.add(now, frame.len() as u64);
+        let header = Header {
+            source: m.source,
+            destination: m.destination,
+            class: m.class_id,
+            id: m.msg_id,
+            rssi: None,
+        };
+        let handled = self.handle(now, &header, m.payload);
+        on_message(&handled.decoded(&header, m.payload, frame, m.log_time));
+    }
+
     /// End of input: decodes frames held behind an incomplete false start.
     pub fn flush(&mut self, now: f64, mut on_message: impl FnMut(&Decoded<'_>)) {
         self.advance(now);
