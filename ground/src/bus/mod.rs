@@ -230,16 +230,11 @@ impl Bus {
     /// to [`MAX_PUBLISHERS`]), with an attachment. Under congestion Zenoh drops the
     /// sample; a put it refuses is counted ([`put_errors`](Self::put_errors)).
     pub fn put(&mut self, key: &str, payload: impl Into<ZBytes>, attachment: Option<Vec<u8>>) {
-        if !self.publishers.contains_key(key) && self.publishers.len() < MAX_PUBLISHERS {
-            match self.session.declare_publisher(key.to_owned()).wait() {
-                Ok(p) => {
-                    self.publishers.insert(key.to_owned(), p);
-                }
-                Err(_) => {
-                    self.put_errors += 1;
-                    return;
-                }
-            }
+        if !self.publishers.contains_key(key)
+            && self.publishers.len() < MAX_PUBLISHERS
+            && let Ok(p) = self.session.declare_publisher(key.to_owned()).wait()
+        {
+            self.publishers.insert(key.to_owned(), p);
         }
         let result = match self.publishers.get(key) {
             Some(p) => p.put(payload).attachment(attachment).wait(),
