@@ -15,7 +15,7 @@
 //! | `pprz/gateway/<name>/stats` | the gateway's counters, as JSON, once a second |
 //!
 //! Names from the `messages.xml` and link names are escaped with
-//! [`topic_part`](crate::json::topic_part): letters, digits, `_` and `-` as they are,
+//! [`topic_part`]: letters, digits, `_` and `-` as they are,
 //! every other byte as `%XX`, so no name adds a level or a wildcard.
 //!
 //! ```
