@@ -42,32 +42,8 @@ app=${FOOTPRINT_APP:-pprz_footprint}
 # `send::<Msg>`): attributed to what they wrap.
 wrappers=${FOOTPRINT_WRAPPERS:-poll_task|send|encode}
 
-pick() {
-    local var=$1
-    shift
-    if [ -n "${!var:-}" ]; then
-        echo "${!var}"
-        return
-    fi
-    local sysroot
-    sysroot=$(rustc --print sysroot 2>/dev/null || true)
-    for tool in "$@"; do
-        if command -v "$tool" >/dev/null; then
-            command -v "$tool"
-            return
-        fi
-        for found in "$sysroot"/lib/rustlib/*/bin/"$tool"; do
-            if [ -x "$found" ]; then
-                echo "$found"
-                return
-            fi
-        done
-    done
-    echo "no $var tool found (tried: $*)" >&2
-    exit 1
-}
-NM=$(pick NM arm-none-eabi-nm llvm-nm nm)
-SIZE=$(pick SIZE arm-none-eabi-size llvm-size size)
+# SIZE and NM: tools that read ARM ELF and demangle Rust symbols.
+source "$root/bench/elf-tools.sh"
 
 elf=${1:-}
 enc_elf=${2:-}

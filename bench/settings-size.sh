@@ -26,32 +26,8 @@
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 
-pick() {
-    local var=$1
-    shift
-    if [ -n "${!var:-}" ]; then
-        echo "${!var}"
-        return
-    fi
-    local sysroot
-    sysroot=$(rustc --print sysroot 2>/dev/null || true)
-    for tool in "$@"; do
-        if command -v "$tool" >/dev/null; then
-            command -v "$tool"
-            return
-        fi
-        for found in "$sysroot"/lib/rustlib/*/bin/"$tool"; do
-            if [ -x "$found" ]; then
-                echo "$found"
-                return
-            fi
-        done
-    done
-    echo "no $var tool found (tried: $*)" >&2
-    exit 1
-}
-SIZE=$(pick SIZE arm-none-eabi-size llvm-size size)
-NM=$(pick NM arm-none-eabi-nm llvm-nm nm)
+# SIZE and NM: tools that read ARM ELF and demangle Rust symbols.
+source "$root/bench/elf-tools.sh"
 
 target_dir=${SETTINGS_SIZE_TARGET_DIR:-${CARGO_TARGET_DIR:-$root/target}/footprint-settings}
 (cd "$root/bench/footprint-settings" && cargo build -q --release --target-dir "$target_dir")
