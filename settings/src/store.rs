@@ -424,15 +424,7 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
             capacity,
             written: Cell::new(None),
         };
-        let mut map = open(
-            &mut self.flash,
-            &self.range,
-            &mut self.cache,
-            self.new_cache,
-        )?;
-        let stored = map.store_item(&mut self.buf.0, &SNAPSHOT_KEY, &item).await;
-        close(map, &mut self.cache);
-        stored.map_err(StoreError::from_map)?;
+        self.store_record(&item).await?;
         // Read back as a reboot would (an empty cache): the flash may not have taken
         // every byte (sequential-storage does not check), and the map then serves the
         // previous snapshot.
@@ -458,6 +450,23 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
         })
     }
 
+    /// Writes `record` under the snapshot key: the map opened, the item stored, the map
+    /// closed (its cache kept for the next operation).
+    async fn store_record<'v, V: Value<'v>>(
+        &mut self,
+        record: &V,
+    ) -> Result<(), StoreError<S::Error>> {
+        let mut map = open(
+            &mut self.flash,
+            &self.range,
+            &mut self.cache,
+            self.new_cache,
+        )?;
+        let stored = map.store_item(&mut self.buf.0, &SNAPSHOT_KEY, record).await;
+        close(map, &mut self.cache);
+        stored.map_err(StoreError::from_map)
+    }
+
     /// Forgets the stored snapshot: stores an empty one, so the next boot keeps every
     /// default (settings keep their values until then). As a store, a power cut leaves
     /// either the previous snapshot or the empty one. If the map cannot be read or take
@@ -474,15 +483,7 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
             Err(_) => return self.erase().await,
         }
         let empty = Record::decode(&EMPTY).map_err(|_| StoreError::Internal)?;
-        let mut map = open(
-            &mut self.flash,
-            &self.range,
-            &mut self.cache,
-            self.new_cache,
-        )?;
-        let stored = map.store_item(&mut self.buf.0, &SNAPSHOT_KEY, &empty).await;
-        close(map, &mut self.cache);
-        match stored.map_err(StoreError::from_map) {
+        match self.store_record(&empty).await {
             Ok(()) => Ok(()),
             Err(StoreError::Flash(e)) => Err(StoreError::Flash(e)),
             Err(_) => self.erase().await,
