@@ -1,22 +1,12 @@
 //! `pprz-codegen --settings FILE...`: generate, check, list; arguments that make no
 //! sense with settings are refused.
 
-use std::process::Command;
+mod common;
+
+use common::run;
 
 const THREE: &str = "tests/fixtures/settings/three.xml";
 const EDGE: &str = "tests/fixtures/settings/edge.xml";
-
-fn run(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_pprz-codegen"))
-        .args(args)
-        .output()
-        .expect("the CLI runs");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 #[test]
 fn generates_the_table_to_stdout_and_file() {
