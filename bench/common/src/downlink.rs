@@ -25,6 +25,8 @@ use pprz_telemetry::stats::DeviceStats;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use pprz_transports::PprzV2;
 
+use pprz_telemetry::SendOptions;
+
 use crate::stream::{AC_ID, attitude, gps};
 
 /// Bytes of the frame arena.
@@ -33,6 +35,9 @@ pub const ARENA_BYTES: usize = 4096;
 pub const QUEUE: usize = 16;
 /// Messages sent between two yields of the producer.
 pub const BATCH: usize = 8;
+/// Messages sent between two yields of the producer in the flood: three queues' worth,
+/// so every burst fills the queue and then evicts or drops.
+pub const FLOOD_BATCH: usize = 3 * QUEUE;
 
 /// The arena of the workload.
 pub type BenchArena = FrameArena<CriticalSectionRawMutex, ARENA_BYTES>;
@@ -87,17 +92,46 @@ pub fn run_downlink(
     count: usize,
     sink: &mut Sink,
 ) -> DeviceStats {
+    drive(downlink, port, count, BATCH, sink, |_| SendOptions::new())
+}
+
+/// The flood: `count` messages as in [`run_downlink`], in bursts of [`FLOOD_BATCH`] (three
+/// times the queue) at priorities cycling through 0, 64, 128 and 192, so each burst fills
+/// the queue, evicts less important frames and drops the rest (all counted by reason in
+/// the returned statistics). The send path's worst cases: eviction, refusal, the arena's
+/// release of an evicted frame.
+pub fn run_downlink_flood(
+    downlink: &BenchDownlink<'_>,
+    port: &mut Port<'_>,
+    count: usize,
+    sink: &mut Sink,
+) -> DeviceStats {
+    drive(downlink, port, count, FLOOD_BATCH, sink, |i| {
+        SendOptions::new().priority((i % 4) as u8 * 64)
+    })
+}
+
+/// Sends `count` messages (GPS and ATTITUDE alternating) with `options(i)`, `batch` between
+/// two yields, while the writer drains to `sink`; the device's statistics at the end.
+fn drive(
+    downlink: &BenchDownlink<'_>,
+    port: &mut Port<'_>,
+    count: usize,
+    batch: usize,
+    sink: &mut Sink,
+    options: impl Fn(usize) -> SendOptions,
+) -> DeviceStats {
     let producer = async {
         let mut i = 0;
         while i < count {
-            let end = (i + BATCH).min(count);
+            let end = (i + batch).min(count);
             while i < end {
                 let index = i as u32;
                 // A drop is counted in the device statistics, which the caller checks.
                 let _ = if i % 2 == 0 {
-                    downlink.send(&gps(index))
+                    downlink.send_with(&gps(index), options(i))
                 } else {
-                    downlink.send(&attitude(index))
+                    downlink.send_with(&attitude(index), options(i))
                 };
                 i += 1;
             }

@@ -130,3 +130,29 @@ pub fn exit(success: bool) -> ! {
         cortex_m::asm::nop();
     }
 }
+
+/// Whether QEMU's semihosting command line (`-semihosting-config ...,arg=A,arg=B`: "A B")
+/// has the word `word` (`SYS_GET_CMDLINE`). False when QEMU gives none.
+pub fn cmdline_has(word: &str) -> bool {
+    let mut buf = [0u8; 128];
+    // SYS_GET_CMDLINE's parameter block: the buffer's address and size; QEMU writes the
+    // command line into the buffer and its length into the second word.
+    let mut block: [u32; 2] = [buf.as_mut_ptr() as u32, buf.len() as u32];
+    let status: u32;
+    // Safety: `bkpt 0xab` with r0 = 0x15 (SYS_GET_CMDLINE) and r1 the address of `block`:
+    // QEMU writes at most `block[1]` bytes into `buf` and the length into `block[1]`, both
+    // live, writable locals of this function.
+    unsafe {
+        core::arch::asm!(
+            "bkpt #0xab",
+            inout("r0") 0x15u32 => status,
+            in("r1") block.as_mut_ptr(),
+            options(nostack),
+        );
+    }
+    let len = (block[1] as usize).min(buf.len());
+    status == 0
+        && buf[..len]
+            .split(|&b| b == b' ')
+            .any(|w| w == word.as_bytes())
+}

@@ -26,6 +26,7 @@
 #![no_main]
 
 mod hw;
+mod masked;
 mod settings;
 mod time_driver;
 
@@ -80,6 +81,12 @@ fn main() -> ! {
         "bench-m4: the telemetry stack and pprz-secure (salty) on mps2-an386, 1 tick = \
          {INSTRUCTIONS_PER_TICK} instructions under -icount shift=0"
     );
+    if hw::cmdline_has("masked") {
+        // The traced run (run.sh, second QEMU run): no timing, the instruction log counts.
+        masked::run(&mut out);
+        let _ = writeln!(out, "done");
+        hw::exit(true)
+    }
     calibrate(&mut out, &timer, &systick);
     workloads(&mut out, &timer);
     handshakes(&mut out, &timer);
@@ -90,7 +97,7 @@ fn main() -> ! {
 }
 
 /// Prints `message` and stops QEMU with a failure status.
-fn fail(message: &str) -> ! {
+pub(crate) fn fail(message: &str) -> ! {
     let _ = writeln!(Uart::init(), "error: {message}");
     hw::exit(false)
 }
@@ -169,7 +176,7 @@ fn result(out: &mut Uart, name: &str, ticks: u32, count: usize, unit: &str, what
 }
 
 /// Bytes of the encoded stream of workloads 1 and 2.
-const STREAM_LEN: usize = stream::stream_len(MESSAGES);
+pub(crate) const STREAM_LEN: usize = stream::stream_len(MESSAGES);
 
 /// Workloads 1-3 of the host benchmarks (`BENCHMARKS.md`, sections 1-3), each checked
 /// against its expected result after the measurement, as on the host.
