@@ -209,12 +209,30 @@ fn workloads(out: &mut Uart, timer: &Timer) {
     {
         fail("downlink");
     }
+    // The flood: bursts of three queues at four priorities (evictions and drops).
+    let flood_arena = dl_workload::BenchArena::new();
+    let downlink = dl_workload::new_downlink(&flood_arena);
+    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+    let (flood, t_flood) = ticks(now, u32::MAX, || {
+        dl_workload::run_downlink_flood(&downlink, &mut port, black_box(MESSAGES), &mut sink)
+    });
+    if !flood.is_balanced() || flood.submitted as usize != MESSAGES || flood_arena.stats().live != 0
+    {
+        fail("flood");
+    }
     let _ = writeln!(
         out,
         "workloads: {MESSAGES} messages (GPS/ATTITUDE alternating), {STREAM_LEN} bytes of \
          PPRZ v2; downlink queue high water {}, arena high water {} B",
         stats.queue_high_water,
         arena.stats().high_water
+    );
+    let _ = writeln!(
+        out,
+        "flood: {} sent, {} evicted, {} dropped",
+        flood.sent,
+        flood.evicted.total(),
+        flood.dropped.total()
     );
     result(
         out,
@@ -239,6 +257,14 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         MESSAGES,
         "message",
         "send -> arena -> queue -> writer -> sink (workload 3)",
+    );
+    result(
+        out,
+        "flood",
+        t_flood,
+        MESSAGES,
+        "message",
+        "the same, in bursts of 3 queues at 4 priorities: evictions and drops",
     );
 }
 
