@@ -60,15 +60,15 @@ class Region:
         self.masked = 0
         self.sections = 0
         self.longest = 0
-        # start function -> (sections, longest, total)
+        # start function -> (sections, shortest, longest, total)
         self.by_start = {}
 
     def section(self, length, start):
         self.sections += 1
         self.masked += length
         self.longest = max(self.longest, length)
-        n, longest, total = self.by_start.get(start, (0, 0, 0))
-        self.by_start[start] = (n + 1, max(longest, length), total + length)
+        n, shortest, longest, total = self.by_start.get(start, (0, length, 0, 0))
+        self.by_start[start] = (n + 1, min(shortest, length), max(longest, length), total + length)
 
 
 def analyse(log):
@@ -160,9 +160,9 @@ def main():
               f"masked {r.masked / count:7.1f} per {unit} ({share:4.1f} %), "
               f"{r.sections / count:.2f} sections per {unit}, longest {r.longest}, mean {mean:.1f}"
               f"   ({count} {unit}s: {what})")
-        worst = sorted(r.by_start.items(), key=lambda kv: -kv[1][1])[:4]
-        for start, (n, longest, total) in worst:
-            print(f"      longest {longest:4} mean {total / n:6.1f} x{n:<6} from {start}")
+        worst = sorted(r.by_start.items(), key=lambda kv: -kv[1][2])[:4]
+        for start, (n, shortest, longest, total) in worst:
+            print(f"      longest {longest:4} mean {total / n:6.1f} shortest {shortest:4} x{n:<6} from {start}")
 
 
 if __name__ == "__main__":
