@@ -1,0 +1,16 @@
+//! Puts `memory.x` where the linker finds it (cortex-m-rt's `link.x` includes it) and
+//! passes cortex-m-rt's `link.x` to the linker of the binaries. Here rather than in
+//! `.cargo/config.toml`, so that board crates of different chips can share a target
+//! directory.
+
+use std::path::PathBuf;
+use std::{env, fs};
+
+fn main() {
+    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+    fs::write(out.join("memory.x"), include_bytes!("memory.x")).expect("OUT_DIR is writable");
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rustc-link-arg-bins=-Tlink.x");
+    println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=build.rs");
+}
