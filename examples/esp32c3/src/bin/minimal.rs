@@ -71,7 +71,8 @@ async fn main(spawner: Spawner) {
     esp_rtos::start(timg0.timer0, p.FROM_CPU_INTR0);
 
     // UART1 through the GPIO matrix: GPIO4 TX, GPIO5 RX (not UART0's GPIO21/GPIO20, where
-    // the ROM bootloader prints at reset; not a strapping, flash or USB pin).
+    // the ROM bootloader prints at reset; not a strapping, flash or USB pin; the external
+    // JTAG's MTMS and MTDI, free when debugging over USB).
     let cfg = uart::Config::default().with_baudrate(57_600);
     let uart = Uart::new(p.UART1, cfg).expect("radio UART");
     let (rx, tx) = uart.with_tx(p.GPIO4).with_rx(p.GPIO5).into_async().split();
