@@ -1,0 +1,163 @@
+//! Telemetry over USB CDC-ACM on an STM32F767 (USB OTG FS: PA11 DM, PA12 DP, PA9 VBUS
+//! sense), with the one-link facade `Link`: the ground's PING, SETTING and GET_SETTING
+//! answered, an ATTITUDE every 100 ms, and a failsafe task that raises `GO_HOME` when
+//! the ground has been silent for 5 s.
+//!
+//! The port appears on the host as `/dev/ttyACM0` (USB id 1209:0001). While the cable is
+//! unplugged or the port closed, writes fail at once and are counted
+//! (`pprz_devices::usb`), so the queue keeps shedding by priority instead of stalling.
+//!
+//! Clocks: 216 MHz from an 8 MHz HSE in bypass mode (the ST-LINK's MCO on a
+//! Nucleo-F767ZI), 48 MHz for USB from the main PLL's Q output.
+
+#![no_std]
+#![no_main]
+
+use core::sync::atomic::{AtomicBool, Ordering};
+use embassy_executor::Spawner;
+use embassy_stm32::peripherals::USB_OTG_FS;
+use embassy_stm32::rcc::{
+    AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllQDiv, PllSource,
+    Sysclk, mux,
+};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::{bind_interrupts, usb};
+use embassy_time::{Duration, Ticker};
+use embassy_usb::UsbDevice;
+use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
+use panic_halt as _;
+use pprz_default::messages::{Set, telemetry::Attitude};
+use pprz_devices::usb::{CdcRx, CdcTx, UsbConfig, UsbCounters};
+use pprz_telemetry::{FrameArena, Health, HealthConfig, Link, LinkMutex};
+use static_cell::StaticCell;
+
+bind_interrupts!(struct Irqs { OTG_FS => usb::InterruptHandler<USB_OTG_FS>; });
+
+type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
+
+/// Pending frames.
+static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
+/// Aircraft 7; the ground is lost after 5 s of silence.
+static LINK: Link<'static, Set> =
+    Link::new(&ARENA, 7).health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
+/// Set when the ground has been silent for 5 s: your autopilot flies home.
+static GO_HOME: AtomicBool = AtomicBool::new(false);
+static USB_COUNTERS: UsbCounters = UsbCounters::new();
+/// USB buffers: OUT endpoints, configuration descriptor, control transfers, BOS descriptor.
+struct UsbBuffers {
+    ep_out: [u8; 256],
+    config_descriptor: [u8; 256],
+    control: [u8; 64],
+    bos_descriptor: [u8; 256],
+}
+static USB_BUFFERS: StaticCell<UsbBuffers> = StaticCell::new();
+static CDC_STATE: StaticCell<State> = StaticCell::new();
+
+#[embassy_executor::task]
+async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
+    device.run().await
+}
+
+#[embassy_executor::task]
+async fn link(tx: CdcTx<'static, 'static, UsbDriver>, rx: CdcRx<'static, 'static, UsbDriver>) {
+    let Err(e) = LINK.run(tx, rx).await; // writer + reader + services, forever
+    panic!("{e}");
+}
+
+#[embassy_executor::task]
+async fn attitude() {
+    let mut ticker = Ticker::every(Duration::from_millis(100));
+    loop {
+        ticker.next().await;
+        // A message that cannot be queued is counted in LINK.stats(), by reason.
+        let _ = LINK.send(&Attitude {
+            phi: 0.1,
+            psi: 0.0,
+            theta: 0.0,
+        });
+    }
+}
+
+#[embassy_executor::task]
+async fn failsafe() {
+    LINK.health().wait_for(Health::Up).await; // not before the ground was heard once
+    loop {
+        LINK.health().wait_for(Health::Lost).await;
+        GO_HOME.store(true, Ordering::Relaxed);
+        LINK.health().wait_for(Health::Up).await;
+    }
+}
+
+/// 216 MHz from the 8 MHz HSE, 48 MHz for USB. The Nucleo-F767ZI feeds the ST-LINK's
+/// 8 MHz clock into OSC_IN (`HseMode::Bypass`); a board with a crystal there needs
+/// `HseMode::Oscillator` and, for another frequency, another `prediv`. The HSI (1 %)
+/// is not accurate enough for USB full speed.
+fn clocks() -> embassy_stm32::Config {
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hse = Some(Hse {
+        freq: Hertz(8_000_000),
+        mode: HseMode::Bypass,
+    });
+    config.rcc.pll_src = PllSource::HSE;
+    config.rcc.pll = Some(Pll {
+        prediv: PllPreDiv::DIV4,   // 2 MHz PLL input
+        mul: PllMul::MUL216,       // 432 MHz VCO
+        divp: Some(PllPDiv::DIV2), // 216 MHz system clock
+        divq: Some(PllQDiv::DIV9), // 48 MHz for USB
+        divr: None,
+    });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = AHBPrescaler::DIV1;
+    config.rcc.apb1_pre = APBPrescaler::DIV4; // 54 MHz
+    config.rcc.apb2_pre = APBPrescaler::DIV2; // 108 MHz
+    // The F7 picks the 48 MHz clock with a mux (PLL Q or PLLSAI P); the F4 has none.
+    config.rcc.mux.clk48sel = mux::Clk48sel::PLL1_Q;
+    config
+}
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let p = embassy_stm32::init(clocks());
+
+    let bufs = USB_BUFFERS.init(UsbBuffers {
+        ep_out: [0; 256],
+        config_descriptor: [0; 256],
+        control: [0; 64],
+        bos_descriptor: [0; 256],
+    });
+    // An autopilot is self-powered (its own battery), so it senses VBUS on PA9 to see
+    // the cable come and go; the Nucleo-F767ZI wires PA9 to its user USB connector.
+    let mut driver_config = usb::Config::default();
+    driver_config.vbus_detection = true;
+    let driver = usb::Driver::new_fs(
+        p.USB_OTG_FS,
+        Irqs,
+        p.PA12,
+        p.PA11,
+        &mut bufs.ep_out,
+        driver_config,
+    );
+    let mut usb_config = embassy_usb::Config::new(0x1209, 0x0001);
+    usb_config.manufacturer = Some("pprz-embassy");
+    usb_config.product = Some("telemetry");
+    let mut builder = embassy_usb::Builder::new(
+        driver,
+        usb_config,
+        &mut bufs.config_descriptor,
+        &mut bufs.bos_descriptor,
+        &mut [],
+        &mut bufs.control,
+    );
+    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
+    let device = builder.build();
+    let (rx, tx) =
+        match pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default()) {
+            Ok(halves) => halves,
+            Err(e) => panic!("USB CDC-ACM: {e:?}"),
+        };
+
+    spawner.spawn(usb_device(device).unwrap());
+    spawner.spawn(link(tx, rx).unwrap());
+    spawner.spawn(attitude().unwrap());
+    spawner.spawn(failsafe().unwrap());
+}
