@@ -267,12 +267,10 @@ impl<'a, const Q: usize> State<'a, Q> {
         }
     }
 
-    /// Counts the outcome of the in-flight frame and releases it (see
+    /// Counts the outcome of the in-flight frame of `len` bytes (see
     /// [`FrameQueue::complete`]); the caller updates the queue counts.
     #[inline]
-    fn complete(&mut self, frame: FrameBuf<'_>, outcome: Result<(), DropReason>) {
-        let len = frame.len();
-        drop(frame);
+    fn complete(&mut self, len: usize, outcome: Result<(), DropReason>) {
         let priority = self.in_flight_priority;
         let relayed = self.in_flight_relayed;
         match outcome {
@@ -504,10 +502,10 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     }
 
     /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
-    /// write error, or refused by the device's link layer), and releases the frame's
-    /// memory. The release takes the arena's lock inside this queue's (one critical
-    /// section per frame instead of two; nothing takes them in the other order). With
-    /// `take_next`, then takes the most important frame as
+    /// write error, or refused by the device's link layer), then releases the frame's
+    /// memory once this queue's lock is let go (the two critical sections follow each
+    /// other instead of nesting, so interrupts wait for the longer of the two only). With
+    /// `take_next`, also takes the most important frame as
     /// [`try_receive`](Self::try_receive) (without a context) does, under the same lock:
     /// for a writer that writes the next frame as soon as a write completes.
     pub fn complete(
@@ -516,14 +514,17 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         outcome: Result<(), DropReason>,
         take_next: bool,
     ) -> Option<FrameBuf<'a>> {
-        self.with(|s| {
-            s.complete(frame, outcome);
+        let len = frame.len();
+        let next = self.with(|s| {
+            s.complete(len, outcome);
             let next = if take_next { s.receive(None) } else { None };
             if next.is_none() {
                 s.update_queued();
             }
             next
-        })
+        });
+        drop(frame);
+        next
     }
 }
 
