@@ -16,8 +16,9 @@
 //! It is a binary heap: equal priorities come out in no particular order unless the key
 //! carries a sequence number, it cannot evict, and its 0.8.0 `poll_ready_to_send` is
 //! buggy. This queue is built on embassy-sync's blocking [`Mutex`] (a critical section
-//! on boards, so interrupt-free contexts on any executor may send) and a
-//! [`WakerRegistration`] for its one consumer, the device's writer task. Entries are
+//! on boards, so interrupt-free contexts on any executor may send) and the waker of its
+//! one consumer, the device's writer task, which is taken under the lock and woken after
+//! it (so the executor's wake runs with interrupts enabled). Entries are
 //! kept sorted in a ring buffer (`heapless::Deque`), so sending takes the front one, FIFO
 //! order needs no sequence number, and the eviction candidate is found by binary search.
 //!
@@ -28,11 +29,10 @@
 //! evicted one back: both O(Q), where `Q` is the queue capacity, typically 8..64.
 
 use core::cell::RefCell;
-use core::task::Context;
+use core::task::{Context, Waker};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
-use embassy_sync::waitqueue::WakerRegistration;
 
 use crate::arena::FrameBuf;
 use crate::stats::{DeviceStats, DropReason};
@@ -108,7 +108,8 @@ struct State<'a, const Q: usize> {
     in_flight: bool,
     in_flight_priority: u8,
     in_flight_relayed: bool,
-    waker: WakerRegistration,
+    /// The writer's waker while it waits for a frame: taken under the lock, woken after.
+    waker: Option<Waker>,
     stats: DeviceStats,
 }
 
@@ -247,23 +248,30 @@ impl<'a, const Q: usize> State<'a, Q> {
         self.lost(entry.priority, entry.relayed);
     }
 
-    /// Takes the most important frame (see [`FrameQueue::try_receive`]).
+    /// Takes the most important frame (see [`FrameQueue::try_receive`]); when there is
+    /// none, registers the waker of `cx` and returns the one it replaces (another task's),
+    /// for the caller to wake once the lock is let go.
     #[inline]
-    fn receive(&mut self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
+    fn receive(&mut self, cx: Option<&mut Context<'_>>) -> (Option<FrameBuf<'a>>, Option<Waker>) {
         match self.entries.pop_front() {
             Some(entry) => {
                 self.in_flight = true;
                 self.in_flight_priority = entry.priority;
                 self.in_flight_relayed = entry.relayed;
                 self.update_queued();
-                Some(entry.frame)
+                (Some(entry.frame), None)
             }
-            None => {
-                if let Some(cx) = cx {
-                    self.waker.register(cx.waker());
-                }
-                None
-            }
+            None => (None, cx.and_then(|cx| self.register(cx.waker()))),
+        }
+    }
+
+    /// Registers `waker` as the writer's; returns the waker it replaces if that one wakes
+    /// another task (woken by the caller after the lock, so that task can register again).
+    #[inline]
+    fn register(&mut self, waker: &Waker) -> Option<Waker> {
+        match &self.waker {
+            Some(w) if w.will_wake(waker) => None,
+            _ => self.waker.replace(waker.clone()),
         }
     }
 
@@ -321,7 +329,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 in_flight: false,
                 in_flight_priority: 0,
                 in_flight_relayed: false,
-                waker: WakerRegistration::new(),
+                waker: None,
                 stats: DeviceStats {
                     submitted: 0,
                     sent: 0,
@@ -405,8 +413,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 s.stats.superseded = s.stats.superseded.wrapping_add(1);
                 let l = s.level(priority);
                 l.superseded = l.superseded.wrapping_add(1);
-                s.waker.wake();
-                return (Pushed::Superseded, None);
+                return (Pushed::Superseded, None, s.waker.take());
             }
             let mut result = Pushed::Queued;
             if s.entries.len() >= depth {
@@ -423,7 +430,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                     _ => {
                         s.dropped(DropReason::QueueFull, priority, relayed);
                         s.update_queued();
-                        return (Pushed::Dropped, Some(frame));
+                        return (Pushed::Dropped, Some(frame), None);
                     }
                 }
             }
@@ -439,15 +446,19 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 // Unreachable while depth <= Q; counted rather than lost if it ever is.
                 s.dropped(DropReason::QueueFull, priority, relayed);
                 s.update_queued();
-                return (Pushed::Dropped, Some(entry.frame));
+                return (Pushed::Dropped, Some(entry.frame), None);
             }
             s.update_queued();
-            s.waker.wake();
-            (result, None)
+            (result, None, s.waker.take())
         });
+        let (pushed, rejected, waker) = result;
+        // The writer runs (or the executor queues it) with interrupts enabled.
+        if let Some(waker) = waker {
+            waker.wake();
+        }
         drop(released);
-        drop(result.1);
-        result.0
+        drop(rejected);
+        pushed
     }
 
     /// The eviction candidate, if any.
@@ -483,22 +494,25 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// The length of the most important frame, without taking it; with a context,
     /// registers the waker when there is none.
     pub fn peek_len(&self, cx: Option<&mut Context<'_>>) -> Option<usize> {
-        self.with(|s| match s.entries.front() {
-            Some(entry) => Some(entry.frame.len()),
-            None => {
-                if let Some(cx) = cx {
-                    s.waker.register(cx.waker());
-                }
-                None
-            }
-        })
+        let (len, replaced) = self.with(|s| match s.entries.front() {
+            Some(entry) => (Some(entry.frame.len()), None),
+            None => (None, cx.and_then(|cx| s.register(cx.waker()))),
+        });
+        if let Some(waker) = replaced {
+            waker.wake();
+        }
+        len
     }
 
     /// Takes the most important frame and marks it in flight; with a context, registers
     /// the waker when there is none. For the device's one consumer, which reports the
     /// outcome with [`complete`](Self::complete).
     pub fn try_receive(&self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
-        self.with(|s| s.receive(cx))
+        let (frame, replaced) = self.with(|s| s.receive(cx));
+        if let Some(waker) = replaced {
+            waker.wake();
+        }
+        frame
     }
 
     /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
@@ -517,7 +531,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let len = frame.len();
         let next = self.with(|s| {
             s.complete(len, outcome);
-            let next = if take_next { s.receive(None) } else { None };
+            let next = if take_next { s.receive(None).0 } else { None };
             if next.is_none() {
                 s.update_queued();
             }
