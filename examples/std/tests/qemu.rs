@@ -1,21 +1,24 @@
-//! The emulated Cortex-M4 firmware (`examples/mps2-an386`) under QEMU's `mps2-an386`
-//! machine, with this test as its ground station: QEMU carries the firmware's UART0 over
-//! a socket; the test decodes the telemetry, sends PING and SETTING frames up, and
-//! checks that PONG and the DL_VALUE acknowledgement come back and that the periodic
-//! telemetry of `telemetry.xml` arrives at its configured rates, measured on the guest's
-//! own clock (GPS_INT's `tow` field). A second test cuts the uplink: the firmware's
-//! link-loss failsafe flies home, and the `ap_mode` setting brings it back to NAV. A
-//! third stores the gain in the firmware's settings flash (the machine's PSRAM, kept in
-//! a file), kills QEMU, starts it again on the same file and reads the gain back.
+//! The emulated firmwares under QEMU, with this test as their ground station: the
+//! Cortex-M4 one (`examples/mps2-an386`, QEMU's `mps2-an386` machine) and the Cortex-M0
+//! one, a core without compare-and-swap (`examples/microbit`, QEMU's `microbit` machine,
+//! nRF51822 with 32 KiB of RAM). QEMU carries the firmware's UART0 over a socket; the
+//! test decodes the telemetry, sends PING and SETTING frames up, and checks that PONG and
+//! the DL_VALUE acknowledgement come back and that the periodic telemetry of
+//! `telemetry.xml` arrives at its configured rates, measured on the guest's own clock
+//! (GPS_INT's `tow` field). A second test cuts the uplink: the firmware's link-loss
+//! failsafe flies home, and the `ap_mode` setting brings it back to NAV. Both run on
+//! each board. On mps2-an386 only, a third stores the gain in the firmware's settings
+//! flash (the machine's PSRAM, kept in a file), kills QEMU, starts it again on the same
+//! file and reads the gain back, and a fourth runs the secure firmware.
 //!
 //! QEMU's serial port is a Unix socket of this test's own (a path unique to the process
 //! and the test), so tests running side by side never race for a TCP port.
 //!
-//! Needs `qemu-system-arm` (or `PPRZ_QEMU`) and the firmware ELF, built first with
-//! `cargo build --release` in `examples/mps2-an386` (or named by `PPRZ_QEMU_FIRMWARE`).
-//! Without either the test is skipped with a note on stderr, unless
-//! `PPRZ_REQUIRE_QEMU=1` (CI) makes that a failure. QEMU is killed at the end, also when
-//! the test fails.
+//! Needs `qemu-system-arm` (or `PPRZ_QEMU`) and the firmware ELFs, built first with
+//! `cargo build --release` in `examples/mps2-an386` and `examples/microbit` (or named by
+//! `PPRZ_QEMU_FIRMWARE` and `PPRZ_QEMU_MICROBIT_FIRMWARE`). Without them a test is
+//! skipped with a note on stderr, unless `PPRZ_REQUIRE_QEMU=1` (CI) makes that a
+//! failure. QEMU is killed at the end, also when the test fails.
 
 use std::io::{ErrorKind, Read, Write as _};
 use std::os::unix::net::UnixStream;
@@ -46,31 +49,77 @@ const DEADLINE: Duration = Duration::from_secs(20);
 const GAIN_INDEX: u8 = 2;
 const GAIN: f32 = 2.5;
 
+/// An emulated board: its QEMU machine and the crate of its firmware.
+#[derive(Debug, Clone, Copy)]
+struct Board {
+    /// QEMU's machine (`-M`), also the board's name in sockets and messages.
+    machine: &'static str,
+    /// QEMU's other machine options.
+    options: &'static [&'static str],
+    /// The firmware crate's directory, in `examples/`.
+    crate_dir: &'static str,
+    /// The firmware's Rust target.
+    target: &'static str,
+    /// The variable that names another firmware ELF.
+    firmware_var: &'static str,
+    /// Whether the machine has a PSRAM QEMU can keep in a file.
+    psram: bool,
+}
+
+/// The emulated Cortex-M4 (ARM MPS2 with the AN386 image).
+const MPS2_AN386: Board = Board {
+    machine: "mps2-an386",
+    options: &[],
+    crate_dir: "mps2-an386",
+    target: "thumbv7em-none-eabihf",
+    firmware_var: "PPRZ_QEMU_FIRMWARE",
+    psram: true,
+};
+
+/// The emulated Cortex-M0 without compare-and-swap (BBC micro:bit, nRF51822), with the
+/// nRF51822-QFAC's 32 KiB of RAM (QEMU's default is 16 KiB, too little for the firmware).
+const MICROBIT: Board = Board {
+    machine: "microbit",
+    options: &["-global", "nrf51-soc.sram-size=32768"],
+    crate_dir: "microbit",
+    target: "thumbv6m-none-eabi",
+    firmware_var: "PPRZ_QEMU_MICROBIT_FIRMWARE",
+    psram: false,
+};
+
 /// QEMU, killed and reaped when dropped (so also when the test panics).
 struct Qemu {
     child: Child,
 }
 
 impl Qemu {
-    /// QEMU running `firmware`, its UART0 on `socket`; with `psram`, the machine's PSRAM
-    /// (the firmware's settings flash) is that file, which keeps what the guest writes.
+    /// QEMU emulating `board`, running `firmware`, its UART0 on `socket`; with `psram`,
+    /// the machine's PSRAM (the firmware's settings flash) is that file, which keeps what
+    /// the guest writes.
     fn start(
         qemu: &str,
+        board: Board,
         firmware: &Path,
         socket: &Path,
         psram: Option<&Path>,
     ) -> std::io::Result<Self> {
         let mut command = Command::new(qemu);
         match psram {
-            Some(file) => command
-                .args(["-M", "mps2-an386,memory-backend=psram", "-object"])
-                .arg(format!(
-                    "memory-backend-file,id=psram,size=16M,mem-path={},share=on",
-                    file.display()
-                )),
-            None => command.args(["-M", "mps2-an386"]),
+            Some(file) => {
+                assert!(board.psram, "{} has no PSRAM", board.machine);
+                command
+                    .arg("-M")
+                    .arg(format!("{},memory-backend=psram", board.machine))
+                    .arg("-object")
+                    .arg(format!(
+                        "memory-backend-file,id=psram,size=16M,mem-path={},share=on",
+                        file.display()
+                    ))
+            }
+            None => command.args(["-M", board.machine]),
         };
         let child = command
+            .args(board.options)
             .args(["-nographic", "-monitor", "none", "-serial"])
             .arg(format!("unix:{},server=on,wait=on", socket.display()))
             .arg("-kernel")
@@ -170,18 +219,21 @@ fn skip(reason: &str) {
     let _ = writeln!(std::io::stderr(), "qemu test skipped: {reason}");
 }
 
-/// The firmware binary `name`: `PPRZ_QEMU_FIRMWARE` (with `-secure` appended for the
-/// secure one), else the release build in the firmware crate's own target directory,
-/// else in `CARGO_TARGET_DIR` (where it lands when that is set).
-fn firmware_path(name: &str) -> PathBuf {
-    if let Some(path) = std::env::var_os("PPRZ_QEMU_FIRMWARE") {
+/// The firmware binary `name` of `board`: its variable (`PPRZ_QEMU_FIRMWARE` for
+/// mps2-an386, with `-secure` appended for the secure one), else the release build in the
+/// firmware crate's own target directory, else in `CARGO_TARGET_DIR` (where it lands
+/// when that is set).
+fn firmware_path(board: Board, name: &str) -> PathBuf {
+    if let Some(path) = std::env::var_os(board.firmware_var) {
         let mut path = path;
         path.push(name.strip_prefix("aircraft").unwrap_or_default());
         return PathBuf::from(path);
     }
-    let elf = format!("thumbv7em-none-eabihf/release/{name}");
+    let elf = format!("{}/release/{name}", board.target);
     let local = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../mps2-an386/target")
+        .join("..")
+        .join(board.crate_dir)
+        .join("target")
         .join(&elf);
     match std::env::var_os("CARGO_TARGET_DIR") {
         Some(dir) if !local.is_file() => Path::new(&dir).join(elf),
@@ -189,21 +241,24 @@ fn firmware_path(name: &str) -> PathBuf {
     }
 }
 
-/// Boots firmware `name` under QEMU and connects to its UART0 (a socket named after
-/// `test`, which no other test of the process uses), or `None` (the test is skipped, or
-/// fails where QEMU is required) when QEMU or the firmware is missing.
-fn boot(name: &str, test: &str) -> Option<Serial> {
-    boot_with(name, test, None)
+/// Boots firmware `name` of `board` under QEMU and connects to its UART0 (a socket named
+/// after the board and `test`, which no other test of the process uses), or `None` (the
+/// test is skipped, or fails where QEMU is required) when QEMU or the firmware is
+/// missing.
+fn boot(board: Board, name: &str, test: &str) -> Option<Serial> {
+    boot_with(board, name, test, None)
 }
 
 /// [`boot`], the machine's PSRAM in the file `psram` if given.
-fn boot_with(name: &str, test: &str, psram: Option<&Path>) -> Option<Serial> {
+fn boot_with(board: Board, name: &str, test: &str, psram: Option<&Path>) -> Option<Serial> {
     let qemu = std::env::var("PPRZ_QEMU").unwrap_or_else(|_| "qemu-system-arm".to_owned());
-    let firmware = firmware_path(name);
+    let firmware = firmware_path(board, name);
     if !firmware.is_file() {
         skip(&format!(
-            "no firmware at {} (build it: cd examples/mps2-an386 && cargo build --release)",
-            firmware.display()
+            "no {} firmware at {} (build it: cd examples/{} && cargo build --release)",
+            board.machine,
+            firmware.display(),
+            board.crate_dir
         ));
         return None;
     }
@@ -217,9 +272,13 @@ fn boot_with(name: &str, test: &str, psram: Option<&Path>) -> Option<Serial> {
         skip(&format!("{qemu} is not installed"));
         return None;
     }
-    let socket = std::env::temp_dir().join(format!("pprz-qemu-{}-{test}.sock", std::process::id()));
+    let socket = std::env::temp_dir().join(format!(
+        "pprz-qemu-{}-{}-{test}.sock",
+        std::process::id(),
+        board.machine
+    ));
     let _ = std::fs::remove_file(&socket);
-    let mut guard = Qemu::start(&qemu, &firmware, &socket, psram).expect("QEMU starts");
+    let mut guard = Qemu::start(&qemu, board, &firmware, &socket, psram).expect("QEMU starts");
     let stream = guard.connect(&socket).unwrap_or_else(|e| panic!("{e}"));
     // The connection is made: the path is no longer needed.
     let _ = std::fs::remove_file(&socket);
@@ -270,7 +329,20 @@ struct Received {
 
 #[test]
 fn firmware_answers_and_sends_telemetry_at_configured_rates() {
-    let Some(mut serial) = boot("aircraft", "rates") else {
+    answers_and_sends_telemetry_at_configured_rates(MPS2_AN386);
+}
+
+/// [`firmware_answers_and_sends_telemetry_at_configured_rates`] on the Cortex-M0 without
+/// compare-and-swap.
+#[test]
+fn microbit_firmware_answers_and_sends_telemetry_at_configured_rates() {
+    answers_and_sends_telemetry_at_configured_rates(MICROBIT);
+}
+
+/// The firmware of `board` answers PING and SETTING, and sends the periodic telemetry at
+/// the configured rates on its own clock.
+fn answers_and_sends_telemetry_at_configured_rates(board: Board) {
+    let Some(mut serial) = boot(board, "aircraft", "rates") else {
         return;
     };
     let set = default_set();
@@ -442,9 +514,10 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
     }
     let _ = writeln!(
         std::io::stderr(),
-        "qemu: {} frames in {wall:.1} s (first byte after {:.0} ms; guest clock at the end \
-         {last_tow} ms); PONG after {:.1} ms, gain acknowledged after {:.1} ms; over \
+        "qemu {}: {} frames in {wall:.1} s (first byte after {:.0} ms; guest clock at the \
+         end {last_tow} ms); PONG after {:.1} ms, gain acknowledged after {:.1} ms; over \
          {span_ms} ms: {}",
+        board.machine,
         stats.frames,
         first_byte.unwrap_or(0.0) * 1e3,
         rtt * 1e3,
@@ -460,7 +533,7 @@ fn firmware_answers_and_sends_telemetry_at_configured_rates() {
 /// exchange), and none is rejected by the ground.
 #[test]
 fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
-    let Some(mut serial) = boot("aircraft-secure", "secure") else {
+    let Some(mut serial) = boot(MPS2_AN386, "aircraft-secure", "secure") else {
         return;
     };
     let keys = KeyFile::parse(pprz_secure::keys::INSECURE_TEST_KEY_FILE).expect("test keys");
@@ -551,7 +624,7 @@ fn secure_firmware_completes_the_handshake_and_answers_encrypted_pings() {
 const AP_MODE_INDEX: u8 = 3;
 const NAV: u8 = ApMode::Nav.raw();
 const HOME: u8 = ApMode::Home.raw();
-/// The firmware's lost timeout (`HEALTH` in its `board.rs`), in ms of guest time: after
+/// The firmwares' lost timeout (`HEALTH` in their `board.rs`), in ms of guest time: after
 /// this long without a frame from the ground, the vehicle flies home.
 const LOST_AFTER_MS: u32 = 2_000;
 /// Seconds between the test's PINGs while it keeps the link up (the firmware's link is
@@ -684,7 +757,20 @@ fn default_period_ms<M: Message>() -> u32 {
 /// bounds the test against hangs.
 #[test]
 fn firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting() {
-    let Some(mut serial) = boot("aircraft", "link-loss") else {
+    flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting(MPS2_AN386);
+}
+
+/// [`firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting`] on the
+/// Cortex-M0 without compare-and-swap.
+#[test]
+fn microbit_firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting() {
+    flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting(MICROBIT);
+}
+
+/// The link-loss failsafe of the firmware of `board` (see
+/// [`firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting`]).
+fn flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting(board: Board) {
+    let Some(mut serial) = boot(board, "aircraft", "link-loss") else {
         return;
     };
     let set = default_set();
@@ -784,9 +870,10 @@ fn firmware_flies_home_when_the_link_is_lost_and_back_to_nav_on_the_setting() {
         .collect();
     let _ = writeln!(
         std::io::stderr(),
-        "qemu link loss: HOME {silence} ms of guest time after the last PONG (lost after \
+        "qemu {} link loss: HOME {silence} ms of guest time after the last PONG (lost after \
          {LOST_AFTER_MS} ms); ap_mode up {up:?}, silent {silent:?}, until the SETTING \
          {setting:?}, after it {back:?}; steps ended (wall clock): {}; {wall:.1} s in all",
+        board.machine,
         ended.join(", ")
     );
 }
@@ -906,7 +993,7 @@ fn set_and_store(serial: &mut Serial, set: &RuntimeSet) -> Values {
 #[test]
 fn firmware_keeps_the_stored_gain_across_a_restart() {
     let psram = PsramFile::new("persist");
-    let Some(mut serial) = boot_with("aircraft", "persist", Some(&psram.0)) else {
+    let Some(mut serial) = boot_with(MPS2_AN386, "aircraft", "persist", Some(&psram.0)) else {
         return;
     };
     let set = default_set();
@@ -917,8 +1004,8 @@ fn firmware_keeps_the_stored_gain_across_a_restart() {
     drop(serial);
     assert!(psram.written(), "nothing in the settings flash");
 
-    let mut serial =
-        boot_with("aircraft", "persist-again", Some(&psram.0)).expect("QEMU booted once already");
+    let mut serial = boot_with(MPS2_AN386, "aircraft", "persist-again", Some(&psram.0))
+        .expect("QEMU booted once already");
     let get = uplink::frame(
         &set,
         AnyTransport::from(PprzV2::new()),
