@@ -18,15 +18,19 @@
 //! buggy. This queue is built on embassy-sync's blocking [`Mutex`] (a critical section
 //! on boards, so interrupt-free contexts on any executor may send) and the waker of its
 //! one consumer, the device's writer task, which is taken under the lock and woken after
-//! it (so the executor's wake runs with interrupts enabled). Entries are
-//! kept sorted in a ring buffer (`heapless::Deque`), so sending takes the front one, FIFO
-//! order needs no sequence number, and the eviction candidate is found by binary search.
+//! it (so the executor's wake runs with interrupts enabled). The waiting frames are one
+//! FIFO list per priority present, linked through a pool of `Q` slots ([`Lists`]), so
+//! FIFO order needs no sequence number and no frame moves once stored.
 //!
 //! # Time Complexity
-//! `receive` is O(1). `push` is O(1) when the new frame is not more important than the
-//! least important waiting one (all frames of one priority, say), else it moves the new
-//! entry forward past the less important ones; evicting moves the entries behind the
-//! evicted one back: both O(Q), where `Q` is the queue capacity, typically 8..64.
+//! Under the lock, every operation is a few steps, whatever the queue holds: taking the
+//! most important frame (the head of the most important list), queueing a frame (at the
+//! tail of its priority's list), evicting the oldest of the least important (the head of
+//! the least important list). The only step that depends on the queue is finding the
+//! list of a priority among the priorities waiting, and moving that small array when a
+//! priority appears or disappears: O(P), where `P` is the number of distinct priorities
+//! waiting (a few in practice, at most `Q`). A state message's lookup walks the list of
+//! its own priority.
 
 use core::cell::RefCell;
 use core::task::{Context, Waker};
@@ -98,11 +102,213 @@ fn older(a: u32, b: u32) -> bool {
     (a.wrapping_sub(b) as i32) < 0
 }
 
+/// Slot index plus one, `0` for none: so that an empty [`Lists`] is all zero bytes.
+type Link = u16;
+
+/// A priority of the queue: the FIFO list of its waiting frames, oldest first.
+#[derive(Clone, Copy)]
+struct Level {
+    priority: u8,
+    /// First (oldest) and last (newest) slot of the list.
+    head: Link,
+    tail: Link,
+}
+
+/// The waiting frames of a queue: one FIFO list per priority present, linked through a
+/// pool of `Q` slots, and the priorities in ascending order. Every operation the queue
+/// makes under its lock is a few steps whatever the queue holds: taking the most
+/// important frame (the head of the last level), appending a frame to its priority's
+/// list, evicting the oldest of the least important (the head of the first level). Only
+/// a priority that appears or disappears moves the small level array (at most one entry
+/// per distinct priority waiting); frames never move once stored.
+struct Lists<'a, const Q: usize> {
+    slots: [Option<Entry<'a>>; Q],
+    /// Next slot in its level's list, or in the free list.
+    next: [Link; Q],
+    /// Released slots, to be used again.
+    free: Link,
+    /// Slots `0..fresh` have been used at least once; the others never were.
+    fresh: u16,
+    /// The levels present, ascending by priority: `levels[..count]`.
+    levels: [Level; Q],
+    count: u16,
+    len: u16,
+}
+
+impl<'a, const Q: usize> Lists<'a, Q> {
+    const fn new() -> Self {
+        Self {
+            slots: [const { None }; Q],
+            next: [0; Q],
+            free: 0,
+            fresh: 0,
+            levels: [Level {
+                priority: 0,
+                head: 0,
+                tail: 0,
+            }; Q],
+            count: 0,
+            len: 0,
+        }
+    }
+
+    /// Waiting frames.
+    #[inline]
+    fn len(&self) -> usize {
+        usize::from(self.len)
+    }
+
+    /// The levels present, ascending.
+    #[inline]
+    fn levels(&self) -> &[Level] {
+        &self.levels[..usize::from(self.count)]
+    }
+
+    #[inline]
+    fn slot(&self, link: Link) -> Option<&Entry<'a>> {
+        self.slots.get(usize::from(link).checked_sub(1)?)?.as_ref()
+    }
+
+    /// The most important, oldest frame.
+    #[inline]
+    fn front(&self) -> Option<&Entry<'a>> {
+        self.slot(self.levels().last()?.head)
+    }
+
+    /// The eviction candidate: the oldest frame of the least important priority.
+    #[inline]
+    fn candidate(&self) -> Option<&Entry<'a>> {
+        self.slot(self.levels().first()?.head)
+    }
+
+    /// Takes the head of level `at` (`at < count`), dropping the level when it empties.
+    #[inline]
+    fn pop_level(&mut self, at: usize) -> Option<Entry<'a>> {
+        let head = self.levels.get(at)?.head;
+        let i = usize::from(head).checked_sub(1)?;
+        let entry = self.slots.get_mut(i)?.take()?;
+        let next = core::mem::replace(&mut self.next[i], self.free);
+        self.free = head;
+        self.len -= 1;
+        if next == 0 {
+            // The level empties: the ones above it move down (none when it is the most
+            // important, the usual case). A plain loop: a few small entries.
+            let count = usize::from(self.count);
+            for j in at..count - 1 {
+                self.levels[j] = self.levels[j + 1];
+            }
+            self.count -= 1;
+        } else {
+            self.levels[at].head = next;
+        }
+        Some(entry)
+    }
+
+    /// Takes the most important, oldest frame.
+    #[inline]
+    fn pop_front(&mut self) -> Option<Entry<'a>> {
+        self.pop_level(usize::from(self.count).checked_sub(1)?)
+    }
+
+    /// Takes the eviction candidate.
+    #[inline]
+    fn pop_candidate(&mut self) -> Option<Entry<'a>> {
+        self.pop_level(0)
+    }
+
+    /// Appends `entry` behind the frames of its priority. `Err` if all `Q` slots are in use.
+    #[inline]
+    fn push(&mut self, entry: Entry<'a>) -> Result<(), Entry<'a>> {
+        let link = if self.free != 0 {
+            self.free
+        } else if usize::from(self.fresh) < Q {
+            self.fresh += 1;
+            self.fresh
+        } else {
+            return Err(entry);
+        };
+        let i = usize::from(link) - 1;
+        if self.free == link {
+            self.free = self.next[i];
+        }
+        self.next[i] = 0;
+        let priority = entry.priority;
+        // The slot is empty (free or fresh): fills it without the drop of an old value.
+        self.slots[i].get_or_insert(entry);
+        self.len += 1;
+        // The level of `priority`: searched from the most important end, where most
+        // frames go.
+        let count = usize::from(self.count);
+        let mut at = count;
+        while at > 0 && self.levels[at - 1].priority > priority {
+            at -= 1;
+        }
+        if at > 0 && self.levels[at - 1].priority == priority {
+            let tail = core::mem::replace(&mut self.levels[at - 1].tail, link);
+            self.next[usize::from(tail) - 1] = link;
+        } else {
+            // A new level: `count < Q`, as each level holds at least one of the `Q` frames.
+            // The ones above it move up (none when it is the most important).
+            for j in (at..count).rev() {
+                self.levels[j + 1] = self.levels[j];
+            }
+            self.levels[at] = Level {
+                priority,
+                head: link,
+                tail: link,
+            };
+            self.count += 1;
+        }
+        Ok(())
+    }
+
+    /// Takes the oldest waiting frame of `priority` for which `f` holds (tests: the
+    /// queue itself only takes from the ends).
+    #[cfg(test)]
+    fn remove_where(&mut self, priority: u8, f: impl Fn(&Entry<'a>) -> bool) -> Option<Entry<'a>> {
+        let at = self.levels().iter().position(|l| l.priority == priority)?;
+        let (mut prev, mut link) = (0, self.levels[at].head);
+        while let Some(i) = usize::from(link).checked_sub(1) {
+            if self.slots[i].as_ref().is_some_and(&f) {
+                if prev == 0 {
+                    return self.pop_level(at);
+                }
+                let entry = self.slots[i].take()?;
+                let next = core::mem::replace(&mut self.next[i], self.free);
+                self.free = link;
+                self.len -= 1;
+                self.next[usize::from(prev) - 1] = next;
+                if self.levels[at].tail == link {
+                    self.levels[at].tail = prev;
+                }
+                return Some(entry);
+            }
+            (prev, link) = (link, self.next[i]);
+        }
+        None
+    }
+
+    /// The waiting frame of `priority` for which `f` holds, oldest first.
+    fn find_mut(
+        &mut self,
+        priority: u8,
+        mut f: impl FnMut(&Entry<'a>) -> bool,
+    ) -> Option<&mut Entry<'a>> {
+        let level = self.levels().iter().find(|l| l.priority == priority)?;
+        let mut link = level.head;
+        while let Some(i) = usize::from(link).checked_sub(1) {
+            if self.slots[i].as_ref().is_some_and(&mut f) {
+                return self.slots[i].as_mut();
+            }
+            link = self.next[i];
+        }
+        None
+    }
+}
+
 struct State<'a, const Q: usize> {
-    /// Invariant: sorted by priority descending, and within a priority by age ascending
-    /// (oldest first), so the front entry is the most important and oldest, and the
-    /// eviction candidate is the first entry of the back's priority.
-    entries: heapless::Deque<Entry<'a>, Q>,
+    /// The waiting frames, by priority and age (see [`Lists`]).
+    entries: Lists<'a, Q>,
     /// Whether the writer holds a frame taken from this queue, its priority, and
     /// whether it is a forwarded one.
     in_flight: bool,
@@ -114,65 +320,6 @@ struct State<'a, const Q: usize> {
 }
 
 impl<'a, const Q: usize> State<'a, Q> {
-    /// Index of the eviction candidate: the oldest entry of the lowest priority.
-    fn candidate(&self) -> Option<usize> {
-        let lowest = self.entries.back()?.priority;
-        // The first index whose priority is `lowest` (binary search: entries before it are
-        // more important).
-        let (mut lo, mut hi) = (0, self.entries.len() - 1);
-        while lo < hi {
-            let mid = lo + (hi - lo) / 2;
-            match self.entries.get(mid) {
-                Some(e) if e.priority > lowest => lo = mid + 1,
-                _ => hi = mid,
-            }
-        }
-        Some(lo)
-    }
-
-    /// Removes and returns entry `at` (`at < len`), keeping the order of the others.
-    fn remove(&mut self, at: usize) -> Option<Entry<'a>> {
-        let len = self.entries.len();
-        if at >= len {
-            return None;
-        }
-        // Move it to the nearer end, then take it from there.
-        if at < len - at {
-            for i in (0..at).rev() {
-                self.entries.swap(i, i + 1);
-            }
-            self.entries.pop_front()
-        } else {
-            for i in at..len - 1 {
-                self.entries.swap(i, i + 1);
-            }
-            self.entries.pop_back()
-        }
-    }
-
-    /// Inserts `entry` after every entry at least as important (behind the entries of its
-    /// own priority: the newest of them). `Err` if the queue is full.
-    fn insert(&mut self, entry: Entry<'a>) -> Result<(), Entry<'a>> {
-        let priority = entry.priority;
-        // Usually no entry is less important: the new one stays at the back.
-        let in_place = self.entries.back().is_none_or(|e| e.priority >= priority);
-        self.entries.push_back(entry)?;
-        if !in_place {
-            // Move it forward past the less important entries.
-            let mut at = self.entries.len() - 1;
-            while at > 0
-                && self
-                    .entries
-                    .get(at - 1)
-                    .is_some_and(|e| e.priority < priority)
-            {
-                self.entries.swap(at - 1, at);
-                at -= 1;
-            }
-        }
-        Ok(())
-    }
-
     fn level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
         &mut self.stats.levels[pprz_messages::priority::level(priority)]
     }
@@ -248,21 +395,16 @@ impl<'a, const Q: usize> State<'a, Q> {
         self.lost(entry.priority, entry.relayed);
     }
 
-    /// Takes the most important frame (see [`FrameQueue::try_receive`]); when there is
-    /// none, registers the waker of `cx` and returns the one it replaces (another task's),
-    /// for the caller to wake once the lock is let go.
+    /// Takes the most important frame and marks it in flight (see
+    /// [`FrameQueue::try_receive`]).
     #[inline]
-    fn receive(&mut self, cx: Option<&mut Context<'_>>) -> (Option<FrameBuf<'a>>, Option<Waker>) {
-        match self.entries.pop_front() {
-            Some(entry) => {
-                self.in_flight = true;
-                self.in_flight_priority = entry.priority;
-                self.in_flight_relayed = entry.relayed;
-                self.update_queued();
-                (Some(entry.frame), None)
-            }
-            None => (None, cx.and_then(|cx| self.register(cx.waker()))),
-        }
+    fn take(&mut self) -> Option<FrameBuf<'a>> {
+        let entry = self.entries.pop_front()?;
+        self.in_flight = true;
+        self.in_flight_priority = entry.priority;
+        self.in_flight_relayed = entry.relayed;
+        self.update_queued();
+        Some(entry.frame)
     }
 
     /// Registers `waker` as the writer's; returns the waker it replaces if that one wakes
@@ -325,7 +467,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let () = Self::VALID;
         Self {
             state: Mutex::new(RefCell::new(State {
-                entries: heapless::Deque::new(),
+                entries: Lists::new(),
                 in_flight: false,
                 in_flight_priority: 0,
                 in_flight_relayed: false,
@@ -404,10 +546,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let result = self.with(|s| {
             s.submitted(priority, relayed);
             if latest.is_some()
-                && let Some(old) = s
-                    .entries
-                    .iter_mut()
-                    .find(|e| e.latest == latest && e.priority == priority)
+                && let Some(old) = s.entries.find_mut(priority, |e| e.latest == latest)
             {
                 released = Some(core::mem::replace(&mut old.frame, frame));
                 s.stats.superseded = s.stats.superseded.wrapping_add(1);
@@ -417,10 +556,12 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
             }
             let mut result = Pushed::Queued;
             if s.entries.len() >= depth {
-                let victim = s
-                    .candidate()
-                    .filter(|&i| s.entries.get(i).is_some_and(|e| e.priority < priority))
-                    .and_then(|i| s.remove(i));
+                let weaker = s.entries.candidate().is_some_and(|e| e.priority < priority);
+                let victim = if weaker {
+                    s.entries.pop_candidate()
+                } else {
+                    None
+                };
                 match victim {
                     Some(victim) => {
                         s.evicted(&victim, true);
@@ -442,7 +583,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 relayed,
                 frame,
             };
-            if let Err(entry) = s.insert(entry) {
+            if let Err(entry) = s.entries.push(entry) {
                 // Unreachable while depth <= Q; counted rather than lost if it ever is.
                 s.dropped(DropReason::QueueFull, priority, relayed);
                 s.update_queued();
@@ -464,8 +605,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// The eviction candidate, if any.
     pub fn candidate(&self) -> Option<Candidate> {
         self.with(|s| {
-            let i = s.candidate()?;
-            let e = s.entries.get(i)?;
+            let e = s.entries.candidate()?;
             Some(Candidate {
                 priority: e.priority,
                 seq: e.seq,
@@ -478,12 +618,11 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// Returns whether a frame was evicted; its memory is released before returning.
     pub fn evict_for_arena(&self, expected: Candidate) -> bool {
         let evicted = self.with(|s| {
-            let i = s.candidate()?;
-            let e = s.entries.get(i)?;
+            let e = s.entries.candidate()?;
             if e.priority != expected.priority || e.seq != expected.seq {
                 return None;
             }
-            let entry = s.remove(i)?;
+            let entry = s.entries.pop_candidate()?;
             s.evicted(&entry, false);
             s.update_queued();
             Some(entry)
@@ -508,7 +647,11 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// the waker when there is none. For the device's one consumer, which reports the
     /// outcome with [`complete`](Self::complete).
     pub fn try_receive(&self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
-        let (frame, replaced) = self.with(|s| s.receive(cx));
+        let (frame, replaced) = self.with(|s| match s.take() {
+            Some(frame) => (Some(frame), None),
+            // None waiting: the writer's waker, and the one it replaces to wake after.
+            None => (None, cx.and_then(|cx| s.register(cx.waker()))),
+        });
         if let Some(waker) = replaced {
             waker.wake();
         }
@@ -531,7 +674,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let len = frame.len();
         let next = self.with(|s| {
             s.complete(len, outcome);
-            let next = if take_next { s.receive(None).0 } else { None };
+            let next = if take_next { s.take() } else { None };
             if next.is_none() {
                 s.update_queued();
             }
@@ -607,10 +750,7 @@ mod tests {
                     msg_id: i as u8,
                 });
                 if policy == Policy::Requeue {
-                    let old = queue.with(|s| {
-                        let at = s.entries.iter().position(|e| e.latest == key)?;
-                        s.remove(at)
-                    });
+                    let old = queue.with(|s| s.entries.remove_where(128, |e| e.latest == key));
                     drop(old);
                 }
                 seq += 1;
@@ -664,5 +804,122 @@ mod tests {
             "{requeue_gaps:?}"
         );
         assert!(requeue_p99 < in_place_p99);
+    }
+}
+
+#[cfg(test)]
+mod model {
+    //! The queue against a plain model: a vector kept sorted by priority (descending),
+    //! then age, where pushing inserts behind every frame at least as important, eviction
+    //! takes the first frame of the lowest priority, and a state message replaces the
+    //! waiting one of the same message and priority in its place.
+
+    use super::*;
+    use crate::arena::FrameArena;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as RawM;
+    use proptest::prelude::*;
+
+    #[derive(Debug, Clone)]
+    enum Op {
+        Push {
+            priority: u8,
+            key: Option<u8>,
+            depth: usize,
+        },
+        Take,
+        EvictForArena,
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        prop_oneof![
+            4 => (0u8..5, prop::option::weighted(0.3, 0u8..3), 1usize..10)
+                .prop_map(|(p, key, depth)| Op::Push { priority: p * 60, key, depth }),
+            2 => Just(Op::Take),
+            1 => Just(Op::EvictForArena),
+        ]
+    }
+
+    /// Model entry: priority, seq, key, the id written in the frame.
+    type M = (u8, u32, Option<MessageKey>, u32);
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, ..ProptestConfig::default() })]
+
+        #[test]
+        fn the_queue_behaves_as_the_sorted_model(ops in prop::collection::vec(op(), 1..300)) {
+            const Q: usize = 8;
+            let arena: FrameArena<RawM, 2048> = FrameArena::new();
+            let queue: FrameQueue<'_, RawM, Q> = FrameQueue::new();
+            let mut model: Vec<M> = Vec::new();
+            let mut seq = 0u32;
+            for op in ops {
+                match op {
+                    Op::Push { priority, key, depth } => {
+                        seq += 1;
+                        let key = key.map(|k| MessageKey { class: 1, msg_id: k });
+                        let mut frame = arena.alloc(4).expect("room");
+                        frame.copy_from_slice(&seq.to_le_bytes());
+                        let pushed = queue.push(priority, seq, key, false, frame, depth);
+                        let depth = depth.clamp(1, Q);
+                        let expected = if let Some(old) = model
+                            .iter_mut()
+                            .find(|m| key.is_some() && m.2 == key && m.0 == priority)
+                        {
+                            old.3 = seq;
+                            Pushed::Superseded
+                        } else {
+                            let mut result = Pushed::Queued;
+                            let mut admitted = true;
+                            if model.len() >= depth {
+                                let lowest = model.last().map(|m| m.0);
+                                match lowest {
+                                    Some(l) if l < priority => {
+                                        let at = model.iter().position(|m| m.0 == l).unwrap();
+                                        model.remove(at);
+                                        result = Pushed::QueuedEvicting;
+                                    }
+                                    _ => admitted = false,
+                                }
+                            }
+                            if admitted {
+                                let at = model.iter().position(|m| m.0 < priority).unwrap_or(model.len());
+                                model.insert(at, (priority, seq, key, seq));
+                                result
+                            } else {
+                                Pushed::Dropped
+                            }
+                        };
+                        prop_assert_eq!(pushed, expected);
+                    }
+                    Op::Take => {
+                        let frame = queue.try_receive(None);
+                        let expected = (!model.is_empty()).then(|| model.remove(0));
+                        prop_assert_eq!(frame.is_some(), expected.is_some());
+                        if let (Some(frame), Some(m)) = (frame, expected) {
+                            let mut id = [0u8; 4];
+                            id.copy_from_slice(&frame[..4]);
+                            prop_assert_eq!(u32::from_le_bytes(id), m.3);
+                            queue.complete(frame, Ok(()), false);
+                        }
+                    }
+                    Op::EvictForArena => {
+                        let candidate = queue.candidate();
+                        let expected = model.last().map(|l| {
+                            let at = model.iter().position(|m| m.0 == l.0).unwrap();
+                            (at, Candidate { priority: model[at].0, seq: model[at].1 })
+                        });
+                        prop_assert_eq!(candidate, expected.map(|e| e.1));
+                        if let Some((at, c)) = expected {
+                            prop_assert!(queue.evict_for_arena(c));
+                            model.remove(at);
+                        }
+                    }
+                }
+                let stats = queue.stats();
+                prop_assert_eq!(usize::from(stats.waiting), model.len());
+                prop_assert!(stats.is_balanced());
+                prop_assert_eq!(arena.stats().live, model.len());
+            }
+        }
     }
 }
