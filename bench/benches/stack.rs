@@ -47,7 +47,7 @@ fn parse_buffered(bencher: Bencher<'_, '_>) {
 /// Workload 3: 10 000 messages through send, arena, queue and writer to a sink.
 #[divan::bench]
 fn downlink(bencher: Bencher<'_, '_>) {
-    let arena = downlink::BenchArena::new();
+    let arena = <downlink::BenchArena>::new();
     let dl = downlink::new_downlink(&arena);
     let [mut port] = dl.ports().expect("a new downlink's ports");
     let mut sink = Sink::default();

@@ -36,7 +36,7 @@ fn the_encoded_stream_parses_back_to_the_same_messages() {
 
 #[test]
 fn the_downlink_workload_writes_every_frame_of_the_stream() {
-    let memory = downlink::BenchArena::new();
+    let memory = <downlink::BenchArena>::new();
     let dl = downlink::new_downlink(&memory);
     let [mut port] = dl.ports().unwrap();
     let mut sink = Sink::default();

@@ -44,6 +44,32 @@
 //! }
 //! ```
 //!
+//! # Which mutex
+//!
+//! Every lock of the link (its queue, settings, health and registry) is the link's mutex
+//! `M`; the arena has its own, which should be the same.
+//!
+//! * [`LinkMutex`] (`CriticalSectionRawMutex`, the default): any task of any executor,
+//!   and interrupt handlers, may send. Each lock masks interrupts while it is held: a few
+//!   hundred instructions at most on the send path of a Cortex-M4 (`BENCHMARKS.md`).
+//! * `ThreadModeRawMutex` (embassy-sync, Cortex-M): for a single-core firmware whose
+//!   senders all run in thread mode (tasks of a thread-mode executor). The link never
+//!   masks an interrupt, so it never delays an interrupt handler; a send from an
+//!   interrupt handler, or from a task of an interrupt-mode executor, panics. (On a
+//!   two-core chip such as the RP2040 it does not exclude the other core.)
+//!
+//! ```no_run
+//! use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+//! use pprz_default::messages::{Set, telemetry::Attitude};
+//! use pprz_telemetry::{FrameArena, Link};
+//!
+//! static ARENA: FrameArena<ThreadModeRawMutex, 4096> = FrameArena::new();
+//! static LINK: Link<'static, Set, 32, 16, 8, ThreadModeRawMutex> = Link::new(&ARENA, 7);
+//!
+//! // In a task of the thread-mode executor:
+//! LINK.send(&Attitude { phi: 0.1, psi: 0.0, theta: 0.0 }).unwrap();
+//! ```
+//!
 //! Settings and subscribers are added at start-up, before or after `run` starts:
 //! `LINK.settings().add("gain", &get, &set)`, `LINK.subscribe(Filter::message::<Block>(),
 //! &on_block)`. Several devices, several transports per message or a log beside the
@@ -55,7 +81,7 @@ use core::convert::Infallible;
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, RawMutex};
 use embedded_io_async::{Read, Write};
 use pprz_messages::Message;
 use pprz_messages::roles::ServiceSet;
@@ -84,19 +110,25 @@ pub type LinkMutex = CriticalSectionRawMutex;
 ///   evicted, or the new one dropped, and counted).
 /// * `SETTINGS`: capacity of the settings table.
 /// * `SUBSCRIBERS`: capacity of the subscriber registry (the services need none of it).
+/// * `M`: the mutex of every lock of the link ([`LinkMutex`] by default: sends from any
+///   task and from interrupts, each lock a short interrupt mask). A firmware that sends
+///   only from thread mode may choose `ThreadModeRawMutex`: no interrupt is ever masked
+///   by the link, and a send from an interrupt handler panics (see the
+///   [module documentation](self)).
 pub struct Link<
     'a,
     S,
     const Q: usize = 32,
     const SETTINGS: usize = 16,
     const SUBSCRIBERS: usize = 8,
+    M: RawMutex + Sync + 'static = LinkMutex,
 > {
-    downlink: Downlink<'a, LinkMutex, 1, Q>,
-    datalink: Datalink<'a, LinkMutex, SUBSCRIBERS>,
-    services: Services<'a, S, LinkMutex, SETTINGS>,
-    health: LinkHealth<LinkMutex>,
+    downlink: Downlink<'a, M, 1, Q>,
+    datalink: Datalink<'a, M, SUBSCRIBERS>,
+    services: Services<'a, S, M, SETTINGS>,
+    health: LinkHealth<M>,
     /// The device's port between two runs (a cancelled `run` puts it back here).
-    port: Mutex<LinkMutex, Cell<Option<Port<'a>>>>,
+    port: Mutex<M, Cell<Option<Port<'a>>>>,
 }
 
 /// Counters of a [`Link`].
@@ -115,8 +147,10 @@ pub struct LinkStats {
     pub delivery: DeliveryStats,
 }
 
-impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
-    Link<'a, S, Q, SETTINGS, SUBSCRIBERS>
+impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize, M>
+    Link<'a, S, Q, SETTINGS, SUBSCRIBERS, M>
+where
+    M: RawMutex + Sync + 'static,
 {
     /// A link for aircraft `ac_id` speaking PPRZ v2, frames allocated in `arena`.
     pub const fn new(arena: &'a (dyn FrameAlloc + Sync), ac_id: u8) -> Self {
@@ -184,7 +218,7 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
     }
 
     /// The settings table the SETTING and GET_SETTING services read and write.
-    pub fn settings(&self) -> &Settings<'a, LinkMutex, SETTINGS> {
+    pub fn settings(&self) -> &Settings<'a, M, SETTINGS> {
         self.services.settings()
     }
 
@@ -204,7 +238,7 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
     /// Whether the ground is still there: its state, the time since it was last heard,
     /// and an `async` wait for a change that a failsafe task awaits (see
     /// [`health`](crate::health)). Driven by the frames the link's reader accepts.
-    pub fn health(&self) -> &LinkHealth<LinkMutex> {
+    pub fn health(&self) -> &LinkHealth<M> {
         &self.health
     }
 
@@ -223,8 +257,10 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
 /// The bound `S: ServiceSet` is on each method, not on this block, so that a message set
 /// without the services' messages gets the trait's explanation (E0277), not a bare
 /// "method not found" (E0599).
-impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
-    Link<'a, S, Q, SETTINGS, SUBSCRIBERS>
+impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize, M>
+    Link<'a, S, Q, SETTINGS, SUBSCRIBERS, M>
+where
+    M: RawMutex + Sync + 'static,
 {
     /// Runs the link forever: writes the queued frames to `tx` (most important first),
     /// reads `rx`, answers PING, SETTING and GET_SETTING on it and hands every other
@@ -285,12 +321,12 @@ impl<'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize>
 }
 
 /// Gives the port back to its link when `run` ends (it only ends by being dropped).
-struct PortGuard<'l, 'a> {
-    slot: &'l Mutex<LinkMutex, Cell<Option<Port<'a>>>>,
+struct PortGuard<'l, 'a, M: RawMutex> {
+    slot: &'l Mutex<M, Cell<Option<Port<'a>>>>,
     port: Option<Port<'a>>,
 }
 
-impl Drop for PortGuard<'_, '_> {
+impl<M: RawMutex> Drop for PortGuard<'_, '_, M> {
     fn drop(&mut self) {
         let port = self.port.take();
         self.slot.lock(|slot| slot.set(port));
@@ -299,12 +335,22 @@ impl Drop for PortGuard<'_, '_> {
 
 /// The link's reader delivers here: destination filter and counters, the services,
 /// then the subscribers.
-struct LinkInbox<'l, 'a, S, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize> {
-    link: &'l Link<'a, S, Q, SETTINGS, SUBSCRIBERS>,
+struct LinkInbox<
+    'l,
+    'a,
+    S,
+    const Q: usize,
+    const SETTINGS: usize,
+    const SUBSCRIBERS: usize,
+    M: RawMutex + Sync + 'static,
+> {
+    link: &'l Link<'a, S, Q, SETTINGS, SUBSCRIBERS, M>,
 }
 
-impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize> Inbox<'a>
-    for LinkInbox<'_, 'a, S, Q, SETTINGS, SUBSCRIBERS>
+impl<'a, S: ServiceSet, const Q: usize, const SETTINGS: usize, const SUBSCRIBERS: usize, M>
+    Inbox<'a> for LinkInbox<'_, 'a, S, Q, SETTINGS, SUBSCRIBERS, M>
+where
+    M: RawMutex + Sync + 'static,
 {
     fn deliver(&self, rx: &Received<'_, 'a>) {
         self.link

@@ -20,7 +20,7 @@ use core::convert::Infallible;
 
 use embassy_futures::select::{Either, select};
 use embassy_futures::{block_on, yield_now};
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, RawMutex};
 use pprz_telemetry::stats::DeviceStats;
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, Port, run_writer};
 use pprz_transports::PprzV2;
@@ -39,10 +39,11 @@ pub const BATCH: usize = 8;
 /// so every burst fills the queue and then evicts or drops.
 pub const FLOOD_BATCH: usize = 3 * QUEUE;
 
-/// The arena of the workload.
-pub type BenchArena = FrameArena<CriticalSectionRawMutex, ARENA_BYTES>;
-/// The downlink of the workload: one PPRZ v2 device.
-pub type BenchDownlink<'a> = Downlink<'a, CriticalSectionRawMutex, 1, QUEUE>;
+/// The arena of the workload (with the mutex `M` of its downlink).
+pub type BenchArena<M = CriticalSectionRawMutex> = FrameArena<M, ARENA_BYTES>;
+/// The downlink of the workload: one PPRZ v2 device, its locks `M` (a critical section
+/// by default).
+pub type BenchDownlink<'a, M = CriticalSectionRawMutex> = Downlink<'a, M, 1, QUEUE>;
 
 /// A device that accepts every write at once, counting frames and bytes and folding the
 /// bytes into a digest (so the writes cannot be optimised away).
@@ -79,15 +80,15 @@ impl embedded_io_async::Write for Sink {
 }
 
 /// A downlink for the workload over `arena`.
-pub fn new_downlink(arena: &BenchArena) -> BenchDownlink<'_> {
+pub fn new_downlink<M: RawMutex + Sync>(arena: &BenchArena<M>) -> BenchDownlink<'_, M> {
     Downlink::new(arena, AC_ID, [DeviceConfig::new(PprzV2::new().into())])
 }
 
 /// Workload 3: sends `count` messages through `downlink` to `sink`, written through
 /// `port` (the downlink's port); returns the device's statistics once every message has
 /// been written.
-pub fn run_downlink(
-    downlink: &BenchDownlink<'_>,
+pub fn run_downlink<M: RawMutex + Sync>(
+    downlink: &BenchDownlink<'_, M>,
     port: &mut Port<'_>,
     count: usize,
     sink: &mut Sink,
@@ -100,8 +101,8 @@ pub fn run_downlink(
 /// the queue, evicts less important frames and drops the rest (all counted by reason in
 /// the returned statistics). The send path's worst cases: eviction, refusal, the arena's
 /// release of an evicted frame.
-pub fn run_downlink_flood(
-    downlink: &BenchDownlink<'_>,
+pub fn run_downlink_flood<M: RawMutex + Sync>(
+    downlink: &BenchDownlink<'_, M>,
     port: &mut Port<'_>,
     count: usize,
     sink: &mut Sink,
@@ -113,8 +114,8 @@ pub fn run_downlink_flood(
 
 /// Sends `count` messages (GPS and ATTITUDE alternating) with `options(i)`, `batch` between
 /// two yields, while the writer drains to `sink`; the device's statistics at the end.
-fn drive(
-    downlink: &BenchDownlink<'_>,
+fn drive<M: RawMutex + Sync>(
+    downlink: &BenchDownlink<'_, M>,
     port: &mut Port<'_>,
     count: usize,
     batch: usize,

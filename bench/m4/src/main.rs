@@ -34,6 +34,7 @@ use core::fmt::Write;
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
+use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
 use pprz_bench_common::downlink::{self as dl_workload, Sink};
 use pprz_bench_common::stream::{self, MESSAGES};
 use pprz_secure::keys::INSECURE_TEST_KEY_FILE;
@@ -196,7 +197,7 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         fail("parse");
     }
     // 3. Downlink: send -> arena -> queue -> writer -> sink.
-    let arena = dl_workload::BenchArena::new();
+    let arena = <dl_workload::BenchArena>::new();
     let downlink = dl_workload::new_downlink(&arena);
     let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
     let mut sink = Sink::default();
@@ -210,7 +211,7 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         fail("downlink");
     }
     // The flood: bursts of three queues at four priorities (evictions and drops).
-    let flood_arena = dl_workload::BenchArena::new();
+    let flood_arena = <dl_workload::BenchArena>::new();
     let downlink = dl_workload::new_downlink(&flood_arena);
     let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
     let (flood, t_flood) = ticks(now, u32::MAX, || {
@@ -219,6 +220,20 @@ fn workloads(out: &mut Uart, timer: &Timer) {
     if !flood.is_balanced() || flood.submitted as usize != MESSAGES || flood_arena.stats().live != 0
     {
         fail("flood");
+    }
+    // The downlink again, its locks a thread-mode mutex: nothing masked.
+    let thread_arena = dl_workload::BenchArena::<ThreadModeRawMutex>::new();
+    let downlink = dl_workload::new_downlink(&thread_arena);
+    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+    let mut thread_sink = Sink::default();
+    let (thread, t_thread) = ticks(now, u32::MAX, || {
+        dl_workload::run_downlink(&downlink, &mut port, black_box(MESSAGES), &mut thread_sink)
+    });
+    if thread.sent as usize != MESSAGES
+        || thread_sink.bytes as usize != STREAM_LEN
+        || thread_arena.stats().live != 0
+    {
+        fail("downlink, thread mode");
     }
     let _ = writeln!(
         out,
@@ -257,6 +272,14 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         MESSAGES,
         "message",
         "send -> arena -> queue -> writer -> sink (workload 3)",
+    );
+    result(
+        out,
+        "downlink-thread",
+        t_thread,
+        MESSAGES,
+        "message",
+        "the same with ThreadModeRawMutex (thread-mode senders only; nothing masked)",
     );
     result(
         out,

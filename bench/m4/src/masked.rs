@@ -12,6 +12,7 @@
 use core::fmt::Write;
 use core::hint::black_box;
 
+use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
 use pprz_bench_common::downlink::{self as dl_workload, Sink};
 use pprz_bench_common::stream;
 
@@ -78,7 +79,7 @@ pub fn run(out: &mut Uart) {
     if summary != stream::expected_summary(TRACED) {
         fail("parse");
     }
-    let arena = dl_workload::BenchArena::new();
+    let arena = <dl_workload::BenchArena>::new();
     let downlink = dl_workload::new_downlink(&arena);
     let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
     let mut sink = Sink::default();
@@ -93,7 +94,22 @@ pub fn run(out: &mut Uart) {
     if stats.sent as usize != TRACED || arena.stats().live != 0 {
         fail("downlink");
     }
-    let arena = dl_workload::BenchArena::new();
+    let arena = dl_workload::BenchArena::<ThreadModeRawMutex>::new();
+    let downlink = dl_workload::new_downlink(&arena);
+    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+    let mut sink = Sink::default();
+    let stats = region(
+        out,
+        "thread",
+        TRACED,
+        "message",
+        "the downlink with ThreadModeRawMutex",
+        || dl_workload::run_downlink(&downlink, &mut port, black_box(TRACED), &mut sink),
+    );
+    if stats.sent as usize != TRACED || arena.stats().live != 0 {
+        fail("downlink, thread mode");
+    }
+    let arena = <dl_workload::BenchArena>::new();
     let downlink = dl_workload::new_downlink(&arena);
     let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
     let mut sink = Sink::default();

@@ -135,7 +135,7 @@ fn run_parse_buffered() {
 }
 
 fn run_downlink() {
-    let arena = downlink::BenchArena::new();
+    let arena = <downlink::BenchArena>::new();
     let dl = downlink::new_downlink(&arena);
     let [mut port] = dl.ports().expect("a new downlink's ports");
     let mut sink = Sink::default();
