@@ -34,7 +34,8 @@ use core::fmt::Write;
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
-use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, RawMutex, ThreadModeRawMutex};
+use pprz_bench_common::downlink::BenchDownlink;
 use pprz_bench_common::downlink::{self as dl_workload, Sink};
 use pprz_bench_common::stream::{self, MESSAGES};
 use pprz_secure::keys::INSECURE_TEST_KEY_FILE;
@@ -42,6 +43,9 @@ use pprz_secure::{
     Initiator, InitiatorEvent, KeyExchange, KeyFile, OVERHEAD, Policy, Responder, ResponderEvent,
     SecureChannel,
 };
+use pprz_telemetry::Port;
+use pprz_telemetry::arena::ArenaStats;
+use pprz_telemetry::stats::DeviceStats;
 use pprz_transports::{Encoder, GROUND_ID, MsgHeader, PprzV2, TxMeta};
 use rand_chacha::ChaCha20Rng;
 use rand_chacha::rand_core::SeedableRng;
@@ -197,41 +201,29 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         fail("parse");
     }
     // 3. Downlink: send -> arena -> queue -> writer -> sink.
-    let arena = <dl_workload::BenchArena>::new();
-    let downlink = dl_workload::new_downlink(&arena);
-    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-    let mut sink = Sink::default();
-    let (stats, t_downlink) = ticks(now, u32::MAX, || {
-        dl_workload::run_downlink(&downlink, &mut port, black_box(MESSAGES), &mut sink)
-    });
-    if stats.sent as usize != MESSAGES
-        || sink.bytes as usize != STREAM_LEN
-        || arena.stats().live != 0
-    {
+    let (stats, sink, arena, t_downlink) =
+        timed_downlink::<CriticalSectionRawMutex>(timer, |d, p, n, s| {
+            dl_workload::run_downlink(d, p, n, s)
+        });
+    if stats.sent as usize != MESSAGES || sink.bytes as usize != STREAM_LEN || arena.live != 0 {
         fail("downlink");
     }
     // The flood: bursts of three queues at four priorities (evictions and drops).
-    let flood_arena = <dl_workload::BenchArena>::new();
-    let downlink = dl_workload::new_downlink(&flood_arena);
-    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-    let (flood, t_flood) = ticks(now, u32::MAX, || {
-        dl_workload::run_downlink_flood(&downlink, &mut port, black_box(MESSAGES), &mut sink)
-    });
-    if !flood.is_balanced() || flood.submitted as usize != MESSAGES || flood_arena.stats().live != 0
-    {
+    let (flood, _, flood_arena, t_flood) =
+        timed_downlink::<CriticalSectionRawMutex>(timer, |d, p, n, s| {
+            dl_workload::run_downlink_flood(d, p, n, s)
+        });
+    if !flood.is_balanced() || flood.submitted as usize != MESSAGES || flood_arena.live != 0 {
         fail("flood");
     }
     // The downlink again, its locks a thread-mode mutex: nothing masked.
-    let thread_arena = dl_workload::BenchArena::<ThreadModeRawMutex>::new();
-    let downlink = dl_workload::new_downlink(&thread_arena);
-    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-    let mut thread_sink = Sink::default();
-    let (thread, t_thread) = ticks(now, u32::MAX, || {
-        dl_workload::run_downlink(&downlink, &mut port, black_box(MESSAGES), &mut thread_sink)
-    });
+    let (thread, thread_sink, thread_arena, t_thread) =
+        timed_downlink::<ThreadModeRawMutex>(timer, |d, p, n, s| {
+            dl_workload::run_downlink(d, p, n, s)
+        });
     if thread.sent as usize != MESSAGES
         || thread_sink.bytes as usize != STREAM_LEN
-        || thread_arena.stats().live != 0
+        || thread_arena.live != 0
     {
         fail("downlink, thread mode");
     }
@@ -239,8 +231,7 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         out,
         "workloads: {MESSAGES} messages (GPS/ATTITUDE alternating), {STREAM_LEN} bytes of \
          PPRZ v2; downlink queue high water {}, arena high water {} B",
-        stats.queue_high_water,
-        arena.stats().high_water
+        stats.queue_high_water, arena.high_water
     );
     let _ = writeln!(
         out,
@@ -289,6 +280,24 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         "message",
         "the same, in bursts of 3 queues at 4 priorities: evictions and drops",
     );
+}
+
+/// Runs `run` on a new downlink whose locks are `M` over [`MESSAGES`] messages: the
+/// device's statistics, the sink, the arena's statistics after it, and the ticks it took.
+fn timed_downlink<M: RawMutex + Sync>(
+    timer: &Timer,
+    run: impl FnOnce(&BenchDownlink<'_, M>, &mut Port<'_>, usize, &mut Sink) -> DeviceStats,
+) -> (DeviceStats, Sink, ArenaStats, u32) {
+    let arena = dl_workload::BenchArena::<M>::new();
+    let downlink = dl_workload::new_downlink(&arena);
+    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+    let mut sink = Sink::default();
+    let (stats, t) = ticks(
+        || timer.now(),
+        u32::MAX,
+        || run(&downlink, &mut port, black_box(MESSAGES), &mut sink),
+    );
+    (stats, sink, arena.stats(), t)
 }
 
 /// `ROUNDS` complete handshakes between an initiator and a responder, each step
