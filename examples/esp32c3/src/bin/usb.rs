@@ -14,26 +14,15 @@
 #![no_std]
 #![no_main]
 
-use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_executor::Spawner;
-use embassy_time::{Duration, Ticker, with_timeout};
+use embassy_time::{Duration, with_timeout};
 use embedded_io_async::{ErrorKind, ErrorType, Write};
 use esp_hal::Async;
 use esp_hal::timer::timg::TimerGroup;
 use esp_hal::usb::usb_serial_jtag::{UsbSerialJtag, UsbSerialJtagRx, UsbSerialJtagTx};
 use panic_halt as _;
-use pprz_default::messages::{Set, telemetry::Attitude};
-use pprz_telemetry::{FrameArena, Health, HealthConfig, Link, LinkMutex};
 
 esp_bootloader_esp_idf::esp_app_desc!();
-
-/// Pending frames.
-static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
-/// Aircraft 7; the ground is lost after 5 s of silence.
-static LINK: Link<'static, Set> =
-    Link::new(&ARENA, 7).health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
-/// Set when the ground has been silent for 5 s: your autopilot flies home.
-static GO_HOME: AtomicBool = AtomicBool::new(false);
 
 /// How long a write may wait for the host. A host with the port open polls the endpoint
 /// every millisecond, so a frame (at most five 64-byte packets) goes in a few
@@ -72,32 +61,7 @@ impl Write for FailFast {
 
 #[embassy_executor::task]
 async fn link(tx: FailFast, rx: UsbSerialJtagRx<'static, Async>) {
-    let Err(e) = LINK.run(tx, rx).await; // writer + reader + services, forever
-    panic!("{e}");
-}
-
-#[embassy_executor::task]
-async fn attitude() {
-    let mut ticker = Ticker::every(Duration::from_millis(100));
-    loop {
-        ticker.next().await;
-        // A message that cannot be queued is counted in LINK.stats(), by reason.
-        let _ = LINK.send(&Attitude {
-            phi: 0.1,
-            psi: 0.0,
-            theta: 0.0,
-        });
-    }
-}
-
-#[embassy_executor::task]
-async fn failsafe() {
-    LINK.health().wait_for(Health::Up).await; // not before the ground was heard once
-    loop {
-        LINK.health().wait_for(Health::Lost).await;
-        GO_HOME.store(true, Ordering::Relaxed);
-        LINK.health().wait_for(Health::Up).await;
-    }
+    pprz_example_one_link::run(tx, rx).await // writer + reader + services, forever
 }
 
 #[esp_rtos::main]
@@ -108,6 +72,6 @@ async fn main(spawner: Spawner) {
 
     let (rx, tx) = UsbSerialJtag::new(p.USB_DEVICE).into_async().split();
     spawner.spawn(link(FailFast(tx), rx).unwrap());
-    spawner.spawn(attitude().unwrap());
-    spawner.spawn(failsafe().unwrap());
+    spawner.spawn(pprz_example_one_link::attitude().unwrap());
+    spawner.spawn(pprz_example_one_link::failsafe().unwrap());
 }

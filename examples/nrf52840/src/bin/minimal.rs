@@ -10,60 +10,25 @@
 #![no_std]
 #![no_main]
 
-use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_executor::Spawner;
 use embassy_nrf::buffered_uarte::{self, BufferedUarte, BufferedUarteRx, BufferedUarteTx};
 use embassy_nrf::config::HfclkSource;
 use embassy_nrf::peripherals::UARTE0;
 use embassy_nrf::uarte::{self, Baudrate};
-use embassy_time::{Duration, Ticker};
 use panic_halt as _;
-use pprz_default::messages::{Set, telemetry::Attitude};
-use pprz_telemetry::{FrameArena, Health, HealthConfig, Link, LinkMutex};
 use static_cell::ConstStaticCell;
 
 embassy_nrf::bind_interrupts!(struct Irqs {
     UARTE0 => buffered_uarte::InterruptHandler<UARTE0>;
 });
 
-static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
-/// Aircraft 7; the ground is lost after 5 s of silence.
-static LINK: Link<'static, Set> =
-    Link::new(&ARENA, 7).health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
-/// Set when the ground has been silent for 5 s: your autopilot flies home.
-static GO_HOME: AtomicBool = AtomicBool::new(false);
 static TX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 /// The receive buffer's length must be even (the driver receives into its two halves).
 static RX: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
 
 #[embassy_executor::task]
 async fn radio(tx: BufferedUarteTx<'static>, rx: BufferedUarteRx<'static>) {
-    let Err(e) = LINK.run(tx, rx).await; // writer + reader + services, forever
-    panic!("{e}");
-}
-
-#[embassy_executor::task]
-async fn attitude() {
-    let mut ticker = Ticker::every(Duration::from_millis(100));
-    loop {
-        ticker.next().await;
-        // A message that cannot be queued is counted in LINK.stats(), by reason.
-        let _ = LINK.send(&Attitude {
-            phi: 0.1,
-            psi: 0.0,
-            theta: 0.0,
-        });
-    }
-}
-
-#[embassy_executor::task]
-async fn failsafe() {
-    LINK.health().wait_for(Health::Up).await; // not before the ground was heard once
-    loop {
-        LINK.health().wait_for(Health::Lost).await;
-        GO_HOME.store(true, Ordering::Relaxed);
-        LINK.health().wait_for(Health::Up).await;
-    }
+    pprz_example_one_link::run(tx, rx).await // writer + reader + services, forever
 }
 
 #[embassy_executor::main]
@@ -91,6 +56,6 @@ async fn main(spawner: Spawner) {
     );
     let (rx, tx) = uart.split(); // receive half first, unlike embassy-stm32 and embassy-rp
     spawner.spawn(radio(tx, rx).unwrap());
-    spawner.spawn(attitude().unwrap());
-    spawner.spawn(failsafe().unwrap());
+    spawner.spawn(pprz_example_one_link::attitude().unwrap());
+    spawner.spawn(pprz_example_one_link::failsafe().unwrap());
 }

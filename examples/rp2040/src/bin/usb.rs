@@ -9,29 +9,19 @@
 #![no_std]
 #![no_main]
 
-use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_executor::Spawner;
 use embassy_rp::peripherals::USB;
 use embassy_rp::usb::{Driver, InterruptHandler};
-use embassy_time::{Duration, Ticker};
 use embassy_usb::UsbDevice;
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use panic_halt as _;
-use pprz_default::messages::{Set, telemetry::Attitude};
 use pprz_devices::usb::{CdcRx, CdcTx, UsbConfig, UsbCounters};
-use pprz_telemetry::{FrameArena, Health, HealthConfig, Link, LinkMutex};
 use static_cell::{ConstStaticCell, StaticCell};
 
 embassy_rp::bind_interrupts!(struct Irqs { USBCTRL_IRQ => InterruptHandler<USB>; });
 
 type UsbDriver = Driver<'static, USB>;
 
-static ARENA: FrameArena<LinkMutex, 4096> = FrameArena::new();
-/// Aircraft 7; the ground is lost after 5 s of silence.
-static LINK: Link<'static, Set> =
-    Link::new(&ARENA, 7).health_config(HealthConfig::new().lost_after(Duration::from_secs(5)));
-/// Set when the ground has been silent for 5 s: your autopilot flies home.
-static GO_HOME: AtomicBool = AtomicBool::new(false);
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
 /// USB buffers: configuration descriptor, BOS descriptor, control transfers (the RP2040's
 /// endpoints have their own 4 KiB of USB RAM).
@@ -46,32 +36,7 @@ async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
 
 #[embassy_executor::task]
 async fn link(tx: CdcTx<'static, 'static, UsbDriver>, rx: CdcRx<'static, 'static, UsbDriver>) {
-    let Err(e) = LINK.run(tx, rx).await; // writer + reader + services, forever
-    panic!("{e}");
-}
-
-#[embassy_executor::task]
-async fn attitude() {
-    let mut ticker = Ticker::every(Duration::from_millis(100));
-    loop {
-        ticker.next().await;
-        // A message that cannot be queued (or written) is counted in LINK.stats().
-        let _ = LINK.send(&Attitude {
-            phi: 0.1,
-            psi: 0.0,
-            theta: 0.0,
-        });
-    }
-}
-
-#[embassy_executor::task]
-async fn failsafe() {
-    LINK.health().wait_for(Health::Up).await; // not before the ground was heard once
-    loop {
-        LINK.health().wait_for(Health::Lost).await;
-        GO_HOME.store(true, Ordering::Relaxed);
-        LINK.health().wait_for(Health::Up).await;
-    }
+    pprz_example_one_link::run(tx, rx).await // writer + reader + services, forever
 }
 
 #[embassy_executor::main(
@@ -104,6 +69,6 @@ async fn main(spawner: Spawner) {
         };
     spawner.spawn(usb_device(device).unwrap());
     spawner.spawn(link(tx, rx).unwrap());
-    spawner.spawn(attitude().unwrap());
-    spawner.spawn(failsafe().unwrap());
+    spawner.spawn(pprz_example_one_link::attitude().unwrap());
+    spawner.spawn(pprz_example_one_link::failsafe().unwrap());
 }
