@@ -478,6 +478,18 @@ pub fn parse_setting(s: &str) -> Result<SettingArg, String> {
     })
 }
 
+/// A flag that Ctrl-C sets, for the tools' main loops (which end when it is set); a
+/// warning on standard error if the handler cannot be installed.
+pub fn stop_on_ctrl_c() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
+        eprintln!("warning: Ctrl-C handler not installed: {e}");
+    }
+    stop
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

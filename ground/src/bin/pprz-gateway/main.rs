@@ -8,7 +8,7 @@ use std::io::ErrorKind;
 use std::net::UdpSocket;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
@@ -192,7 +192,7 @@ fn run(
     if let Some(t) = table {
         service = service.with_settings(t);
     }
-    let stop = stop_on_ctrl_c();
+    let stop = pprz_ground::cli::stop_on_ctrl_c();
     let start = Instant::now();
     let mut next_tick = 0.0;
     loop {
@@ -223,14 +223,4 @@ fn run(
             .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
     }
     Ok(())
-}
-
-/// A flag that Ctrl-C sets.
-fn stop_on_ctrl_c() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
-        eprintln!("warning: Ctrl-C handler not installed: {e}");
-    }
-    stop
 }

@@ -11,7 +11,7 @@ use std::io::{BufWriter, ErrorKind, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 mod bus;
@@ -368,7 +368,7 @@ fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<
     let has_uplink = !matches!(uplink_sink, UplinkSink::None);
     let viewer = open_viewer(args, &inputs, has_uplink, prepared.table.as_ref())?;
     let queue = source.start();
-    let stop = stop_on_ctrl_c();
+    let stop = pprz_ground::cli::stop_on_ctrl_c();
     let live = queue.overflow() == Overflow::DropOldest;
     let mut monitor = Monitor::new(set, transport)
         .with_stale_after(args.stale_after)
@@ -443,16 +443,6 @@ fn open_recorder(
         inputs.push((id, format!("the --record file {}", path.display())));
     }
     Ok(Some(Recorder::new(BufWriter::new(file), transport)))
-}
-
-/// A flag that Ctrl-C sets.
-fn stop_on_ctrl_c() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
-        eprintln!("warning: Ctrl-C handler not installed: {e}");
-    }
-    stop
 }
 
 /// A run of the monitor: its state, its outputs, and when each periodic task is due.
