@@ -12,42 +12,14 @@
 //! back to a payload that is a fixed point of the round trip.
 #![no_main]
 
-use std::sync::OnceLock;
-
 use libfuzzer_sys::fuzz_target;
 use pprz_ground::gateway::{Gateway, GatewayLink};
 use pprz_ground::json;
-use pprz_ground::set::RuntimeSet;
-use pprz_transports::{AnyTransport, PprzLog, PprzV1, PprzV2, XBee24, XBee868};
-
-fn reference_set() -> RuntimeSet {
-    static SET: OnceLock<RuntimeSet> = OnceLock::new();
-    *SET.get_or_init(|| {
-        let path = pprz_test_support::reference::dir().join("messages.xml");
-        RuntimeSet::load(&path).unwrap_or_else(|e| {
-            panic!(
-                "the gateway fuzz target needs the PPRZLINK reference messages.xml: cannot load {} ({e}); set {} to the directory that holds it",
-                path.display(),
-                pprz_test_support::reference::DIR_VAR
-            )
-        })
-    })
-}
-
-fn transport(selector: u8) -> AnyTransport {
-    match selector % 5 {
-        0 => PprzV2::new().into(),
-        1 => PprzV1::new(1).into(),
-        2 => XBee24::default().into(),
-        3 => XBee868::default().into(),
-        _ => PprzLog::TELEMETRY.into(),
-    }
-}
 
 const CAPACITY: usize = 64;
 
 fuzz_target!(|data: &[u8]| {
-    let set = reference_set();
+    let set = pprz_transports_fuzz::reference_set("gateway");
     let (selector, seed, split, rest) = match data {
         [a, b, c, rest @ ..] => (*a, *b, *c, rest),
         _ => return,
@@ -55,8 +27,13 @@ fuzz_target!(|data: &[u8]| {
     let at = rest.len() * usize::from(split) / 256;
     let (stream, command) = rest.split_at(at);
     let links = vec![
-        GatewayLink::new("a", set, transport(selector), true),
-        GatewayLink::new("b", set, transport(selector / 5), true),
+        GatewayLink::new("a", set, pprz_transports_fuzz::transport(selector), true),
+        GatewayLink::new(
+            "b",
+            set,
+            pprz_transports_fuzz::transport(selector / 5),
+            true,
+        ),
     ];
     let mut gw = Gateway::new(set, links).with_window(0.05, CAPACITY);
     let mut rng = pprz_test_support::rng::Rng::new(u64::from(seed));
@@ -70,7 +47,11 @@ fuzz_target!(|data: &[u8]| {
         now += f64::from(r >> 26) * 0.001;
         gw.feed((r >> 8) as usize % 2, now, chunk, |d| {
             delivered += 1;
-            assert!(!d.message.line.chars().any(char::is_control), "{:?}", d.message.line);
+            assert!(
+                !d.message.line.chars().any(char::is_control),
+                "{:?}",
+                d.message.line
+            );
         });
         if r % 7 == 0 {
             gw.tick(now);
@@ -82,18 +63,30 @@ fuzz_target!(|data: &[u8]| {
         .iter()
         .map(|l| u64::from(l.monitor().decoder_stats().frames))
         .sum();
-    assert!(delivered <= decoded, "{delivered} delivered of {decoded} decoded");
+    assert!(
+        delivered <= decoded,
+        "{delivered} delivered of {decoded} decoded"
+    );
     let Ok(text) = std::str::from_utf8(command) else {
         return;
     };
-    for desc in set.set().messages().iter().filter(|d| d.class_name == "datalink") {
+    for desc in set
+        .set()
+        .messages()
+        .iter()
+        .filter(|d| d.class_name == "datalink")
+    {
         // A payload from JSON shows as JSON that parses back to a payload whose JSON
         // parses back to it (one step may normalise text: trailing NULs).
         if let Ok(first) = json::parse_message_str(desc, text) {
             let shown = json::message(desc, &first).expect("a parsed payload decodes");
             let second = json::parse_message_str(desc, &shown).expect("its JSON parses back");
             let again = json::message(desc, &second).expect("a parsed payload decodes");
-            assert_eq!(json::parse_message_str(desc, &again).as_ref(), Ok(&second), "{again}");
+            assert_eq!(
+                json::parse_message_str(desc, &again).as_ref(),
+                Ok(&second),
+                "{again}"
+            );
         }
     }
 });

@@ -16,42 +16,13 @@
 //! the path, when it is missing.
 #![no_main]
 
-use std::sync::OnceLock;
-
 use libfuzzer_sys::fuzz_target;
 use pprz_ground::escape;
 use pprz_ground::format::MAX_FIELDS_LEN;
 use pprz_ground::input::Drops;
 use pprz_ground::monitor::{Decoded, Monitor, MAX_EVENTS};
 use pprz_ground::ping::PingTracker;
-use pprz_ground::set::RuntimeSet;
 use pprz_ground::settings::SettingTracker;
-use pprz_transports::{AnyTransport, PprzLog, PprzV1, PprzV2, XBee24, XBee868};
-
-fn reference_set() -> RuntimeSet {
-    static SET: OnceLock<RuntimeSet> = OnceLock::new();
-    *SET.get_or_init(|| {
-        let dir = pprz_test_support::reference::dir();
-        let path = dir.join("messages.xml");
-        RuntimeSet::load(&path).unwrap_or_else(|e| {
-            panic!(
-                "the monitor fuzz target needs the PPRZLINK reference messages.xml: cannot load {} ({e}); set {} to the directory that holds it",
-                path.display(),
-                pprz_test_support::reference::DIR_VAR
-            )
-        })
-    })
-}
-
-fn transport(selector: u8) -> AnyTransport {
-    match selector % 5 {
-        0 => PprzV2::new().into(),
-        1 => PprzV1::new(1).into(),
-        2 => XBee24::default().into(),
-        3 => XBee868::default().into(),
-        _ => PprzLog::TELEMETRY.into(),
-    }
-}
 
 fn assert_clean(line: &str) {
     if let Some(c) = line
@@ -63,12 +34,12 @@ fn assert_clean(line: &str) {
 }
 
 fuzz_target!(|data: &[u8]| {
-    let set = reference_set();
+    let set = pprz_transports_fuzz::reference_set("monitor");
     let (selector, seed, stream) = match data {
         [a, b, rest @ ..] => (*a, *b, rest),
         _ => return,
     };
-    let mut monitor = Monitor::new(set, transport(selector))
+    let mut monitor = Monitor::new(set, pprz_transports_fuzz::transport(selector))
         .with_trackers(PingTracker::new(4, 0.05), SettingTracker::new(0.05));
     // Chunk sizes, times and operations from the workspace's seeded generator.
     let mut rng = pprz_test_support::rng::Rng::new(u64::from(seed));

@@ -252,3 +252,34 @@ pub fn run(t: AnyTransport, data: &[u8]) {
     small.matches_model(&model(&t, 32, stream));
     assert_eq!(decode::<32>(t, stream, seed, true), small);
 }
+
+/// The transport a selector byte names (modulo 5): PPRZ v2, PPRZ v1, XBee 2.4 GHz, XBee
+/// 868 MHz, PPRZLOG.
+pub fn transport(selector: u8) -> AnyTransport {
+    use pprz_transports::{PprzV1, PprzV2, XBee24, XBee868};
+    match selector % 5 {
+        0 => PprzV2::new().into(),
+        1 => PprzV1::new(1).into(),
+        2 => XBee24::default().into(),
+        3 => XBee868::default().into(),
+        _ => PprzLog::TELEMETRY.into(),
+    }
+}
+
+/// The PPRZLINK reference message set, loaded once from the reference directory
+/// (`pprz_test_support::reference::dir`); panics at start-up, naming the fuzz `target`,
+/// the path and the variable that sets it, when it is missing.
+pub fn reference_set(target: &str) -> pprz_ground::set::RuntimeSet {
+    use pprz_ground::set::RuntimeSet;
+    static SET: std::sync::OnceLock<RuntimeSet> = std::sync::OnceLock::new();
+    *SET.get_or_init(|| {
+        let path = pprz_test_support::reference::dir().join("messages.xml");
+        RuntimeSet::load(&path).unwrap_or_else(|e| {
+            panic!(
+                "the {target} fuzz target needs the PPRZLINK reference messages.xml: cannot load {} ({e}); set {} to the directory that holds it",
+                path.display(),
+                pprz_test_support::reference::DIR_VAR
+            )
+        })
+    })
+}
