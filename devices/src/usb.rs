@@ -33,30 +33,24 @@
 //!
 //! ```ignore
 //! use embassy_stm32::{bind_interrupts, peripherals, usb};
-//! use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
-//! use pprz_devices::usb::{UsbConfig, UsbCounters};
-//! use static_cell::StaticCell;
+//! use pprz_devices::usb::{CdcPort, UsbConfig, UsbCounters};
+//! use static_cell::{ConstStaticCell, StaticCell};
 //!
 //! bind_interrupts!(struct Irqs { OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>; });
 //! static USB_COUNTERS: UsbCounters = UsbCounters::new();
-//! static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
-//! static DESC: StaticCell<([u8; 256], [u8; 256], [u8; 64])> = StaticCell::new();
-//! static STATE: StaticCell<State> = StaticCell::new();
+//! static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+//! static PORT: StaticCell<CdcPort> = StaticCell::new();
 //!
 //! // In main, with `p = embassy_stm32::init(config)` and a 48 MHz USB clock:
 //! let mut usb_config = usb::Config::default();
 //! usb_config.vbus_detection = true; // self-powered board: VBUS sensed on PA9
 //! let driver = usb::Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11,
-//!                                  EP_OUT.init([0; 256]), usb_config);
+//!                                  EP_OUT.take(), usb_config);
 //! let mut config = embassy_usb::Config::new(0x1209, 0x0001);
 //! config.product = Some("Paparazzi telemetry");
-//! let (config_desc, bos_desc, control_buf) = DESC.init(([0; 256], [0; 256], [0; 64]));
-//! let mut builder = embassy_usb::Builder::new(driver, config, config_desc, bos_desc,
-//!                                             &mut [], control_buf);
-//! let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), 64);
-//! let usb = builder.build();
+//! let (usb, uplink, downlink) =
+//!     pprz_devices::usb::cdc_acm(driver, config, PORT.init(CdcPort::new()), &USB_COUNTERS, UsbConfig::default());
 //! spawner.spawn(usb_task(usb)?); // async fn usb_task(mut usb: UsbDevice<'static, Driver<..>>) { usb.run().await }
-//! let (uplink, downlink) = pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default())?;
 //! // `downlink` goes to a downlink writer task, `uplink` to a datalink Reader.
 //! ```
 
@@ -64,8 +58,9 @@ use core::fmt;
 use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 use embassy_time::{Duration, with_timeout};
-use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::driver::{Driver, EndpointError};
+use embassy_usb::{Builder, Config, UsbDevice};
 use embedded_io_async::{ErrorKind, ErrorType, Read, Write};
 
 use crate::{bump, len_u32};
@@ -265,6 +260,80 @@ pub fn split<'d, 'c, D: Driver<'d>, const N: usize>(
         UsbRx::new(receiver, counters)?,
         UsbTx::new(sender, counters, config),
     ))
+}
+
+/// Packet size of the CDC-ACM interface [`cdc_acm`] builds: the largest bulk packet of a
+/// full-speed device, and [`CdcRx`]'s default buffer.
+pub const FULL_SPEED_PACKET: u16 = 64;
+
+/// What the USB stack borrows from a [`cdc_acm`] port for as long as the device runs:
+/// the configuration and BOS descriptor buffers (256 bytes each), the control transfer
+/// buffer (64 bytes) and embassy-usb's CDC-ACM class state. Keep it in a `static`
+/// (`static_cell::StaticCell`: the class state is not `Send`, so `ConstStaticCell` does
+/// not take it).
+pub struct CdcPort<'d> {
+    config_descriptor: [u8; 256],
+    bos_descriptor: [u8; 256],
+    control: [u8; 64],
+    state: State<'d>,
+}
+
+impl CdcPort<'_> {
+    /// Zeroed buffers and a new class state.
+    pub const fn new() -> Self {
+        Self {
+            config_descriptor: [0; 256],
+            bos_descriptor: [0; 256],
+            control: [0; 64],
+            state: State::new(),
+        }
+    }
+}
+
+impl Default for CdcPort<'_> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// A USB device with one CDC-ACM interface (full speed, [`FULL_SPEED_PACKET`]-byte
+/// packets) on `driver`, named by `config` (vendor and product ids, strings), split as
+/// [`split`] does. Returns the device, which a task must run (`UsbDevice::run`), the
+/// reading half for a datalink reader and the writing half for a downlink writer; both
+/// count into `counters` and write as `usb` says.
+pub fn cdc_acm<'d, 'c, D: Driver<'d>>(
+    driver: D,
+    config: Config<'d>,
+    port: &'d mut CdcPort<'d>,
+    counters: &'c UsbCounters,
+    usb: UsbConfig,
+) -> (UsbDevice<'d, D>, CdcRx<'c, 'd, D>, CdcTx<'c, 'd, D>) {
+    let CdcPort {
+        config_descriptor,
+        bos_descriptor,
+        control,
+        state,
+    } = port;
+    let mut builder = Builder::new(
+        driver,
+        config,
+        config_descriptor,
+        bos_descriptor,
+        &mut [],
+        control,
+    );
+    let class = CdcAcmClass::new(&mut builder, state, FULL_SPEED_PACKET);
+    let device = builder.build();
+    let (sender, receiver) = class.split();
+    // The class's packet size is the buffer's size: the check in `UsbRx::new` cannot fail.
+    let rx = UsbRx {
+        receiver,
+        counters,
+        buf: [0; FULL_SPEED_PACKET as usize],
+        start: 0,
+        end: 0,
+    };
+    (device, rx, UsbTx::new(sender, counters, usb))
 }
 
 /// The writing half: packetisation, zero-length packets, fail-fast; see the

@@ -65,6 +65,18 @@
 //! repository; 32-bit figures run under Miri for `i686`, 2 000 rounds.) Smaller arenas fill
 //! less at the first failure mostly because a 255-byte request is a larger share of them.
 //!
+//! # Cache
+//!
+//! A telemetry stream allocates and releases frames of the same few sizes over and over.
+//! While the arena is at most three quarters full, a released block of up to 32 units
+//! (256 bytes) is kept whole, at most 16 of them, on a list per exact size; the next
+//! allocation of that many units takes it without searching, splitting or merging. When
+//! neither the cache nor the free lists have a block for a request, the cached blocks go
+//! back to the free lists one at a time (each merges with its free neighbours) and the
+//! free lists are tried again after each: an allocation fails only once the cache is
+//! empty and no free block fits, as without the cache. [`ArenaStats::cached`] counts the
+//! cached blocks; they count as free in [`ArenaStats::used`].
+//!
 //! # Layout
 //!
 //! ```text
@@ -92,10 +104,12 @@
 //!
 //! # Time Complexity
 //!
-//! [`FrameArena::alloc`] and releasing a [`FrameBuf`] run in constant time whatever the
+//! [`FrameArena::alloc`] and releasing a [`FrameBuf`] run in bounded time whatever the
 //! fill level and fragmentation: a few bit scans (`trailing_zeros`), unlinking at most
-//! three free blocks and linking one. Nothing loops over blocks, lists or units. The lock
-//! is held only for that time.
+//! three free blocks and linking one, or taking or putting one cached block. Nothing
+//! loops over blocks, lists or units, except that an allocation that finds no block
+//! returns the cached blocks first, at most 16 steps of that kind. The lock is held for
+//! one step at a time.
 //!
 //! # Concurrency and `unsafe`
 //!
@@ -138,6 +152,11 @@ const SL: usize = 1 << SLI;
 const FL: usize = 16 - SLI as usize + 1;
 /// Largest number of units an arena may have (so that `unit + 1` fits a `u16` link).
 const MAX_UNITS: usize = u16::MAX as usize - 1;
+/// Released blocks of up to this many units (256 bytes: every PPRZ frame) may be cached
+/// whole for the next allocation of their exact size.
+const CACHE_SIZES: usize = 32;
+/// Largest number of cached blocks.
+const CACHE_BLOCKS: u16 = 16;
 
 /// Byte offsets of the fields of a free block (relative to its first or last unit).
 mod field {
@@ -197,8 +216,12 @@ pub struct ArenaStats {
     pub live: usize,
     /// Largest `used` since creation or the last [`FrameArena::reset_high_water`].
     pub high_water: usize,
-    /// Number of free blocks; with `used`, a measure of fragmentation.
+    /// Number of free blocks; with `used`, a measure of fragmentation. Cached blocks are
+    /// not counted here but in `cached`.
     pub free_blocks: usize,
+    /// Released blocks kept whole for the next allocation of their size (at most 16,
+    /// see [the cache](self#cache)). They count as free in `used`.
+    pub cached: usize,
     /// Successful allocations (wrapping).
     pub allocs: u32,
     /// Releases (wrapping); `allocs.wrapping_sub(frees) == live`.
@@ -249,16 +272,17 @@ pub struct ArenaStats {
 /// With `UNITS` the number of 8-byte units before the [`RESERVED`](Self::RESERVED) tail:
 ///
 /// 1. Units `0..UNITS` are partitioned into consecutive blocks. Each is either *free*, in
-///    exactly one free list (that of its size class), or *owned* by exactly one live
+///    exactly one free list (that of its size class), *cached*, in exactly one cache list
+///    (that of its size in units, at most 32), or *owned* by exactly one live
 ///    [`FrameBuf`] that records its start and size.
-/// 2. No two free blocks are adjacent (immediate coalescing), so there are at most
-///    `live + 1` free blocks.
+/// 2. No two free blocks are adjacent (coalescing), so there are at most
+///    `live + cached + 1` free blocks.
 /// 3. The boundary bit of a unit is set iff the unit is the first or the last unit of a
 ///    free block.
-/// 4. A free block's header and footer hold its size and list links. The allocator reads
-///    and writes only the headers and footers of free blocks and the boundary bitmap, and
-///    only with the lock held; the bytes of an owned block are accessed only through its
-///    `FrameBuf`.
+/// 4. A free block's header and footer hold its size and list links; a cached block's
+///    `NEXT` field links its cache list. The allocator reads and writes only these fields
+///    of free and cached blocks and the boundary bitmap, and only with the lock held; the
+///    bytes of an owned block are accessed only through its `FrameBuf`.
 /// 5. Second-level bit `(fl, sl)` is set iff list `(fl, sl)` is non-empty; first-level bit
 ///    `fl` is set iff any of its second-level bits is.
 /// 6. Every byte of the storage is initialised (zero at creation, then only ever written
@@ -323,6 +347,9 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
         MAX_ALLOC_LIMIT
     };
 
+    /// Fill level (`used`, bytes) up to which released frame blocks are cached.
+    const CACHE_FILL: usize = N / 4 * 3;
+
     /// Compile-time check of `N`, forced by [`new`](Self::new).
     const VALID: () = {
         assert!(
@@ -347,6 +374,7 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
             live: st.live(),
             high_water: st.high_water,
             free_blocks: st.free_blocks,
+            cached: usize::from(st.cached),
             allocs: st.allocs,
             frees: st.frees,
             failures: st.failures,
@@ -382,8 +410,9 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
     ///
     /// The block is `len` rounded up to [`GRANULARITY`] (at least one unit). For
     /// `len <= 256` this fails with [`AllocError::Full`] only if no free block is large
-    /// enough; above, only if none is large enough by a margin of at most `len / 16`,
-    /// unless the first block of the request's own size class fits.
+    /// enough once the cached blocks are back in the free lists; above, only if none is
+    /// large enough by a margin of at most `len / 16`, unless the first block of the
+    /// request's own size class fits.
     ///
     /// # Errors
     ///
@@ -392,7 +421,9 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
     ///
     /// # Time Complexity
     ///
-    /// Constant, whatever the fill level; takes the lock briefly.
+    /// Bounded, whatever the fill level: one short section under the lock for a cached
+    /// block, one for the free lists, and when neither has a block, at most 16 more (one
+    /// cached block returned to the free lists and the free lists tried again in each).
     ///
     /// # Panics
     ///
@@ -409,17 +440,39 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
             });
         }
         let units = len.div_ceil(GRANULARITY).max(1);
-        let start = self.with_heap(|st, mem| {
-            let start = st.alloc(mem, units);
-            if start.is_some() {
-                st.allocs = st.allocs.wrapping_add(1);
-                st.used += units * GRANULARITY;
-                st.high_water = st.high_water.max(st.used);
-            } else {
-                st.failures = st.failures.wrapping_add(1);
-            }
-            start
-        });
+        // A cached block of the size (a short section of its own, so that a hit does not
+        // pay for the free lists' size class), else the free lists. When neither has a
+        // block, the cached blocks go back to the free lists one per lock (each may merge
+        // with its neighbours) and the free lists are tried again: the lock is never held
+        // for more than one release and one allocation.
+        let mut start = None;
+        if units <= CACHE_SIZES {
+            start = self.with_heap(|st, mem| {
+                let start = st.take_cached(mem, units);
+                if start.is_some() {
+                    st.allocated(units);
+                }
+                start
+            });
+        }
+        if start.is_none() {
+            start = loop {
+                let step = self.with_heap(|st, mem| {
+                    let start = st.alloc(mem, units);
+                    if start.is_some() {
+                        st.allocated(units);
+                    } else if st.uncache_one(mem) {
+                        return None;
+                    } else {
+                        st.failures = st.failures.wrapping_add(1);
+                    }
+                    Some(start)
+                });
+                if let Some(start) = step {
+                    break start;
+                }
+            };
+        }
         match start {
             // The casts are lossless: `start + units <= UNITS <= MAX_UNITS` and
             // `len <= MAX_ALLOC_LIMIT`.
@@ -472,9 +525,13 @@ impl<M: RawMutex, const N: usize> Grants for FrameArena<M, N> {
         // The block's first unit (the caller guarantees `ptr` is one of ours).
         let start = (ptr.addr() - self.base().addr()) / GRANULARITY;
         self.with_heap(|st, mem| {
-            st.free(mem, start, units);
             st.frees = st.frees.wrapping_add(1);
             st.used -= units * GRANULARITY;
+            // Above three quarters full, blocks go straight back to the free lists: there
+            // a cached block would soon have to be returned by a failing allocation.
+            if st.used > Self::CACHE_FILL || !st.cache(mem, start, units) {
+                st.free(mem, start, units);
+            }
         });
     }
 }
@@ -745,6 +802,13 @@ struct State {
     sl_bitmap: [u16; FL],
     /// First block of each free list, as a link.
     heads: [[u16; SL]; FL],
+    /// First cached block of each size `1..=CACHE_SIZES` units (index `size - 1`), as a
+    /// link; the next one is in the block's `NEXT` field.
+    cache: [u16; CACHE_SIZES],
+    /// Bit `size - 1` set iff `cache[size - 1]` is not none.
+    cache_bits: u32,
+    /// Cached blocks, at most `CACHE_BLOCKS`.
+    cached: u16,
     /// See [`ArenaStats`]; `live` is `allocs - frees`.
     used: usize,
     high_water: usize,
@@ -761,6 +825,9 @@ impl State {
         fl_bitmap: 0,
         sl_bitmap: [0; FL],
         heads: [[0; SL]; FL],
+        cache: [0; CACHE_SIZES],
+        cache_bits: 0,
+        cached: 0,
         used: 0,
         high_water: 0,
         free_blocks: 0,
@@ -888,6 +955,61 @@ impl State {
             self.free_blocks -= 1;
         }
         Some(block)
+    }
+
+    /// Count an allocation of `units`.
+    #[inline(always)]
+    fn allocated(&mut self, units: usize) {
+        self.allocs = self.allocs.wrapping_add(1);
+        self.used += units * GRANULARITY;
+        self.high_water = self.high_water.max(self.used);
+    }
+
+    /// Take a cached block of exactly `units` units, if there is one.
+    #[inline(always)]
+    fn take_cached(&mut self, mem: Mem, units: usize) -> Option<usize> {
+        let i = units.wrapping_sub(1);
+        let block = unlink(usize::from(*self.cache.get(i)?))?;
+        let next = mem.get(block, field::NEXT);
+        self.cache[i] = next as u16;
+        if next == 0 {
+            self.cache_bits &= !(1 << i);
+        }
+        self.cached -= 1;
+        Some(block)
+    }
+
+    /// Keep the released block `block..block + units` whole for the next allocation of
+    /// its size, if it is small enough and the cache has room; otherwise `false`.
+    #[inline(always)]
+    fn cache(&mut self, mem: Mem, block: usize, units: usize) -> bool {
+        let i = units.wrapping_sub(1);
+        if i >= CACHE_SIZES || self.cached >= CACHE_BLOCKS {
+            return false;
+        }
+        // Its first unit is not a free block's, so the field is the allocator's to use.
+        mem.set(block, field::NEXT, usize::from(self.cache[i]));
+        self.cache[i] = (block + 1) as u16;
+        self.cache_bits |= 1 << i;
+        self.cached += 1;
+        true
+    }
+
+    /// Return the largest cached block to the free lists (merging it with its free
+    /// neighbours); `false` if the cache is empty.
+    #[inline(never)]
+    fn uncache_one(&mut self, mem: Mem) -> bool {
+        if self.cache_bits == 0 {
+            return false;
+        }
+        let units = (u32::BITS - self.cache_bits.leading_zeros()) as usize;
+        match self.take_cached(mem, units) {
+            Some(block) => {
+                self.free(mem, block, units);
+                true
+            }
+            None => false,
+        }
     }
 
     /// Remove the head of list `(fl, sl)`, whose successor is `next` (a link).
@@ -1034,6 +1156,7 @@ mod tests {
             enum Owner {
                 Frame(usize),
                 Free(usize),
+                Cached(usize),
             }
             self.with_heap(|st, mem| {
                 let mut owner = std::vec![None::<Owner>; mem.units];
@@ -1068,6 +1191,20 @@ mod tests {
                         }
                     }
                 }
+                let (mut cached, mut cached_units) = (0, 0);
+                for i in 0..CACHE_SIZES {
+                    let head = unlink(usize::from(st.cache[i]));
+                    assert_eq!(st.cache_bits & (1 << i) != 0, head.is_some());
+                    let mut cur = head;
+                    while let Some(b) = cur {
+                        mark(b, i + 1, Owner::Cached(b));
+                        cached += 1;
+                        cached_units += i + 1;
+                        cur = unlink(mem.get(b, field::NEXT));
+                    }
+                }
+                assert_eq!(usize::from(st.cached), cached);
+                assert!(cached <= usize::from(CACHE_BLOCKS));
                 let owner: Vec<Owner> = owner
                     .into_iter()
                     .map(|o| o.expect("a unit in no block: a leak"))
@@ -1084,10 +1221,15 @@ mod tests {
                 assert_eq!(st.live(), live.len());
                 assert_eq!(
                     st.used,
-                    Self::RESERVED + (mem.units - free_units) * GRANULARITY
+                    Self::RESERVED + (mem.units - free_units - cached_units) * GRANULARITY
                 );
                 largest
             })
+        }
+
+        /// Return every cached block to the free lists.
+        fn uncache_all(&self) {
+            while self.with_heap(|st, mem| st.uncache_one(mem)) {}
         }
     }
 
@@ -1132,16 +1274,11 @@ mod tests {
                     .map(|f| (f.offset() / GRANULARITY, usize::from(f.units)))
                     .collect()
             };
-            let mut largest = arena.check(&[]);
+            arena.check(&[]);
             for op in ops {
                 match op {
                     Op::Alloc(len) => {
                         let units = len.div_ceil(GRANULARITY).max(1);
-                        let own_head_fits = arena.with_heap(|st, mem| {
-                            let (fl, sl) = class(units);
-                            unlink(usize::from(st.heads[fl][sl]))
-                                .is_some_and(|b| mem.get(b, field::SIZE) >= units)
-                        });
                         match arena.alloc(len) {
                             Ok(frame) => {
                                 prop_assert!(len <= Arena::<2048>::MAX_ALLOC);
@@ -1153,6 +1290,15 @@ mod tests {
                                 prop_assert!(len > max);
                             }
                             Err(AllocError::Full { .. }) => {
+                                // A failure first returned every cached block: the free
+                                // lists as they are now are those the last attempt saw.
+                                prop_assert_eq!(arena.stats().cached, 0);
+                                let largest = arena.check(&blocks(&frames));
+                                let own_head_fits = arena.with_heap(|st, mem| {
+                                    let (fl, sl) = class(units);
+                                    unlink(usize::from(st.heads[fl][sl]))
+                                        .is_some_and(|b| mem.get(b, field::SIZE) >= units)
+                                });
                                 prop_assert!(largest < round_up(units) && !own_head_fits);
                                 if units <= 32 {
                                     prop_assert!(largest < units);
@@ -1176,9 +1322,11 @@ mod tests {
                         }
                     }
                 }
-                largest = arena.check(&blocks(&frames));
+                arena.check(&blocks(&frames));
             }
             drop(frames);
+            arena.check(&[]);
+            arena.uncache_all();
             prop_assert_eq!(arena.check(&[]), Arena::<2048>::UNITS);
             prop_assert_eq!(arena.stats().used, Arena::<2048>::RESERVED);
         }

@@ -50,7 +50,10 @@ struct Entry<'a> {
     priority: u8,
     seq: u32,
     latest: Option<MessageKey>,
-    relayed: bool,
+    /// 1 if forwarded, else 0. A byte, not a `bool`: a `bool` gives `Option<Entry>` its
+    /// spare values and makes `None` 2, so an empty queue (and a `Link` holding it) would
+    /// not be all zero bytes and could not be built in `.bss`.
+    relayed: u8,
     frame: FrameBuf<'a>,
 }
 
@@ -389,10 +392,10 @@ impl<'a, const Q: usize> State<'a, Q> {
             *c = c.wrapping_add(1);
         };
         count(&mut self.stats.evicted);
-        if entry.relayed {
+        if entry.relayed != 0 {
             count(&mut self.stats.relayed.evicted);
         }
-        self.lost(entry.priority, entry.relayed);
+        self.lost(entry.priority, entry.relayed != 0);
     }
 
     /// Takes the most important frame and marks it in flight (see
@@ -402,7 +405,7 @@ impl<'a, const Q: usize> State<'a, Q> {
         let entry = self.entries.pop_front()?;
         self.in_flight = true;
         self.in_flight_priority = entry.priority;
-        self.in_flight_relayed = entry.relayed;
+        self.in_flight_relayed = entry.relayed != 0;
         self.update_queued();
         Some(entry.frame)
     }
@@ -580,7 +583,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                 priority,
                 seq,
                 latest,
-                relayed,
+                relayed: u8::from(relayed),
                 frame,
             };
             if let Err(entry) = s.entries.push(entry) {

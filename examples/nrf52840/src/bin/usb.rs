@@ -22,10 +22,9 @@ use embassy_nrf::peripherals::USBD;
 use embassy_nrf::usb::vbus_detect::{self, HardwareVbusDetect};
 use embassy_nrf::usb::{self, Driver};
 use embassy_usb::UsbDevice;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use panic_halt as _;
-use pprz_devices::usb::{CdcRx, CdcTx, UsbConfig, UsbCounters};
-use static_cell::{ConstStaticCell, StaticCell};
+use pprz_devices::usb::{CdcPort, CdcRx, CdcTx, UsbConfig, UsbCounters};
+use static_cell::StaticCell;
 
 embassy_nrf::bind_interrupts!(struct Irqs {
     USBD => usb::InterruptHandler<USBD>;
@@ -35,10 +34,8 @@ embassy_nrf::bind_interrupts!(struct Irqs {
 type UsbDriver = Driver<'static, HardwareVbusDetect>;
 
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
-/// USB buffers: configuration descriptor, BOS descriptor, control transfers.
-static USB_BUFFERS: ConstStaticCell<([u8; 256], [u8; 256], [u8; 64])> =
-    ConstStaticCell::new(([0; 256], [0; 256], [0; 64]));
-static CDC_STATE: StaticCell<State> = StaticCell::new();
+/// The CDC-ACM port's descriptor and control buffers and class state.
+static USB_PORT: StaticCell<CdcPort> = StaticCell::new();
 
 #[embassy_executor::task]
 async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
@@ -60,22 +57,13 @@ async fn main(spawner: Spawner) {
     let mut config = embassy_usb::Config::new(0x1209, 0x0001);
     config.manufacturer = Some("pprz-embassy");
     config.product = Some("telemetry");
-    let (config_descriptor, bos_descriptor, control) = USB_BUFFERS.take();
-    let mut builder = embassy_usb::Builder::new(
+    let (device, rx, tx) = pprz_devices::usb::cdc_acm(
         driver,
         config,
-        config_descriptor,
-        bos_descriptor,
-        &mut [],
-        control,
+        USB_PORT.init(CdcPort::new()),
+        &USB_COUNTERS,
+        UsbConfig::default(),
     );
-    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
-    let device = builder.build();
-    let (rx, tx) =
-        match pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default()) {
-            Ok(halves) => halves,
-            Err(e) => panic!("USB CDC-ACM: {e}"),
-        };
     spawner.spawn(usb_device(device).unwrap());
     spawner.spawn(link(tx, rx).unwrap());
     spawner.spawn(pprz_example_one_link::attitude().unwrap());

@@ -13,21 +13,17 @@ use embassy_executor::Spawner;
 use embassy_rp::peripherals::USB;
 use embassy_rp::usb::{Driver, InterruptHandler};
 use embassy_usb::UsbDevice;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use panic_halt as _;
-use pprz_devices::usb::{CdcRx, CdcTx, UsbConfig, UsbCounters};
-use static_cell::{ConstStaticCell, StaticCell};
+use pprz_devices::usb::{CdcPort, CdcRx, CdcTx, UsbConfig, UsbCounters};
+use static_cell::StaticCell;
 
 embassy_rp::bind_interrupts!(struct Irqs { USBCTRL_IRQ => InterruptHandler<USB>; });
 
 type UsbDriver = Driver<'static, USB>;
 
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
-/// USB buffers: configuration descriptor, BOS descriptor, control transfers (the RP2040's
-/// endpoints have their own 4 KiB of USB RAM).
-static USB_BUFFERS: ConstStaticCell<([u8; 256], [u8; 256], [u8; 64])> =
-    ConstStaticCell::new(([0; 256], [0; 256], [0; 64]));
-static CDC_STATE: StaticCell<State> = StaticCell::new();
+/// The CDC-ACM port's descriptor and control buffers and class state.
+static USB_PORT: StaticCell<CdcPort> = StaticCell::new();
 
 #[embassy_executor::task]
 async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
@@ -51,22 +47,13 @@ async fn main(spawner: Spawner) {
     let mut config = embassy_usb::Config::new(0x1209, 0x0001);
     config.manufacturer = Some("pprz-embassy");
     config.product = Some("telemetry");
-    let (config_descriptor, bos_descriptor, control) = USB_BUFFERS.take();
-    let mut builder = embassy_usb::Builder::new(
+    let (device, rx, tx) = pprz_devices::usb::cdc_acm(
         driver,
         config,
-        config_descriptor,
-        bos_descriptor,
-        &mut [],
-        control,
+        USB_PORT.init(CdcPort::new()),
+        &USB_COUNTERS,
+        UsbConfig::default(),
     );
-    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
-    let device = builder.build();
-    let (rx, tx) =
-        match pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default()) {
-            Ok(halves) => halves,
-            Err(e) => panic!("USB CDC-ACM: {e}"),
-        };
     spawner.spawn(usb_device(device).unwrap());
     spawner.spawn(link(tx, rx).unwrap());
     spawner.spawn(pprz_example_one_link::attitude().unwrap());

@@ -39,15 +39,14 @@ use embassy_stm32::usart::{
 use embassy_stm32::{bind_interrupts, usb};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
 use embassy_usb::UsbDevice;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use panic_halt as _;
 use pprz_devices::stm32::{UartErrorCounters, UartRx, f405};
-use pprz_devices::usb::{CdcTx, UsbConfig, UsbCounters};
+use pprz_devices::usb::{CdcPort, CdcTx, UsbConfig, UsbCounters};
 use pprz_example_app::{AC_ID, Config};
 use pprz_settings::{PageCache, PersistentStore, StoreControl, buffer_len};
 use pprz_telemetry::pprz_transports::{AnyTransport, PprzV2};
 use pprz_telemetry::{Device, DeviceConfig, Downlink, FrameArena, Pacing, Port, run_writer};
-use static_cell::StaticCell;
+use static_cell::{ConstStaticCell, StaticCell};
 
 #[cfg(not(feature = "secure"))]
 bind_interrupts!(struct Irqs {
@@ -116,15 +115,10 @@ static DOWNLINK: Dl = Downlink::new(
 static RADIO_ERRORS: UartErrorCounters = UartErrorCounters::new();
 static UART_BUFFERS: StaticCell<([u8; 256], [u8; 256])> = StaticCell::new();
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
-/// USB buffers: OUT endpoints, configuration descriptor, control transfers, BOS descriptor.
-struct UsbBuffers {
-    ep_out: [u8; 256],
-    config_descriptor: [u8; 256],
-    control: [u8; 64],
-    bos_descriptor: [u8; 256],
-}
-static USB_BUFFERS: StaticCell<UsbBuffers> = StaticCell::new();
-static CDC_STATE: StaticCell<State> = StaticCell::new();
+/// USB OUT endpoint buffer.
+static USB_EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+/// The CDC-ACM port's descriptor and control buffers and class state.
+static USB_PORT: StaticCell<CdcPort> = StaticCell::new();
 
 /// The settings' flash: sectors 1 to 3, offsets within `bank1_region1` (sectors 0 to 3,
 /// 16 KiB each, from `0x0800_0000`). Sector 0 holds the vector table; `memory.x` puts
@@ -258,31 +252,17 @@ async fn main(spawner: Spawner) {
     let radio_rx = UartRx::new(radio_rx, &RADIO_ERRORS);
 
     // USB CDC-ACM: a second telemetry output.
-    let bufs = USB_BUFFERS.init(UsbBuffers {
-        ep_out: [0; 256],
-        config_descriptor: [0; 256],
-        control: [0; 64],
-        bos_descriptor: [0; 256],
-    });
-    let driver = f405::usb_otg_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, &mut bufs.ep_out, true);
+    let driver = f405::usb_otg_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, USB_EP_OUT.take(), true);
     let mut usb_config = embassy_usb::Config::new(0x1209, 0x0001);
     usb_config.manufacturer = Some("pprz-embassy");
     usb_config.product = Some("telemetry");
-    let mut builder = embassy_usb::Builder::new(
+    let (device, _usb_rx, usb_tx) = pprz_devices::usb::cdc_acm(
         driver,
         usb_config,
-        &mut bufs.config_descriptor,
-        &mut bufs.bos_descriptor,
-        &mut [],
-        &mut bufs.control,
+        USB_PORT.init(CdcPort::new()),
+        &USB_COUNTERS,
+        UsbConfig::default(),
     );
-    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
-    let device = builder.build();
-    let (_usb_rx, usb_tx) =
-        match pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default()) {
-            Ok(halves) => halves,
-            Err(e) => panic!("USB CDC-ACM: {e:?}"),
-        };
 
     // The settings' flash: bank 1's first region (sectors 0 to 3), sectors 1 to 3 of it.
     let region = Flash::new(p.FLASH, Irqs).into_regions().bank1_region1;

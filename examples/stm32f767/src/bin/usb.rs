@@ -22,25 +22,19 @@ use embassy_stm32::rcc::{
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{bind_interrupts, usb};
 use embassy_usb::UsbDevice;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use panic_halt as _;
-use pprz_devices::usb::{CdcRx, CdcTx, UsbConfig, UsbCounters};
-use static_cell::StaticCell;
+use pprz_devices::usb::{CdcPort, CdcRx, CdcTx, UsbConfig, UsbCounters};
+use static_cell::{ConstStaticCell, StaticCell};
 
 bind_interrupts!(struct Irqs { OTG_FS => usb::InterruptHandler<USB_OTG_FS>; });
 
 type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
 
 static USB_COUNTERS: UsbCounters = UsbCounters::new();
-/// USB buffers: OUT endpoints, configuration descriptor, control transfers, BOS descriptor.
-struct UsbBuffers {
-    ep_out: [u8; 256],
-    config_descriptor: [u8; 256],
-    control: [u8; 64],
-    bos_descriptor: [u8; 256],
-}
-static USB_BUFFERS: StaticCell<UsbBuffers> = StaticCell::new();
-static CDC_STATE: StaticCell<State> = StaticCell::new();
+/// USB OUT endpoint buffer.
+static USB_EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+/// The CDC-ACM port's descriptor and control buffers and class state.
+static USB_PORT: StaticCell<CdcPort> = StaticCell::new();
 
 #[embassy_executor::task]
 async fn usb_device(mut device: UsbDevice<'static, UsbDriver>) {
@@ -83,12 +77,6 @@ fn clocks() -> embassy_stm32::Config {
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clocks());
 
-    let bufs = USB_BUFFERS.init(UsbBuffers {
-        ep_out: [0; 256],
-        config_descriptor: [0; 256],
-        control: [0; 64],
-        bos_descriptor: [0; 256],
-    });
     // An autopilot is self-powered (its own battery), so it senses VBUS on PA9 to see
     // the cable come and go; the Nucleo-F767ZI wires PA9 to its user USB connector.
     let mut driver_config = usb::Config::default();
@@ -98,27 +86,19 @@ async fn main(spawner: Spawner) {
         Irqs,
         p.PA12,
         p.PA11,
-        &mut bufs.ep_out,
+        USB_EP_OUT.take(),
         driver_config,
     );
     let mut usb_config = embassy_usb::Config::new(0x1209, 0x0001);
     usb_config.manufacturer = Some("pprz-embassy");
     usb_config.product = Some("telemetry");
-    let mut builder = embassy_usb::Builder::new(
+    let (device, rx, tx) = pprz_devices::usb::cdc_acm(
         driver,
         usb_config,
-        &mut bufs.config_descriptor,
-        &mut bufs.bos_descriptor,
-        &mut [],
-        &mut bufs.control,
+        USB_PORT.init(CdcPort::new()),
+        &USB_COUNTERS,
+        UsbConfig::default(),
     );
-    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
-    let device = builder.build();
-    let (rx, tx) =
-        match pprz_devices::usb::split::<_, 64>(class, &USB_COUNTERS, UsbConfig::default()) {
-            Ok(halves) => halves,
-            Err(e) => panic!("USB CDC-ACM: {e:?}"),
-        };
 
     spawner.spawn(usb_device(device).unwrap());
     spawner.spawn(link(tx, rx).unwrap());
