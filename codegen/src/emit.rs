@@ -287,7 +287,7 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
                         lifetime,
                         doc: format!("A message of class `{}` (id {}).", c.name, c.id),
                         id: c.id,
-                        decode: format!("{module}::AnyMessage::decode(msg_id, payload)"),
+                        decode: set_decode_arm(c, &module, &opts.runtime),
                     }
                 })
                 .collect(),
@@ -777,6 +777,29 @@ fn emit_value_accessors(out: &mut String, item: &MessageItem) {
     }
 }
 
+/// The arm of the set's `AnyMessage::decode` for `class`: a `match msg_id` that decodes
+/// the message straight into the set's variant, rather than calling the class's `decode`
+/// and wrapping its result (which the compiler builds in a temporary and copies).
+fn set_decode_arm(class: &Class, module: &str, rt: &str) -> String {
+    let variant = names::camel_case(&class.name);
+    let mut arm = String::from("match msg_id {\n");
+    for m in &class.messages {
+        let name = names::camel_case(&m.name);
+        out!(
+            arm,
+            "                {} => <{module}::{name}{} as {rt}::Decode>::decode(payload).map(|m| Self::{variant}({module}::AnyMessage::{name}(m))),",
+            m.id,
+            lt(has_lifetime(m)),
+        );
+    }
+    out!(
+        arm,
+        "                _ => {ERR}({rt}::DecodeError::UnknownMessage {{ class_id, msg_id }}),"
+    );
+    arm.push_str("            }");
+    arm
+}
+
 /// A class's `AnyMessage`: one variant per message.
 fn emit_class_any(out: &mut String, class: &Class) {
     // The variants are named after the message types, so `v.name` is the type.
@@ -809,7 +832,9 @@ fn emit_class_any(out: &mut String, class: &Class) {
                     let lifetime = has_lifetime(m);
                     let ty = format!("{name}{}", lt(lifetime));
                     AnyVariant {
-                        decode: format!("<{ty} as __rt::Decode>::decode(payload)"),
+                        decode: format!(
+                            "<{ty} as __rt::Decode>::decode(payload).map(Self::{name})"
+                        ),
                         doc: format!("`{}` (id {}).", m.name, m.id),
                         id: m.id,
                         name,
@@ -869,7 +894,8 @@ struct AnyVariant {
     doc: String,
     /// The id it is decoded from (class id, or message id).
     id: u8,
-    /// Expression decoding `payload` into a `Result<ty, DecodeError>`.
+    /// Expression decoding `payload` into a `Result<Self, DecodeError>` (the enum's
+    /// `Self`, this variant or an error).
     decode: String,
 }
 
@@ -980,13 +1006,7 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     );
     out!(out, "{i}        match {} {{", d.on);
     for v in &e.variants {
-        out!(
-            out,
-            "{i}            {} => {}.map(Self::{}),",
-            v.id,
-            v.decode,
-            v.name
-        );
+        out!(out, "{i}            {} => {},", v.id, v.decode,);
     }
     out!(
         out,

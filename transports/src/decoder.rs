@@ -123,8 +123,8 @@ impl DecoderStats {
 enum InPlace<'i> {
     /// A message frame, to hand out.
     Frame(Frame<'i>),
-    /// A control frame and its length, to consume.
-    Control(Control, usize),
+    /// A control frame, to consume.
+    Control(Control),
 }
 
 /// Incremental decoder for the transport `F`, with an `N`-byte buffer.
@@ -349,27 +349,28 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
     pub fn feed_borrowed<'d, 'i: 'd>(&'d mut self, input: &mut &'i [u8]) -> Option<Frame<'d>> {
         loop {
             if self.buffered() == 0 {
-                let bytes: &'i [u8] = input;
-                // Garbage before a start byte: dropped without copying, as `feed` does.
+                let mut bytes: &'i [u8] = input;
                 let start_byte = self.framing.start_byte();
-                let skip = bytes
-                    .iter()
-                    .position(|&b| b == start_byte)
-                    .unwrap_or(bytes.len());
-                self.stats.bytes_in = self.stats.bytes_in.wrapping_add(skip as u32);
-                self.stats.dropped_bytes = self.stats.dropped_bytes.wrapping_add(skip as u32);
-                let bytes = bytes.get(skip..).unwrap_or_default();
-                *input = bytes;
+                if bytes.first() != Some(&start_byte) {
+                    // Garbage before a start byte: dropped without copying, as `feed` does.
+                    let skip = bytes
+                        .iter()
+                        .position(|&b| b == start_byte)
+                        .unwrap_or(bytes.len());
+                    self.stats.bytes_in = self.stats.bytes_in.wrapping_add(skip as u32);
+                    self.stats.dropped_bytes = self.stats.dropped_bytes.wrapping_add(skip as u32);
+                    bytes = bytes.get(skip..).unwrap_or_default();
+                    *input = bytes;
+                }
                 match self.in_place(bytes) {
-                    Some(InPlace::Frame(frame)) => {
-                        let len = frame.raw().len();
-                        *input = bytes.get(len..).unwrap_or_default();
+                    Some((InPlace::Frame(frame), len, rest)) => {
+                        *input = rest;
                         self.stats.bytes_in = self.stats.bytes_in.wrapping_add(len as u32);
                         self.count_frame(len);
                         return Some(frame);
                     }
-                    Some(InPlace::Control(control, len)) => {
-                        *input = bytes.get(len..).unwrap_or_default();
+                    Some((InPlace::Control(control), len, rest)) => {
+                        *input = rest;
                         self.stats.bytes_in = self.stats.bytes_in.wrapping_add(len as u32);
                         self.accept_control(control, len);
                         continue;
@@ -402,21 +403,23 @@ impl<F: Framing, const N: usize> Decoder<F, N> {
     }
 
     /// The frame or control frame at the front of `bytes` (which is empty or starts with
-    /// the start byte), if it is there whole and `feed` would accept it from the buffer.
+    /// the start byte), if it is there whole and `feed` would accept it from the buffer;
+    /// with its length and the bytes after it.
     #[inline]
-    fn in_place<'i>(&self, bytes: &'i [u8]) -> Option<InPlace<'i>> {
+    fn in_place<'i>(&self, bytes: &'i [u8]) -> Option<(InPlace<'i>, usize, &'i [u8])> {
         let len = match self.framing.rx_frame_len(bytes) {
             Ok(Some(len)) if len > 0 && len <= N => len,
             _ => return None,
         };
-        let frame = bytes.get(..len)?;
+        let (frame, rest) = bytes.split_at_checked(len)?;
         match self.framing.control(frame) {
-            Some(Ok(control)) => return Some(InPlace::Control(control, len)),
+            Some(Ok(control)) => return Some((InPlace::Control(control), len, rest)),
             Some(Err(_)) => return None,
             None => {}
         }
         self.framing.check(frame).ok()?;
-        self.framing.view(frame).ok().map(InPlace::Frame)
+        let frame = self.framing.view(frame).ok()?;
+        Some((InPlace::Frame(frame), len, rest))
     }
 
     fn count_frame(&mut self, len: usize) {

@@ -30,8 +30,19 @@ impl<'a> AnyMessage<'a> {
     /// Unknown class or message id, or a payload of the wrong length.
     pub fn decode(class_id: u8, msg_id: u8, payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
         match class_id {
-            1 => telemetry::AnyMessage::decode(msg_id, payload).map(Self::Telemetry),
-            2 => datalink::AnyMessage::decode(msg_id, payload).map(Self::Datalink),
+            1 => match msg_id {
+                3 => <telemetry::Pong as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::Pong(m))),
+                7 => <telemetry::Mixed<'a> as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::Mixed(m))),
+                30 => <telemetry::DatalinkReport as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::DatalinkReport(m))),
+                31 => <telemetry::DlValue as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::DlValue(m))),
+                _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
+            },
+            2 => match msg_id {
+                4 => <datalink::Setting as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Datalink(datalink::AnyMessage::Setting(m))),
+                8 => <datalink::Ping as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Datalink(datalink::AnyMessage::Ping(m))),
+                16 => <datalink::GetSetting as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Datalink(datalink::AnyMessage::GetSetting(m))),
+                _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
+            },
             _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
         }
     }
