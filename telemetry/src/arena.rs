@@ -1023,7 +1023,8 @@ impl State {
     }
 
     /// Release the allocated block `block..block + units`, merging it with free neighbours.
-    #[inline(always)]
+    // One copy, for the release of an uncached block and for the cache's return of one.
+    #[inline(never)]
     fn free(&mut self, mem: Mem, block: usize, units: usize) {
         let (mut start, mut size) = (block, units);
         let end = block + units;
