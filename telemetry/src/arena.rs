@@ -128,6 +128,7 @@
 #![allow(unsafe_code)]
 
 use core::cell::UnsafeCell;
+use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 use core::fmt;
 use core::ops::{Deref, DerefMut};
 
@@ -295,6 +296,9 @@ pub struct FrameArena<M: RawMutex, const N: usize> {
     state: Mutex<M, State>,
     /// Frame units, then the boundary bitmap, then padding.
     storage: UnsafeCell<[u8; N]>,
+    /// A copy of the cache's size bits, written with the lock held and read without it:
+    /// an allocation takes the lock for the cache only when its size's bit is set.
+    cached_sizes: AtomicU32,
 }
 
 // Safety: `FrameArena` is `!Sync` only because of `storage`. Concurrent access to it is
@@ -320,6 +324,7 @@ impl<M: RawMutex + Sync, const N: usize> FrameArena<M, N> {
         Self {
             state: Mutex::new(State::EMPTY),
             storage: UnsafeCell::new([0; N]),
+            cached_sizes: AtomicU32::new(0),
         }
     }
 }
@@ -400,7 +405,9 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
                 if !st.ready {
                     st.set_up(mem, Self::RESERVED);
                 }
-                f(st, mem)
+                let result = f(st, mem);
+                self.cached_sizes.store(st.cache_bits, Relaxed);
+                result
             })
         }
     }
@@ -446,7 +453,9 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
         // with its neighbours) and the free lists are tried again: the lock is never held
         // for more than one release and one allocation.
         let mut start = None;
-        if units <= CACHE_SIZES {
+        // The bit may be stale (another context cached or took a block since): the lock
+        // is then taken for nothing, or a cached block is left for the next allocation.
+        if units <= CACHE_SIZES && self.cached_sizes.load(Relaxed) & (1 << (units - 1)) != 0 {
             start = self.with_heap(|st, mem| {
                 let start = st.take_cached(mem, units);
                 if start.is_some() {
