@@ -17,6 +17,11 @@ sections unmask only when the outermost one ends. A `cpsie i` unmasks. The scrip
 if the stack does not balance (a PRIMASK read or write that is not a critical section's)
 rather than print a wrong figure.
 
+The same for BASEPRI (the `BasepriRawMutex` of pprz-telemetry): from an `msr BASEPRI_MAX`
+that raises it (none raised) to the `msr BASEPRI` that writes back the state saved by the
+matching `mrs rN, BASEPRI`, followed as a stack in the same way. While BASEPRI is raised,
+only the interrupts at or below the ceiling wait; the instructions are reported apart.
+
 Prints, per region: instructions per unit, masked instructions (total, share, per unit),
 the number of sections, the longest and the mean, and the functions where the longest
 sections start. Exits non-zero if the log has no complete region or the region lines
@@ -62,6 +67,10 @@ class Region:
         self.longest = 0
         # start function -> (sections, shortest, longest, total)
         self.by_start = {}
+        # BASEPRI raised: instructions, sections, longest.
+        self.raised = 0
+        self.raised_sections = 0
+        self.raised_longest = 0
 
     def section(self, length, start):
         self.sections += 1
@@ -69,6 +78,11 @@ class Region:
         self.longest = max(self.longest, length)
         n, shortest, longest, total = self.by_start.get(start, (0, length, 0, 0))
         self.by_start[start] = (n + 1, min(shortest, length), max(longest, length), total + length)
+
+    def raised_section(self, length):
+        self.raised_sections += 1
+        self.raised += length
+        self.raised_longest = max(self.raised_longest, length)
 
 
 def analyse(log):
@@ -78,6 +92,8 @@ def analyse(log):
     regions, region = [], None
     masked, start, start_symbol = False, 0, ""
     saved = []  # PRIMASK states saved by the open critical sections
+    raised, raised_start = False, 0  # BASEPRI
+    saved_basepri = []  # BASEPRI states saved by the open BASEPRI sections
     unbalanced = 0
     for line in log:
         if line.startswith("IN:"):
@@ -96,6 +112,12 @@ def analyse(log):
                 kind = "R"
             elif mnemonic == "msr" and "primask" in operands.lower():
                 kind = "W"
+            elif mnemonic == "msr" and "basepri_max" in operands.lower():
+                kind = "M"
+            elif mnemonic == "mrs" and "basepri" in operands.lower():
+                kind = "r"
+            elif mnemonic == "msr" and "basepri" in operands.lower():
+                kind = "w"
             if pending is None:
                 pending = pc
                 blocks[pc] = []
@@ -135,7 +157,21 @@ def analyse(log):
                 masked = False
                 if region is not None:
                     region.section(region.instructions - start, demangle(start_symbol))
-    return regions, unbalanced + len(saved)
+            lower = False
+            if kind == "M" and not raised:
+                raised, raised_start = True, region.instructions if region else 0
+            elif kind == "r":
+                saved_basepri.append(raised)
+            elif kind == "w":
+                if not saved_basepri:
+                    unbalanced += 1
+                elif not saved_basepri.pop() and raised:
+                    lower = True
+            if lower:
+                raised = False
+                if region is not None:
+                    region.raised_section(region.instructions - raised_start)
+    return regions, unbalanced + len(saved) + len(saved_basepri)
 
 
 def main():
@@ -151,7 +187,7 @@ def main():
     if not regions or len(regions) != len(names):
         sys.exit(f"masked.py: {len(regions)} traced regions, {len(names)} region lines")
     if unbalanced:
-        sys.exit(f"masked.py: {unbalanced} PRIMASK writes without a saved state (not a critical section)")
+        sys.exit(f"masked.py: {unbalanced} PRIMASK or BASEPRI writes without a saved state (not a lock's)")
     print("interrupts masked (QEMU instruction log: from the `cpsid i` that masks to the instruction that unmasks):")
     for (name, count, unit, what), r in zip(names, regions):
         share = 100.0 * r.masked / r.instructions if r.instructions else 0.0
@@ -160,6 +196,11 @@ def main():
               f"masked {r.masked / count:7.1f} per {unit} ({share:4.1f} %), "
               f"{r.sections / count:.2f} sections per {unit}, longest {r.longest}, mean {mean:.1f}"
               f"   ({count} {unit}s: {what})")
+        if r.raised_sections:
+            share = 100.0 * r.raised / r.instructions
+            print(f"      BASEPRI raised {r.raised / count:7.1f} per {unit} ({share:4.1f} %), "
+                  f"{r.raised_sections / count:.2f} sections per {unit}, longest {r.raised_longest}, "
+                  f"mean {r.raised / r.raised_sections:.1f}: interrupts at or below the ceiling wait")
         worst = sorted(r.by_start.items(), key=lambda kv: -kv[1][2])[:4]
         for start, (n, shortest, longest, total) in worst:
             print(f"      longest {longest:4} mean {total / n:6.1f} shortest {shortest:4} x{n:<6} from {start}")

@@ -57,6 +57,11 @@
 //!   masks an interrupt, so it never delays an interrupt handler; a send from an
 //!   interrupt handler, or from a task of an interrupt-mode executor, panics. (On a
 //!   two-core chip such as the RP2040 it does not exclude the other core.)
+//! * `mutex::BasepriRawMutex<C>` (feature `basepri`, Cortex-M3/M4/M7/M33): a lock raises
+//!   `BASEPRI` to a priority ceiling instead of masking everything. Thread mode and
+//!   interrupt handlers at the ceiling or below may send; handlers above it (motors,
+//!   sensors) are never delayed by the link and must not use it (a lock from there
+//!   panics).
 //!
 //! ```no_run
 //! use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;

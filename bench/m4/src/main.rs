@@ -25,6 +25,8 @@
 #![no_std]
 #![no_main]
 
+#[cfg(target_has_atomic = "32")]
+mod basepri;
 mod hw;
 mod masked;
 mod settings;
@@ -78,9 +80,12 @@ type FrameBuf = [u8; SEALED_LEN];
 #[entry]
 fn main() -> ! {
     let mut out = Uart::init();
-    let cp = cortex_m::Peripherals::take().unwrap_or_else(|| fail("peripherals taken"));
+    #[allow(unused_mut)] // used on ARMv7-M only
+    let mut cp = cortex_m::Peripherals::take().unwrap_or_else(|| fail("peripherals taken"));
     let timer = Timer::start();
     let systick = SysTick::start(cp.SYST);
+    #[cfg(target_has_atomic = "32")]
+    basepri::check(&mut cp.SCB);
     let _ = writeln!(
         out,
         "bench-m4: the telemetry stack and pprz-secure (salty) on mps2-an386, 1 tick = \
@@ -272,6 +277,24 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         "message",
         "the same with ThreadModeRawMutex (thread-mode senders only; nothing masked)",
     );
+    #[cfg(target_has_atomic = "32")]
+    {
+        // The downlink again, its locks raising BASEPRI to a ceiling (ARMv7-M).
+        let (stats, sink, arena, t) = timed_downlink::<basepri::Basepri>(timer, |d, p, n, s| {
+            dl_workload::run_downlink(d, p, n, s)
+        });
+        if stats.sent as usize != MESSAGES || sink.bytes as usize != STREAM_LEN || arena.live != 0 {
+            fail("downlink, BASEPRI");
+        }
+        result(
+            out,
+            "downlink-basepri",
+            t,
+            MESSAGES,
+            "message",
+            "the same with BasepriRawMutex (interrupts above its ceiling never masked)",
+        );
+    }
     result(
         out,
         "flood",

@@ -109,6 +109,24 @@ pub fn run(out: &mut Uart) {
     if stats.sent as usize != TRACED || arena.stats().live != 0 {
         fail("downlink, thread mode");
     }
+    #[cfg(target_has_atomic = "32")]
+    {
+        let arena = dl_workload::BenchArena::<crate::basepri::Basepri>::new();
+        let downlink = dl_workload::new_downlink(&arena);
+        let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+        let mut sink = Sink::default();
+        let stats = region(
+            out,
+            "basepri",
+            TRACED,
+            "message",
+            "the downlink with BasepriRawMutex",
+            || dl_workload::run_downlink(&downlink, &mut port, black_box(TRACED), &mut sink),
+        );
+        if stats.sent as usize != TRACED || arena.stats().live != 0 {
+            fail("downlink, BASEPRI");
+        }
+    }
     let arena = <dl_workload::BenchArena>::new();
     let downlink = dl_workload::new_downlink(&arena);
     let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
