@@ -1,5 +1,5 @@
-//! The downlink's locks on `BasepriRawMutex` (ARMv7-M): its ceiling, and a check that it
-//! excludes what it must. SysTick, pended inside a lock, runs after the lock when its
+//! The downlink's locks on `BasepriRawMutex` (ARMv7-M): its ceiling, the downlink
+//! workload with it, and a check that it excludes what it must. SysTick, pended inside a lock, runs after the lock when its
 //! priority is below the ceiling and at once when it is above.
 
 use core::sync::atomic::{AtomicBool, Ordering::SeqCst};
@@ -10,7 +10,11 @@ use cortex_m_rt::exception;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use pprz_telemetry::mutex::{BasepriRawMutex, Ceiling};
 
-use crate::fail;
+use pprz_bench_common::downlink as dl_workload;
+use pprz_bench_common::stream::MESSAGES;
+
+use crate::hw::{Timer, Uart};
+use crate::{STREAM_LEN, fail, result, timed_downlink};
 
 /// The ceiling of the measured downlink: priority 0x80.
 pub struct BenchCeiling;
@@ -55,4 +59,20 @@ pub fn check(scb: &mut SCB) {
             });
         }
     }
+}
+
+/// The downlink workload (workload 3) with its locks on [`Basepri`].
+pub fn workload(out: &mut Uart, timer: &Timer) {
+    let (stats, sink, arena, t) = timed_downlink::<Basepri>(timer, dl_workload::run_downlink);
+    if stats.sent as usize != MESSAGES || sink.bytes as usize != STREAM_LEN || arena.live != 0 {
+        fail("downlink, BASEPRI");
+    }
+    result(
+        out,
+        "downlink-basepri",
+        t,
+        MESSAGES,
+        "message",
+        "the same with BasepriRawMutex (interrupts above its ceiling never masked)",
+    );
 }

@@ -99,6 +99,8 @@ fn main() -> ! {
     }
     calibrate(&mut out, &timer, &systick);
     workloads(&mut out, &timer);
+    #[cfg(target_has_atomic = "32")]
+    basepri::workload(&mut out, &timer);
     handshakes(&mut out, &timer);
     frames(&mut out, &timer);
     settings::settings(&mut out, &timer);
@@ -180,7 +182,7 @@ fn calibrate(out: &mut Uart, timer: &Timer, systick: &SysTick) {
 
 /// Prints one figure, `result <name> <instructions> <count> <unit> <what>`:
 /// `instructions` (from `ticks`) for `count` units of work.
-fn result(out: &mut Uart, name: &str, ticks: u32, count: usize, unit: &str, what: &str) {
+pub(crate) fn result(out: &mut Uart, name: &str, ticks: u32, count: usize, unit: &str, what: &str) {
     let instructions = u64::from(ticks) * u64::from(INSTRUCTIONS_PER_TICK);
     let _ = writeln!(out, "result {name} {instructions} {count} {unit} {what}");
 }
@@ -277,24 +279,6 @@ fn workloads(out: &mut Uart, timer: &Timer) {
         "message",
         "the same with ThreadModeRawMutex (thread-mode senders only; nothing masked)",
     );
-    #[cfg(target_has_atomic = "32")]
-    {
-        // The downlink again, its locks raising BASEPRI to a ceiling (ARMv7-M).
-        let (stats, sink, arena, t) = timed_downlink::<basepri::Basepri>(timer, |d, p, n, s| {
-            dl_workload::run_downlink(d, p, n, s)
-        });
-        if stats.sent as usize != MESSAGES || sink.bytes as usize != STREAM_LEN || arena.live != 0 {
-            fail("downlink, BASEPRI");
-        }
-        result(
-            out,
-            "downlink-basepri",
-            t,
-            MESSAGES,
-            "message",
-            "the same with BasepriRawMutex (interrupts above its ceiling never masked)",
-        );
-    }
     result(
         out,
         "flood",
@@ -307,7 +291,7 @@ fn workloads(out: &mut Uart, timer: &Timer) {
 
 /// Runs `run` on a new downlink whose locks are `M` over [`MESSAGES`] messages: the
 /// device's statistics, the sink, the arena's statistics after it, and the ticks it took.
-fn timed_downlink<M: RawMutex + Sync>(
+pub(crate) fn timed_downlink<M: RawMutex + Sync>(
     timer: &Timer,
     run: impl FnOnce(&BenchDownlink<'_, M>, &mut Port<'_>, usize, &mut Sink) -> DeviceStats,
 ) -> (DeviceStats, Sink, ArenaStats, u32) {

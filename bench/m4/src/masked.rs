@@ -12,9 +12,11 @@
 use core::fmt::Write;
 use core::hint::black_box;
 
-use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
-use pprz_bench_common::downlink::{self as dl_workload, Sink};
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, RawMutex, ThreadModeRawMutex};
+use pprz_bench_common::downlink::{self as dl_workload, BenchDownlink, Sink};
 use pprz_bench_common::stream;
+use pprz_telemetry::Port;
+use pprz_telemetry::stats::DeviceStats;
 
 use crate::hw::Uart;
 use crate::{STREAM_LEN, fail};
@@ -79,67 +81,43 @@ pub fn run(out: &mut Uart) {
     if summary != stream::expected_summary(TRACED) {
         fail("parse");
     }
-    let arena = <dl_workload::BenchArena>::new();
-    let downlink = dl_workload::new_downlink(&arena);
-    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-    let mut sink = Sink::default();
-    let stats = region(
+    let stats = traced_downlink::<CriticalSectionRawMutex>(
         out,
         "downlink",
-        TRACED,
-        "message",
         "send -> arena -> queue -> writer -> sink",
-        || dl_workload::run_downlink(&downlink, &mut port, black_box(TRACED), &mut sink),
+        dl_workload::run_downlink,
     );
-    if stats.sent as usize != TRACED || arena.stats().live != 0 {
+    if stats.sent as usize != TRACED {
         fail("downlink");
     }
-    let arena = dl_workload::BenchArena::<ThreadModeRawMutex>::new();
-    let downlink = dl_workload::new_downlink(&arena);
-    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-    let mut sink = Sink::default();
-    let stats = region(
+    let stats = traced_downlink::<ThreadModeRawMutex>(
         out,
         "thread",
-        TRACED,
-        "message",
         "the downlink with ThreadModeRawMutex",
-        || dl_workload::run_downlink(&downlink, &mut port, black_box(TRACED), &mut sink),
+        dl_workload::run_downlink,
     );
-    if stats.sent as usize != TRACED || arena.stats().live != 0 {
+    if stats.sent as usize != TRACED {
         fail("downlink, thread mode");
     }
     #[cfg(target_has_atomic = "32")]
     {
-        let arena = dl_workload::BenchArena::<crate::basepri::Basepri>::new();
-        let downlink = dl_workload::new_downlink(&arena);
-        let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-        let mut sink = Sink::default();
-        let stats = region(
+        let stats = traced_downlink::<crate::basepri::Basepri>(
             out,
             "basepri",
-            TRACED,
-            "message",
             "the downlink with BasepriRawMutex",
-            || dl_workload::run_downlink(&downlink, &mut port, black_box(TRACED), &mut sink),
+            dl_workload::run_downlink,
         );
-        if stats.sent as usize != TRACED || arena.stats().live != 0 {
+        if stats.sent as usize != TRACED {
             fail("downlink, BASEPRI");
         }
     }
-    let arena = <dl_workload::BenchArena>::new();
-    let downlink = dl_workload::new_downlink(&arena);
-    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
-    let mut sink = Sink::default();
-    let stats = region(
+    let stats = traced_downlink::<CriticalSectionRawMutex>(
         out,
         "flood",
-        TRACED,
-        "message",
         "bursts of 3 queues, 4 priorities: evictions and drops",
-        || dl_workload::run_downlink_flood(&downlink, &mut port, black_box(TRACED), &mut sink),
+        dl_workload::run_downlink_flood,
     );
-    if !stats.is_balanced() || stats.submitted as usize != TRACED || arena.stats().live != 0 {
+    if !stats.is_balanced() || stats.submitted as usize != TRACED {
         fail("flood");
     }
     let _ = writeln!(
@@ -149,4 +127,25 @@ pub fn run(out: &mut Uart) {
         stats.evicted.total(),
         stats.dropped.total()
     );
+}
+
+/// Runs `run` over [`TRACED`] messages on a new downlink whose locks are `M`, as the
+/// region `name`: the device's statistics. Fails unless the arena is empty after it.
+fn traced_downlink<M: RawMutex + Sync>(
+    out: &mut Uart,
+    name: &str,
+    what: &str,
+    run: impl FnOnce(&BenchDownlink<'_, M>, &mut Port<'_>, usize, &mut Sink) -> DeviceStats,
+) -> DeviceStats {
+    let arena = dl_workload::BenchArena::<M>::new();
+    let downlink = dl_workload::new_downlink(&arena);
+    let [mut port] = downlink.ports().unwrap_or_else(|_| fail("downlink ports"));
+    let mut sink = Sink::default();
+    let stats = region(out, name, TRACED, "message", what, || {
+        run(&downlink, &mut port, black_box(TRACED), &mut sink)
+    });
+    if arena.stats().live != 0 {
+        fail(name);
+    }
+    stats
 }
