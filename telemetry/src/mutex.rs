@@ -65,8 +65,10 @@ use embassy_sync::blocking_mutex::raw::RawMutex;
 pub unsafe trait Ceiling: 'static {
     /// The value written to `BASEPRI` while a lock is held, as the NVIC priority
     /// registers hold it (the implemented bits at the top: 0xC0 is priority 12 of 16 on a
-    /// 4-bit NVIC). Interrupts of this value or above (less urgent) wait; not zero, which
-    /// would mask nothing (a compile-time error).
+    /// 4-bit NVIC). Interrupts of this value or above (less urgent) wait. At least 0x20
+    /// (a compile-time error otherwise): every ARMv7-M and ARMv8-M core implements the
+    /// top three priority bits, so such a value always masks; a smaller one could read
+    /// back as zero on a core with fewer bits (0x10 on a 3-bit NVIC) and mask nothing.
     const PRIORITY: u8;
 }
 
@@ -87,8 +89,9 @@ impl<C: Ceiling> BasepriRawMutex<C> {
     }
 
     const VALID: () = assert!(
-        C::PRIORITY != 0,
-        "Ceiling::PRIORITY must not be zero: BASEPRI = 0 masks nothing"
+        C::PRIORITY >= 0x20,
+        "Ceiling::PRIORITY must be at least 0x20: a core may implement only the top three \
+         priority bits, and a BASEPRI without them masks nothing"
     );
 }
 
