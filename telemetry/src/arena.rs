@@ -108,8 +108,8 @@
 //! fill level and fragmentation: a few bit scans (`trailing_zeros`), unlinking at most
 //! three free blocks and linking one, or taking or putting one cached block. Nothing
 //! loops over blocks, lists or units, except that an allocation that finds no block
-//! returns the cached blocks first, at most 16 steps of that kind. The lock is held for
-//! one step at a time.
+//! returns the cached blocks first: at most 16 steps of that kind, plus one for each
+//! block another context caches while it runs. The lock is held for one step at a time.
 //!
 //! # Concurrency and `unsafe`
 //!
@@ -430,7 +430,8 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
     ///
     /// Bounded, whatever the fill level: one short section under the lock for a cached
     /// block, one for the free lists, and when neither has a block, at most 16 more (one
-    /// cached block returned to the free lists and the free lists tried again in each).
+    /// cached block returned to the free lists and the free lists tried again in each),
+    /// plus one for each block another context caches meanwhile.
     ///
     /// # Panics
     ///
