@@ -326,13 +326,7 @@ pub fn cdc_acm<'d, 'c, D: Driver<'d>>(
     let device = builder.build();
     let (sender, receiver) = class.split();
     // The class's packet size is the buffer's size: the check in `UsbRx::new` cannot fail.
-    let rx = UsbRx {
-        receiver,
-        counters,
-        buf: [0; FULL_SPEED_PACKET as usize],
-        start: 0,
-        end: 0,
-    };
+    let rx = UsbRx::unchecked(receiver, counters);
     (device, rx, UsbTx::new(sender, counters, usb))
 }
 
@@ -461,13 +455,18 @@ impl<'c, R: PacketReceiver, const N: usize> UsbRx<'c, R, N> {
         if usize::from(receiver.max_packet_size()) > N {
             return Err(UsbError::BufferTooSmall);
         }
-        Ok(Self {
+        Ok(Self::unchecked(receiver, counters))
+    }
+
+    /// [`new`](Self::new) for a receiver whose max packet size is known to fit `N`.
+    fn unchecked(receiver: R, counters: &'c UsbCounters) -> Self {
+        Self {
             receiver,
             counters,
             buf: [0; N],
             start: 0,
             end: 0,
-        })
+        }
     }
 
     /// The counters.

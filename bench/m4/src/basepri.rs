@@ -1,6 +1,7 @@
 //! The downlink's locks on `BasepriRawMutex` (ARMv7-M): its ceiling, the downlink
-//! workload with it, and a check that it excludes what it must. SysTick, pended inside a lock, runs after the lock when its
-//! priority is below the ceiling and at once when it is above.
+//! workload with it, and a check that it excludes what it must. SysTick, pended inside a
+//! lock, runs after the lock when its priority is below the ceiling and at once when it
+//! is above.
 
 use core::sync::atomic::{AtomicBool, Ordering::SeqCst};
 
