@@ -13,6 +13,7 @@ pub mod link;
 pub mod mutex;
 #[cfg(all(feature = "basepri", not(target_has_atomic = "32")))]
 compile_error!("feature `basepri` needs a core with BASEPRI: Cortex-M3/M4/M7/M33, not M0/M0+");
+mod atomic;
 mod queue;
 pub mod reader;
 pub mod registry;

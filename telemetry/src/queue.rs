@@ -1,9 +1,8 @@
-//! The transmit queue of one device: frames ordered by priority, FIFO among equal
+//! The transmit queue of one device: frames ordered by priority, oldest first among equal
 //! priorities, with eviction of less important frames when full.
 //!
 //! ```text
 //!   most important                                       least important
-//!   front ................................................ back
 //!   [ p=2 oldest .. p=2 newest | p=1 oldest .. p=1 newest | p=0 oldest .. p=0 newest ]
 //!     ^ sent next                  evicted first: oldest of the lowest priority ^
 //! ```
@@ -12,51 +11,56 @@
 //! [`Port`](crate::Port) its only consumer, so no public path can unbalance the
 //! accounting (every frame pushed is sent, dropped or evicted, and counted once).
 //!
+//! # No lock on the way
+//! Any task and any interrupt handler may send, so a lock around the queue would mask
+//! interrupts (or, with a thread-mode mutex, forbid senders in handlers) for as long as a
+//! push, an eviction or a take lasts. Instead the queue is a board of `Q` slots, each
+//! owned by one context at a time, and ownership moves with atomic bit operations:
+//!
+//! * `used`: a bit per slot holding a frame (being queued, waiting, or being moved);
+//! * `ready`: a bit per slot whose frame waits and may be claimed;
+//! * `len`: the frames waiting or being queued, reserved against the depth limit.
+//!
+//! A sender reserves one unit of `len` (or, when the queue is full, claims the weakest
+//! waiting frame and takes its slot over), claims a free `used` bit, writes its frame,
+//! priority and sequence number into the slot, and publishes it by setting its `ready`
+//! bit. Whoever clears a `ready` bit owns that frame: the writer taking the most important
+//! frame, a sender evicting the least important one or replacing a state message in its
+//! place, the arena making room. A claimer reads the slot's priority and sequence number
+//! before its claim and checks them after: if the slot changed hands in between, it
+//! gives it back and looks again. The counters are atomic words too
+//! ([`Counters`](crate::stats::Counters)). On cores with compare-and-swap no operation of
+//! the queue masks interrupts; each frame is moved in or out of its slot under the
+//! mutex `M` (a few instructions, without contention: the slot's owner is the only one
+//! to touch it), and the writer's waker is taken under it when the writer sleeps. Cores
+//! without compare-and-swap (ARMv6-M) do each bit operation under `M` instead, a few
+//! instructions each.
+//!
+//! Under concurrent senders the order is the order of publication: a frame is visible
+//! once its bit is set. A frame being replaced in place, or claimed and given back, is
+//! not visible for those few instructions, so a writer taking a frame at that moment
+//! takes the next one.
+//!
 //! # Why not `embassy_sync::PriorityChannel`
-//! It is a binary heap: equal priorities come out in no particular order unless the key
-//! carries a sequence number, it cannot evict, and its 0.8.0 `poll_ready_to_send` is
-//! buggy. This queue is built on embassy-sync's blocking [`Mutex`] (a critical section
-//! on boards, so interrupt-free contexts on any executor may send) and the waker of its
-//! one consumer, the device's writer task, which is taken under the lock and woken after
-//! it (so the executor's wake runs with interrupts enabled). The waiting frames are one
-//! FIFO list per priority present, linked through a pool of `Q` slots ([`Lists`]), so
-//! FIFO order needs no sequence number and no frame moves once stored.
+//! It is a binary heap behind a lock: equal priorities come out in no particular order
+//! unless the key carries a sequence number, it cannot evict, and its 0.8.0
+//! `poll_ready_to_send` is buggy.
 //!
 //! # Time Complexity
-//! Under the lock, every operation is a few steps, whatever the queue holds: taking the
-//! most important frame (the head of the most important list), queueing a frame (at the
-//! tail of its priority's list), evicting the oldest of the least important (the head of
-//! the least important list). The only step that depends on the queue is finding the
-//! list of a priority among the priorities waiting, and moving that small array when a
-//! priority appears or disappears: O(P), where `P` is the number of distinct priorities
-//! waiting (a few in practice, at most `Q`). A state message's lookup walks the list of
-//! its own priority.
+//! Every operation reads the `ready` bits (one or two words) and the priority and
+//! sequence number of each waiting frame: O(n) for `n` frames waiting, at most `Q <= 64`.
+//! On a link that keeps up, `n` is zero or one.
 
-use core::cell::RefCell;
+use core::cell::Cell;
+use core::sync::atomic::{AtomicU32, Ordering::Relaxed, Ordering::SeqCst, fence};
 use core::task::{Context, Waker};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 
 use crate::arena::FrameBuf;
-use crate::stats::{DeviceStats, DropReason};
-
-/// A queued frame: its priority, its global sequence number (age), its bytes, for a
-/// state message (latest value wins) the message it carries, and whether it is another
-/// aircraft's frame being forwarded (counted apart as well, [`RelayedStats`]).
-///
-/// [`RelayedStats`]: crate::stats::RelayedStats
-struct Entry<'a> {
-    priority: u8,
-    seq: u32,
-    latest: Option<MessageKey>,
-    /// 1 if forwarded, else 0. A byte, not a `bool`: a `bool` gives `Option<Entry>` its
-    /// spare values and makes `None` 2, so an empty queue (and a `Link` holding it) would
-    /// not be all zero bytes and could not be built in `.bss`.
-    relayed: u8,
-    frame: FrameBuf<'a>,
-}
-
+use crate::atomic::{self, Fallback};
+use crate::stats::{Counters, DeviceStats, DropReason};
 /// Class and id of a state message: a newer one supersedes a waiting older one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MessageKey {
@@ -105,425 +109,258 @@ fn older(a: u32, b: u32) -> bool {
     (a.wrapping_sub(b) as i32) < 0
 }
 
-/// Slot index plus one, `0` for none: so that an empty [`Lists`] is all zero bytes.
-type Link = u16;
+/// The word describing a waiting frame: bits 0-7 its priority, 8-15 and 16-23 the class
+/// and message id of a state message, bit 24 set for a state message, bit 25 for a
+/// forwarded frame.
+fn pack(priority: u8, latest: Option<MessageKey>, relayed: bool) -> u32 {
+    let key = latest.map_or(0, |k| {
+        STATE | u32::from(k.msg_id) << 16 | u32::from(k.class) << 8
+    });
+    u32::from(priority) | key | if relayed { RELAYED } else { 0 }
+}
 
-/// A priority of the queue: the FIFO list of its waiting frames, oldest first.
+/// [`pack`]: a state message.
+const STATE: u32 = 1 << 24;
+/// [`pack`]: a forwarded frame.
+const RELAYED: u32 = 1 << 25;
+/// [`pack`]: what identifies a state message at its priority.
+const KEY: u32 = STATE | 0xff_ffff;
+/// `in_flight`: the writer holds a frame (its [`pack`]ed word in the low bits).
+const IN_FLIGHT: u32 = 1 << 31;
+
+/// A waiting frame as read before claiming it: its slot, [`pack`]ed word and sequence
+/// number.
 #[derive(Clone, Copy)]
-struct Level {
-    priority: u8,
-    /// First (oldest) and last (newest) slot of the list.
-    head: Link,
-    tail: Link,
+struct Seen {
+    slot: usize,
+    meta: u32,
+    seq: u32,
 }
 
-/// The waiting frames of a queue: one FIFO list per priority present, linked through a
-/// pool of `Q` slots, and the priorities in ascending order. Every operation the queue
-/// makes under its lock is a few steps whatever the queue holds: taking the most
-/// important frame (the head of the last level), appending a frame to its priority's
-/// list, evicting the oldest of the least important (the head of the first level). Only
-/// a priority that appears or disappears moves the small level array (at most one entry
-/// per distinct priority waiting); frames never move once stored.
-struct Lists<'a, const Q: usize> {
-    slots: [Option<Entry<'a>>; Q],
-    /// Next slot in its level's list, or in the free list.
-    next: [Link; Q],
-    /// Released slots, to be used again.
-    free: Link,
-    /// Slots `0..fresh` have been used at least once; the others never were.
-    fresh: u16,
-    /// The levels present, ascending by priority: `levels[..count]`.
-    levels: [Level; Q],
-    count: u16,
-    len: u16,
-}
-
-impl<'a, const Q: usize> Lists<'a, Q> {
-    const fn new() -> Self {
-        Self {
-            slots: [const { None }; Q],
-            next: [0; Q],
-            free: 0,
-            fresh: 0,
-            levels: [Level {
-                priority: 0,
-                head: 0,
-                tail: 0,
-            }; Q],
-            count: 0,
-            len: 0,
-        }
+impl Seen {
+    fn priority(&self) -> u8 {
+        self.meta as u8
     }
 
-    /// Waiting frames.
-    #[inline]
-    fn len(&self) -> usize {
-        usize::from(self.len)
+    /// Sent before `other`: more important, or as important and older.
+    fn stronger(&self, other: &Seen) -> bool {
+        self.priority() > other.priority()
+            || (self.priority() == other.priority() && older(self.seq, other.seq))
     }
 
-    /// The levels present, ascending.
-    #[inline]
-    fn levels(&self) -> &[Level] {
-        &self.levels[..usize::from(self.count)]
-    }
-
-    #[inline]
-    fn slot(&self, link: Link) -> Option<&Entry<'a>> {
-        self.slots.get(usize::from(link).checked_sub(1)?)?.as_ref()
-    }
-
-    /// The most important, oldest frame.
-    #[inline]
-    fn front(&self) -> Option<&Entry<'a>> {
-        self.slot(self.levels().last()?.head)
-    }
-
-    /// The eviction candidate: the oldest frame of the least important priority.
-    #[inline]
-    fn candidate(&self) -> Option<&Entry<'a>> {
-        self.slot(self.levels().first()?.head)
-    }
-
-    /// Takes the head of level `at` (`at < count`), dropping the level when it empties.
-    #[inline]
-    fn pop_level(&mut self, at: usize) -> Option<Entry<'a>> {
-        let head = self.levels.get(at)?.head;
-        let i = usize::from(head).checked_sub(1)?;
-        let entry = self.slots.get_mut(i)?.take()?;
-        let next = core::mem::replace(&mut self.next[i], self.free);
-        self.free = head;
-        self.len -= 1;
-        if next == 0 {
-            // The level empties: the ones above it move down (none when it is the most
-            // important, the usual case). A plain loop: a few small entries.
-            let count = usize::from(self.count);
-            for j in at..count - 1 {
-                self.levels[j] = self.levels[j + 1];
-            }
-            self.count -= 1;
-        } else {
-            self.levels[at].head = next;
-        }
-        Some(entry)
-    }
-
-    /// Takes the most important, oldest frame.
-    #[inline]
-    fn pop_front(&mut self) -> Option<Entry<'a>> {
-        self.pop_level(usize::from(self.count).checked_sub(1)?)
-    }
-
-    /// Takes the eviction candidate.
-    #[inline]
-    fn pop_candidate(&mut self) -> Option<Entry<'a>> {
-        self.pop_level(0)
-    }
-
-    /// Appends `entry` behind the frames of its priority. `Err` if all `Q` slots are in use.
-    #[inline]
-    fn push(&mut self, entry: Entry<'a>) -> Result<(), Entry<'a>> {
-        let link = if self.free != 0 {
-            self.free
-        } else if usize::from(self.fresh) < Q {
-            self.fresh += 1;
-            self.fresh
-        } else {
-            return Err(entry);
-        };
-        let i = usize::from(link) - 1;
-        if self.free == link {
-            self.free = self.next[i];
-        }
-        self.next[i] = 0;
-        let priority = entry.priority;
-        // The slot is empty (free or fresh): fills it without the drop of an old value.
-        self.slots[i].get_or_insert(entry);
-        self.len += 1;
-        // The level of `priority`: searched from the most important end, where most
-        // frames go.
-        let count = usize::from(self.count);
-        let mut at = count;
-        while at > 0 && self.levels[at - 1].priority > priority {
-            at -= 1;
-        }
-        if at > 0 && self.levels[at - 1].priority == priority {
-            let tail = core::mem::replace(&mut self.levels[at - 1].tail, link);
-            self.next[usize::from(tail) - 1] = link;
-        } else {
-            // A new level: `count < Q`, as each level holds at least one of the `Q` frames.
-            // The ones above it move up (none when it is the most important).
-            for j in (at..count).rev() {
-                self.levels[j + 1] = self.levels[j];
-            }
-            self.levels[at] = Level {
-                priority,
-                head: link,
-                tail: link,
-            };
-            self.count += 1;
-        }
-        Ok(())
-    }
-
-    /// Takes the oldest waiting frame of `priority` for which `f` holds (tests: the
-    /// queue itself only takes from the ends).
-    #[cfg(test)]
-    fn remove_where(&mut self, priority: u8, f: impl Fn(&Entry<'a>) -> bool) -> Option<Entry<'a>> {
-        let at = self.levels().iter().position(|l| l.priority == priority)?;
-        let (mut prev, mut link) = (0, self.levels[at].head);
-        while let Some(i) = usize::from(link).checked_sub(1) {
-            if self.slots[i].as_ref().is_some_and(&f) {
-                if prev == 0 {
-                    return self.pop_level(at);
-                }
-                let entry = self.slots[i].take()?;
-                let next = core::mem::replace(&mut self.next[i], self.free);
-                self.free = link;
-                self.len -= 1;
-                self.next[usize::from(prev) - 1] = next;
-                if self.levels[at].tail == link {
-                    self.levels[at].tail = prev;
-                }
-                return Some(entry);
-            }
-            (prev, link) = (link, self.next[i]);
-        }
-        None
-    }
-
-    /// The waiting frame of `priority` for which `f` holds, oldest first.
-    fn find_mut(
-        &mut self,
-        priority: u8,
-        mut f: impl FnMut(&Entry<'a>) -> bool,
-    ) -> Option<&mut Entry<'a>> {
-        let level = self.levels().iter().find(|l| l.priority == priority)?;
-        let mut link = level.head;
-        while let Some(i) = usize::from(link).checked_sub(1) {
-            if self.slots[i].as_ref().is_some_and(&mut f) {
-                return self.slots[i].as_mut();
-            }
-            link = self.next[i];
-        }
-        None
+    /// Evicted before `other`: less important, or as important and older.
+    fn weaker(&self, other: &Seen) -> bool {
+        self.priority() < other.priority()
+            || (self.priority() == other.priority() && older(self.seq, other.seq))
     }
 }
 
-struct State<'a, const Q: usize> {
-    /// The waiting frames, by priority and age (see [`Lists`]).
-    entries: Lists<'a, Q>,
-    /// Whether the writer holds a frame taken from this queue, its priority, and
-    /// whether it is a forwarded one.
-    in_flight: bool,
-    in_flight_priority: u8,
-    in_flight_relayed: bool,
-    /// The writer's waker while it waits for a frame: taken under the lock, woken after.
-    waker: Option<Waker>,
-    stats: DeviceStats,
+/// The word and bit of slot `slot` in the `used` and `ready` bit sets.
+fn bit(slot: usize) -> (usize, u32) {
+    (slot / 32, 1 << (slot % 32))
 }
 
-impl<'a, const Q: usize> State<'a, Q> {
-    fn level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
-        &mut self.stats.levels[pprz_messages::priority::level(priority)]
-    }
-
-    fn relayed_level(&mut self, priority: u8) -> &mut crate::stats::LevelStats {
-        &mut self.stats.relayed.levels[pprz_messages::priority::level(priority)]
-    }
-
-    #[inline]
-    fn submitted(&mut self, priority: u8, relayed: bool) {
-        self.stats.submitted = self.stats.submitted.wrapping_add(1);
-        let l = self.level(priority);
-        l.submitted = l.submitted.wrapping_add(1);
-        if relayed {
-            self.relayed_submitted(priority);
-        }
-    }
-
-    /// The forwarded frames' share of [`submitted`](Self::submitted), out of the
-    /// common path (the aircraft's own messages).
-    #[cold]
-    #[inline(never)]
-    fn relayed_submitted(&mut self, priority: u8) {
-        let r = &mut self.stats.relayed;
-        r.submitted = r.submitted.wrapping_add(1);
-        let l = self.relayed_level(priority);
-        l.submitted = l.submitted.wrapping_add(1);
-    }
-
-    /// The forwarded frames' share of a frame sent.
-    #[cold]
-    #[inline(never)]
-    fn relayed_sent(&mut self, priority: u8) {
-        self.stats.relayed.sent = self.stats.relayed.sent.wrapping_add(1);
-        let l = self.relayed_level(priority);
-        l.sent = l.sent.wrapping_add(1);
-    }
-
-    #[inline]
-    fn lost(&mut self, priority: u8, relayed: bool) {
-        let l = self.level(priority);
-        l.lost = l.lost.wrapping_add(1);
-        if relayed {
-            let l = self.relayed_level(priority);
-            l.lost = l.lost.wrapping_add(1);
-        }
-    }
-
-    /// Counts a frame of `priority` dropped for `reason`.
-    fn dropped(&mut self, reason: DropReason, priority: u8, relayed: bool) {
-        self.stats.dropped.count(reason);
-        if relayed {
-            self.stats.relayed.dropped.count(reason);
-        }
-        self.lost(priority, relayed);
-    }
-
-    /// Counts a queued frame evicted because the queue (`queue_full`) or the arena was
-    /// full.
-    fn evicted(&mut self, entry: &Entry<'_>, queue_full: bool) {
-        let count = |e: &mut crate::stats::EvictCounts| {
-            let c = if queue_full {
-                &mut e.queue_full
-            } else {
-                &mut e.arena_full
-            };
-            *c = c.wrapping_add(1);
-        };
-        count(&mut self.stats.evicted);
-        if entry.relayed != 0 {
-            count(&mut self.stats.relayed.evicted);
-        }
-        self.lost(entry.priority, entry.relayed != 0);
-    }
-
-    /// Takes the most important frame and marks it in flight (see
-    /// [`FrameQueue::try_receive`]).
-    #[inline]
-    fn take(&mut self) -> Option<FrameBuf<'a>> {
-        let entry = self.entries.pop_front()?;
-        self.in_flight = true;
-        self.in_flight_priority = entry.priority;
-        self.in_flight_relayed = entry.relayed != 0;
-        self.update_queued();
-        Some(entry.frame)
-    }
-
-    /// Registers `waker` as the writer's; returns the waker it replaces if that one wakes
-    /// another task (woken by the caller after the lock, so that task can register again).
-    #[inline]
-    fn register(&mut self, waker: &Waker) -> Option<Waker> {
-        match &self.waker {
-            Some(w) if w.will_wake(waker) => None,
-            _ => self.waker.replace(waker.clone()),
-        }
-    }
-
-    /// Counts the outcome of the in-flight frame of `len` bytes (see
-    /// [`FrameQueue::complete`]); the caller updates the queue counts.
-    #[inline]
-    fn complete(&mut self, len: usize, outcome: Result<(), DropReason>) {
-        let priority = self.in_flight_priority;
-        let relayed = self.in_flight_relayed;
-        match outcome {
-            Ok(()) => {
-                self.stats.sent = self.stats.sent.wrapping_add(1);
-                self.stats.bytes_sent = self.stats.bytes_sent.wrapping_add(len as u32);
-                let l = self.level(priority);
-                l.sent = l.sent.wrapping_add(1);
-                if relayed {
-                    self.relayed_sent(priority);
-                }
-            }
-            Err(reason) => self.dropped(reason, priority, relayed),
-        }
-        self.in_flight = false;
-    }
-
-    #[inline]
-    fn update_queued(&mut self) {
-        // Lossless: `len <= Q <= u16::MAX` (checked at compile time).
-        let waiting = self.entries.len() as u16;
-        self.stats.waiting = waiting;
-        self.stats.queued = waiting.saturating_add(u16::from(self.in_flight));
-        self.stats.queue_high_water = self.stats.queue_high_water.max(waiting);
-    }
-}
-
-/// The priority queue of one device.
+/// The priority queue of one device; see the [module documentation](self).
 ///
-/// `'a` is the lifetime of the frame arena; `Q` the capacity (each push may set a lower
-/// depth limit).
+/// `'a` is the lifetime of the frame arena; `Q` the capacity, at most 64 (each push may
+/// set a lower depth limit).
 pub struct FrameQueue<'a, M: RawMutex, const Q: usize> {
-    state: Mutex<M, RefCell<State<'a, Q>>>,
+    /// The frame of each slot, touched only by the slot's owner (the lock is never
+    /// contended: it is there because safe code cannot hand a cell from one context to
+    /// another without one).
+    frames: [Mutex<M, Cell<Option<FrameBuf<'a>>>>; Q],
+    /// Each slot's [`pack`]ed word, sequence number and frame length, written by its owner
+    /// before publishing it.
+    meta: [AtomicU32; Q],
+    seqs: [AtomicU32; Q],
+    lens: [AtomicU32; Q],
+    /// Slots holding a frame, and slots whose frame waits to be claimed.
+    used: [AtomicU32; 2],
+    ready: [AtomicU32; 2],
+    /// Frames waiting or being queued.
+    len: AtomicU32,
+    /// The frame the writer holds: `IN_FLIGHT | pack(..)`, or 0.
+    in_flight: AtomicU32,
+    /// Non-zero while the writer waits for a frame with its waker stored.
+    sleeping: AtomicU32,
+    waker: Mutex<M, Cell<Option<Waker>>>,
+    lock: Fallback<M>,
+    counters: Counters,
 }
 
 impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
-    const VALID: () = assert!(
-        Q > 0 && Q <= u16::MAX as usize,
-        "queue capacity must be 1..=65535"
-    );
+    const VALID: () = assert!(Q > 0 && Q <= 64, "queue capacity must be 1..=64");
+    /// Words of the bit sets in use.
+    const WORDS: usize = Q.div_ceil(32);
 
     /// An empty queue of depth `Q`.
     pub const fn new() -> Self {
         let () = Self::VALID;
         Self {
-            state: Mutex::new(RefCell::new(State {
-                entries: Lists::new(),
-                in_flight: false,
-                in_flight_priority: 0,
-                in_flight_relayed: false,
-                waker: None,
-                stats: DeviceStats {
-                    submitted: 0,
-                    sent: 0,
-                    bytes_sent: 0,
-                    dropped: crate::stats::DropCounts {
-                        too_large: 0,
-                        encode: 0,
-                        queue_full: 0,
-                        arena_full: 0,
-                        write_error: 0,
-                        rate_limited: 0,
-                        refused: 0,
-                    },
-                    evicted: crate::stats::EvictCounts {
-                        queue_full: 0,
-                        arena_full: 0,
-                    },
-                    queued: 0,
-                    waiting: 0,
-                    queue_high_water: 0,
-                    superseded: 0,
-                    levels: [crate::stats::LevelStats {
-                        submitted: 0,
-                        sent: 0,
-                        lost: 0,
-                        superseded: 0,
-                    }; 3],
-                    relayed: crate::stats::RelayedStats::ZERO,
-                },
-            })),
+            frames: [const { Mutex::new(Cell::new(None)) }; Q],
+            meta: [const { AtomicU32::new(0) }; Q],
+            seqs: [const { AtomicU32::new(0) }; Q],
+            lens: [const { AtomicU32::new(0) }; Q],
+            used: [const { AtomicU32::new(0) }; 2],
+            ready: [const { AtomicU32::new(0) }; 2],
+            len: AtomicU32::new(0),
+            in_flight: AtomicU32::new(0),
+            sleeping: AtomicU32::new(0),
+            waker: Mutex::new(Cell::new(None)),
+            lock: Mutex::new(()),
+            counters: Counters::new(),
         }
     }
 
-    fn with<R>(&self, f: impl FnOnce(&mut State<'a, Q>) -> R) -> R {
-        self.state.lock(|s| f(&mut s.borrow_mut()))
+    /// Slots `32 * word ..` that exist.
+    const fn mask(word: usize) -> u32 {
+        let first = 32 * word;
+        if Q >= first + 32 {
+            u32::MAX
+        } else if Q > first {
+            (1 << (Q - first)) - 1
+        } else {
+            0
+        }
     }
 
-    /// A snapshot of the statistics.
+    /// The waiting frame `prefer` chooses: it is asked about each waiting frame against
+    /// the best so far (`None` for the first).
+    #[inline]
+    fn pick(&self, prefer: impl Fn(&Seen, Option<&Seen>) -> bool) -> Option<Seen> {
+        let mut best: Option<Seen> = None;
+        for (word, ready) in self.ready.iter().enumerate().take(Self::WORDS) {
+            let mut bits = ready.load(core::sync::atomic::Ordering::Acquire);
+            while bits != 0 {
+                let slot = 32 * word + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (Some(meta), Some(seq)) = (self.meta.get(slot), self.seqs.get(slot)) else {
+                    continue;
+                };
+                let seen = Seen {
+                    slot,
+                    meta: meta.load(Relaxed),
+                    seq: seq.load(Relaxed),
+                };
+                if prefer(&seen, best.as_ref()) {
+                    best = Some(seen);
+                }
+            }
+        }
+        best
+    }
+
+    /// Claims the waiting frame `seen` describes: `true` if this context now owns it, as
+    /// it was seen. A slot that changed hands since is given back.
+    #[inline]
+    fn claim(&self, seen: &Seen) -> bool {
+        let (word, bit) = bit(seen.slot);
+        let Some(ready) = self.ready.get(word) else {
+            return false;
+        };
+        if atomic::and(&self.lock, ready, !bit) & bit == 0 {
+            return false;
+        }
+        let same = self.meta.get(seen.slot).map(|m| m.load(Relaxed)) == Some(seen.meta)
+            && self.seqs.get(seen.slot).map(|s| s.load(Relaxed)) == Some(seen.seq);
+        if !same {
+            self.publish(seen.slot);
+        }
+        same
+    }
+
+    /// Makes the frame of `slot` (owned by this context) visible, and wakes the writer if
+    /// it waits.
+    #[inline]
+    fn publish(&self, slot: usize) {
+        let (word, bit) = bit(slot);
+        if let Some(ready) = self.ready.get(word) {
+            atomic::or(&self.lock, ready, bit);
+        }
+        // Pairs with the fence in `sleep`: either the writer sees the frame, or this
+        // sees it sleeping.
+        fence(SeqCst);
+        if self.sleeping.load(Relaxed) != 0 {
+            let waker = self.waker.lock(|w| {
+                self.sleeping.store(0, Relaxed);
+                w.take()
+            });
+            // The writer runs (or the executor queues it) outside the lock.
+            if let Some(waker) = waker {
+                waker.wake();
+            }
+        }
+    }
+
+    /// Stores `waker` as the writer's before it looks once more: a frame published from
+    /// now on wakes it. The waker it replaces is woken if it wakes another task (so that
+    /// task can register again).
+    fn sleep(&self, waker: &Waker) {
+        let replaced = self.waker.lock(|w| {
+            self.sleeping.store(1, Relaxed);
+            match w.take() {
+                Some(old) if old.will_wake(waker) => {
+                    w.set(Some(old));
+                    None
+                }
+                old => {
+                    w.set(Some(waker.clone()));
+                    old
+                }
+            }
+        });
+        fence(SeqCst);
+        if let Some(waker) = replaced {
+            waker.wake();
+        }
+    }
+
+    /// Takes the frame out of `slot` (claimed by this context) and frees the slot.
+    #[inline]
+    fn vacate(&self, slot: usize) -> Option<FrameBuf<'a>> {
+        let frame = self.frames.get(slot)?.lock(Cell::take);
+        let (word, bit) = bit(slot);
+        if let Some(used) = self.used.get(word) {
+            atomic::and(&self.lock, used, !bit);
+        }
+        // After the slot is free: a sender holding a unit of `len` finds a free slot.
+        let _ = atomic::update(&self.lock, &self.len, |n| n.checked_sub(1));
+        frame
+    }
+
+    /// Claims a free slot for a sender holding a unit of `len` (so one is free, or about
+    /// to be: a slot is freed before its unit is given back).
+    fn claim_free(&self) -> Option<usize> {
+        // Each failed round saw another context take the slot it chose; the bound keeps
+        // a broken invariant from hanging the sender (the frame is then dropped, counted).
+        for _ in 0..4 * Q + 4 {
+            for (word, used) in self.used.iter().enumerate().take(Self::WORDS) {
+                let free = !used.load(Relaxed) & Self::mask(word);
+                if free == 0 {
+                    continue;
+                }
+                let bit = free & free.wrapping_neg();
+                if atomic::or(&self.lock, used, bit) & bit == 0 {
+                    return Some(32 * word + bit.trailing_zeros() as usize);
+                }
+            }
+        }
+        None
+    }
+
+    /// A snapshot of the statistics (see [`Counters`] for what it holds while other
+    /// contexts send).
     pub fn stats(&self) -> DeviceStats {
-        self.with(|s| s.stats)
+        let waiting = self.len.load(Relaxed).min(u32::from(u16::MAX)) as u16;
+        let in_flight = self.in_flight.load(Relaxed) != 0;
+        self.counters.snapshot(waiting, in_flight)
     }
 
     /// Counts a message of `priority` (a forwarded one if `relayed`) submitted for this
     /// device that was dropped before reaching the queue.
     pub fn count_dropped(&self, reason: DropReason, priority: u8, relayed: bool) {
-        self.with(|s| {
-            s.submitted(priority, relayed);
-            s.dropped(reason, priority, relayed);
-        });
+        self.counters.submitted(&self.lock, priority, relayed);
+        self.counters.dropped(&self.lock, reason, priority, relayed);
     }
 
     /// Queues a frame. A state message (`latest`) takes the place of a waiting older
@@ -543,76 +380,116 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         frame: FrameBuf<'a>,
         depth: usize,
     ) -> Pushed {
-        let depth = depth.clamp(1, Q);
-        // Evicted, superseded or rejected frames are released after the lock is let go.
-        let mut released = None;
-        let result = self.with(|s| {
-            s.submitted(priority, relayed);
-            if latest.is_some()
-                && let Some(old) = s.entries.find_mut(priority, |e| e.latest == latest)
-            {
-                released = Some(core::mem::replace(&mut old.frame, frame));
-                s.stats.superseded = s.stats.superseded.wrapping_add(1);
-                let l = s.level(priority);
-                l.superseded = l.superseded.wrapping_add(1);
-                return (Pushed::Superseded, None, s.waker.take());
-            }
-            let mut result = Pushed::Queued;
-            if s.entries.len() >= depth {
-                let weaker = s.entries.candidate().is_some_and(|e| e.priority < priority);
-                let victim = if weaker {
-                    s.entries.pop_candidate()
-                } else {
-                    None
-                };
-                match victim {
-                    Some(victim) => {
-                        s.evicted(&victim, true);
-                        released = Some(victim.frame);
-                        result = Pushed::QueuedEvicting;
-                    }
-                    _ => {
-                        s.dropped(DropReason::QueueFull, priority, relayed);
-                        s.update_queued();
-                        return (Pushed::Dropped, Some(frame), None);
+        self.counters.submitted(&self.lock, priority, relayed);
+        let meta = pack(priority, latest, relayed);
+        let frame = match latest {
+            Some(_) => match self.replace(meta, frame) {
+                Ok(old) => {
+                    self.counters.superseded(&self.lock, priority);
+                    drop(old);
+                    return Pushed::Superseded;
+                }
+                Err(frame) => frame,
+            },
+            None => frame,
+        };
+        let depth = depth.clamp(1, Q) as u32;
+        let mut victim = None;
+        let slot = loop {
+            if atomic::update(&self.lock, &self.len, |n| (n < depth).then_some(n + 1)).is_ok() {
+                match self.claim_free() {
+                    Some(slot) => break slot,
+                    None => {
+                        let _ = atomic::update(&self.lock, &self.len, |n| n.checked_sub(1));
+                        self.counters
+                            .dropped(&self.lock, DropReason::QueueFull, priority, relayed);
+                        return Pushed::Dropped;
                     }
                 }
             }
-            // Oldest first within a priority: after every entry of the same priority.
-            let entry = Entry {
-                priority,
-                seq,
-                latest,
-                relayed: u8::from(relayed),
-                frame,
-            };
-            if let Err(entry) = s.entries.push(entry) {
-                // Unreachable while depth <= Q; counted rather than lost if it ever is.
-                s.dropped(DropReason::QueueFull, priority, relayed);
-                s.update_queued();
-                return (Pushed::Dropped, Some(entry.frame), None);
+            // Full: the least important, oldest frame takes the way out if it is strictly
+            // less important, and leaves its slot to this one.
+            let weakest = self.pick(|s, best| best.is_none_or(|b| s.weaker(b)));
+            match weakest {
+                Some(w) if w.priority() < priority => {
+                    if self.claim(&w) {
+                        victim = self.frames.get(w.slot).and_then(|f| f.lock(Cell::take));
+                        self.counters.evicted(
+                            &self.lock,
+                            true,
+                            w.priority(),
+                            w.meta & RELAYED != 0,
+                        );
+                        break w.slot;
+                    }
+                }
+                // Nothing weaker: dropped, unless frames left meanwhile.
+                _ if self.len.load(Relaxed) >= depth => {
+                    self.counters
+                        .dropped(&self.lock, DropReason::QueueFull, priority, relayed);
+                    return Pushed::Dropped;
+                }
+                _ => {}
             }
-            s.update_queued();
-            (result, None, s.waker.take())
-        });
-        let (pushed, rejected, waker) = result;
-        // The writer runs (or the executor queues it) with interrupts enabled.
-        if let Some(waker) = waker {
-            waker.wake();
+        };
+        if let (Some(m), Some(s), Some(l)) = (
+            self.meta.get(slot),
+            self.seqs.get(slot),
+            self.lens.get(slot),
+        ) {
+            m.store(meta, Relaxed);
+            s.store(seq, Relaxed);
+            l.store(frame.len() as u32, Relaxed);
         }
-        drop(released);
-        drop(rejected);
-        pushed
+        if let Some(f) = self.frames.get(slot) {
+            f.lock(|f| f.set(Some(frame)));
+        }
+        self.counters.waiting(&self.lock, self.len.load(Relaxed));
+        self.publish(slot);
+        match victim {
+            Some(victim) => {
+                drop(victim);
+                Pushed::QueuedEvicting
+            }
+            None => Pushed::Queued,
+        }
+    }
+
+    /// Puts `frame` in the place of the oldest waiting frame with the same [`pack`]ed key
+    /// and returns that one's; `Err(frame)` if none waits.
+    fn replace(
+        &self,
+        meta: u32,
+        frame: FrameBuf<'a>,
+    ) -> Result<Option<FrameBuf<'a>>, FrameBuf<'a>> {
+        let len = frame.len() as u32;
+        loop {
+            let seen = self.pick(|s, best| {
+                s.meta & KEY == meta & KEY && best.is_none_or(|b| older(s.seq, b.seq))
+            });
+            let Some(seen) = seen else {
+                return Err(frame);
+            };
+            if self.claim(&seen) {
+                let old = self
+                    .frames
+                    .get(seen.slot)
+                    .and_then(|f| f.lock(|f| f.replace(Some(frame))));
+                if let Some(l) = self.lens.get(seen.slot) {
+                    l.store(len, Relaxed);
+                }
+                self.publish(seen.slot);
+                return Ok(old);
+            }
+        }
     }
 
     /// The eviction candidate, if any.
     pub fn candidate(&self) -> Option<Candidate> {
-        self.with(|s| {
-            let e = s.entries.candidate()?;
-            Some(Candidate {
-                priority: e.priority,
-                seq: e.seq,
-            })
+        let weakest = self.pick(|s, best| best.is_none_or(|b| s.weaker(b)))?;
+        Some(Candidate {
+            priority: weakest.priority(),
+            seq: weakest.seq,
         })
     }
 
@@ -620,71 +497,107 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// (another task may have changed the queue since [`candidate`](Self::candidate)).
     /// Returns whether a frame was evicted; its memory is released before returning.
     pub fn evict_for_arena(&self, expected: Candidate) -> bool {
-        let evicted = self.with(|s| {
-            let e = s.entries.candidate()?;
-            if e.priority != expected.priority || e.seq != expected.seq {
-                return None;
-            }
-            let entry = s.entries.pop_candidate()?;
-            s.evicted(&entry, false);
-            s.update_queued();
-            Some(entry)
-        });
-        evicted.is_some()
+        let Some(seen) =
+            self.pick(|s, _| s.priority() == expected.priority && s.seq == expected.seq)
+        else {
+            return false;
+        };
+        if !self.claim(&seen) {
+            return false;
+        }
+        let frame = self.vacate(seen.slot);
+        self.counters
+            .evicted(&self.lock, false, seen.priority(), seen.meta & RELAYED != 0);
+        drop(frame);
+        true
+    }
+
+    /// The most important waiting frame.
+    #[inline]
+    fn strongest(&self) -> Option<Seen> {
+        self.pick(|s, best| best.is_none_or(|b| s.stronger(b)))
     }
 
     /// The length of the most important frame, without taking it; with a context,
     /// registers the waker when there is none.
     pub fn peek_len(&self, cx: Option<&mut Context<'_>>) -> Option<usize> {
-        let (len, replaced) = self.with(|s| match s.entries.front() {
-            Some(entry) => (Some(entry.frame.len()), None),
-            None => (None, cx.and_then(|cx| s.register(cx.waker()))),
-        });
-        if let Some(waker) = replaced {
-            waker.wake();
+        let len = || {
+            let s = self.strongest()?;
+            Some(self.lens.get(s.slot)?.load(Relaxed) as usize)
+        };
+        match (len(), cx) {
+            (Some(len), _) => Some(len),
+            (None, None) => None,
+            (None, Some(cx)) => {
+                self.sleep(cx.waker());
+                len()
+            }
         }
-        len
+    }
+
+    /// Takes the most important frame and marks it in flight.
+    fn take(&self) -> Option<FrameBuf<'a>> {
+        loop {
+            let seen = self.strongest()?;
+            if self.claim(&seen) {
+                // In flight before the slot is freed, so that a snapshot never misses it.
+                self.in_flight.store(IN_FLIGHT | seen.meta, Relaxed);
+                return self.vacate(seen.slot);
+            }
+        }
     }
 
     /// Takes the most important frame and marks it in flight; with a context, registers
     /// the waker when there is none. For the device's one consumer, which reports the
     /// outcome with [`complete`](Self::complete).
     pub fn try_receive(&self, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'a>> {
-        let (frame, replaced) = self.with(|s| match s.take() {
-            Some(frame) => (Some(frame), None),
-            // None waiting: the writer's waker, and the one it replaces to wake after.
-            None => (None, cx.and_then(|cx| s.register(cx.waker()))),
-        });
-        if let Some(waker) = replaced {
-            waker.wake();
+        match (self.take(), cx) {
+            (Some(frame), _) => Some(frame),
+            (None, None) => None,
+            (None, Some(cx)) => {
+                self.sleep(cx.waker());
+                self.take()
+            }
         }
-        frame
     }
 
     /// Reports the outcome of writing the in-flight frame: sent, or lost for `reason` (a
     /// write error, or refused by the device's link layer), then releases the frame's
-    /// memory once this queue's lock is let go (the two critical sections follow each
-    /// other instead of nesting, so interrupts wait for the longer of the two only). With
-    /// `take_next`, also takes the most important frame as
-    /// [`try_receive`](Self::try_receive) (without a context) does, under the same lock:
-    /// for a writer that writes the next frame as soon as a write completes.
+    /// memory. With `take_next`, also takes the most important frame as
+    /// [`try_receive`](Self::try_receive) (without a context) does: for a writer that
+    /// writes the next frame as soon as a write completes.
     pub fn complete(
         &self,
         frame: FrameBuf<'_>,
         outcome: Result<(), DropReason>,
         take_next: bool,
     ) -> Option<FrameBuf<'a>> {
-        let len = frame.len();
-        let next = self.with(|s| {
-            s.complete(len, outcome);
-            let next = if take_next { s.take() } else { None };
-            if next.is_none() {
-                s.update_queued();
-            }
-            next
-        });
+        let held = self.in_flight.load(Relaxed);
+        let (priority, relayed) = (held as u8, held & RELAYED != 0);
+        match outcome {
+            Ok(()) => self
+                .counters
+                .sent(&self.lock, priority, relayed, frame.len()),
+            Err(reason) => self.counters.dropped(&self.lock, reason, priority, relayed),
+        }
+        self.in_flight.store(0, Relaxed);
         drop(frame);
-        next
+        if take_next { self.take() } else { None }
+    }
+
+    /// Takes the oldest waiting instance of state message `key` at `priority` without
+    /// counting it (tests: the queue itself only supersedes in place).
+    #[cfg(test)]
+    fn remove_latest(&self, priority: u8, key: MessageKey) -> Option<FrameBuf<'a>> {
+        let meta = pack(priority, Some(key), false);
+        let seen = self.pick(|s, best| {
+            s.meta & KEY == meta & KEY && best.is_none_or(|b| older(s.seq, b.seq))
+        })?;
+        if self.claim(&seen) {
+            self.vacate(seen.slot)
+        } else {
+            None
+        }
     }
 }
 
@@ -753,7 +666,7 @@ mod tests {
                     msg_id: i as u8,
                 });
                 if policy == Policy::Requeue {
-                    let old = queue.with(|s| s.entries.remove_where(128, |e| e.latest == key));
+                    let old = key.and_then(|k| queue.remove_latest(128, k));
                     drop(old);
                 }
                 seq += 1;

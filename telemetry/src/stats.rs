@@ -14,6 +14,11 @@
 //! evicted or superseded, by reason.
 
 use core::fmt;
+use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
+
+use embassy_sync::blocking_mutex::raw::RawMutex;
+
+use crate::atomic::{self, Fallback};
 
 /// Why a message did not reach a device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -82,17 +87,6 @@ pub struct DropCounts {
 }
 
 impl DropCounts {
-    /// Zero counters, in `const` contexts.
-    pub(crate) const ZERO: Self = Self {
-        too_large: 0,
-        encode: 0,
-        queue_full: 0,
-        arena_full: 0,
-        write_error: 0,
-        rate_limited: 0,
-        refused: 0,
-    };
-
     /// Sum of all reasons.
     pub fn total(&self) -> u32 {
         self.too_large
@@ -104,19 +98,19 @@ impl DropCounts {
             .wrapping_add(self.refused)
     }
 
-    pub(crate) fn count(&mut self, reason: DropReason) {
-        let c = match reason {
-            DropReason::TooLarge => &mut self.too_large,
-            DropReason::Encode => &mut self.encode,
-            DropReason::QueueFull => &mut self.queue_full,
-            DropReason::ArenaFull => &mut self.arena_full,
-            DropReason::WriteError => &mut self.write_error,
-            DropReason::RateLimited => &mut self.rate_limited,
-            DropReason::Refused => &mut self.refused,
-            // Not a device's drop: counted by the downlink (`undeliverable`).
-            DropReason::NoDevice => return,
-        };
-        *c = c.wrapping_add(1);
+    /// The position of `reason` among the fields, `None` for [`DropReason::NoDevice`] (not
+    /// a device's drop: the downlink counts it, `undeliverable`).
+    pub(crate) fn index(reason: DropReason) -> Option<usize> {
+        Some(match reason {
+            DropReason::TooLarge => 0,
+            DropReason::Encode => 1,
+            DropReason::QueueFull => 2,
+            DropReason::ArenaFull => 3,
+            DropReason::WriteError => 4,
+            DropReason::RateLimited => 5,
+            DropReason::Refused => 6,
+            DropReason::NoDevice => return None,
+        })
     }
 }
 
@@ -131,12 +125,6 @@ pub struct EvictCounts {
 }
 
 impl EvictCounts {
-    /// Zero counters, in `const` contexts.
-    pub(crate) const ZERO: Self = Self {
-        queue_full: 0,
-        arena_full: 0,
-    };
-
     /// Sum of both causes.
     pub fn total(&self) -> u32 {
         self.queue_full.wrapping_add(self.arena_full)
@@ -155,16 +143,6 @@ pub struct LevelStats {
     pub lost: u32,
     /// Replaced while waiting by a newer instance of the same state message.
     pub superseded: u32,
-}
-
-impl LevelStats {
-    /// Zero counters, in `const` contexts.
-    pub(crate) const ZERO: Self = Self {
-        submitted: 0,
-        sent: 0,
-        lost: 0,
-        superseded: 0,
-    };
 }
 
 /// Statistics of one device of the downlink (a snapshot).
@@ -220,15 +198,6 @@ pub struct RelayedStats {
 }
 
 impl RelayedStats {
-    /// Zero counters, in `const` contexts.
-    pub(crate) const ZERO: Self = Self {
-        submitted: 0,
-        sent: 0,
-        dropped: DropCounts::ZERO,
-        evicted: EvictCounts::ZERO,
-        levels: [LevelStats::ZERO; 3],
-    };
-
     /// Forwarded frames that will never reach the wire (dropped and evicted).
     pub fn lost(&self) -> u32 {
         self.dropped.total().wrapping_add(self.evicted.total())
@@ -313,6 +282,187 @@ impl DeviceStats {
     }
 }
 
+/// The counters of one device's queue, each its own atomic word, so that every context
+/// counts without taking a lock (see the queue). [`snapshot`](Self::snapshot) reads them
+/// one by one: a snapshot taken while another context sends or writes may be off by the
+/// messages in transit (counted submitted, not yet queued or dropped); one taken between
+/// two operations is exact.
+pub(crate) struct Counters {
+    words: [AtomicU32; Counters::LEN],
+}
+
+/// Layout of one block of [`Counters`] (the device's totals, then the forwarded part):
+/// submitted, sent, the drop reasons in [`DropCounts`]' order, the two eviction causes,
+/// then per level submitted, sent, lost, superseded.
+mod at {
+    pub const SUBMITTED: usize = 0;
+    pub const SENT: usize = 1;
+    pub const DROPPED: usize = 2;
+    pub const EVICTED: usize = DROPPED + 7;
+    pub const LEVELS: usize = EVICTED + 2;
+    pub const BLOCK: usize = LEVELS + 3 * 4;
+    /// The second block: the forwarded frames' share.
+    pub const RELAYED: usize = BLOCK;
+    /// After both blocks: bytes sent, superseded, queue high-water mark.
+    pub const BYTES: usize = 2 * BLOCK;
+    pub const SUPERSEDED: usize = BYTES + 1;
+    pub const HIGH_WATER: usize = BYTES + 2;
+}
+
+impl Counters {
+    const LEN: usize = at::HIGH_WATER + 1;
+
+    /// All zero.
+    pub(crate) const fn new() -> Self {
+        Self {
+            words: [const { AtomicU32::new(0) }; Counters::LEN],
+        }
+    }
+
+    #[inline]
+    fn add<M: RawMutex>(&self, lock: &Fallback<M>, i: usize, v: u32) {
+        if let Some(w) = self.words.get(i) {
+            atomic::add(lock, w, v);
+        }
+    }
+
+    /// Adds one to counter `what` of level `priority`'s, in the device's block and, for a
+    /// forwarded frame, in the relayed block.
+    #[inline]
+    fn level<M: RawMutex>(
+        &self,
+        lock: &Fallback<M>,
+        total: usize,
+        what: usize,
+        priority: u8,
+        relayed: bool,
+    ) {
+        let level = at::LEVELS + 4 * pprz_messages::priority::level(priority) + what;
+        self.add(lock, total, 1);
+        self.add(lock, level, 1);
+        if relayed {
+            self.relayed(lock, total, level);
+        }
+    }
+
+    /// The forwarded frames' share, out of the common path (the aircraft's own messages).
+    #[cold]
+    #[inline(never)]
+    fn relayed<M: RawMutex>(&self, lock: &Fallback<M>, total: usize, level: usize) {
+        self.add(lock, at::RELAYED + total, 1);
+        self.add(lock, at::RELAYED + level, 1);
+    }
+
+    /// A message of `priority` accepted for sending.
+    #[inline]
+    pub(crate) fn submitted<M: RawMutex>(&self, lock: &Fallback<M>, priority: u8, relayed: bool) {
+        self.level(lock, at::SUBMITTED, 0, priority, relayed);
+    }
+
+    /// A frame of `len` bytes written completely.
+    #[inline]
+    pub(crate) fn sent<M: RawMutex>(
+        &self,
+        lock: &Fallback<M>,
+        priority: u8,
+        relayed: bool,
+        len: usize,
+    ) {
+        self.add(lock, at::BYTES, len as u32);
+        self.level(lock, at::SENT, 1, priority, relayed);
+    }
+
+    /// A message dropped for `reason` (nothing for [`DropReason::NoDevice`], which the
+    /// downlink counts).
+    pub(crate) fn dropped<M: RawMutex>(
+        &self,
+        lock: &Fallback<M>,
+        reason: DropReason,
+        priority: u8,
+        relayed: bool,
+    ) {
+        let Some(i) = DropCounts::index(reason) else {
+            return;
+        };
+        self.level(lock, at::DROPPED + i, 2, priority, relayed);
+    }
+
+    /// A queued frame evicted because the queue (`queue_full`) or the arena was full.
+    pub(crate) fn evicted<M: RawMutex>(
+        &self,
+        lock: &Fallback<M>,
+        queue_full: bool,
+        priority: u8,
+        relayed: bool,
+    ) {
+        let i = at::EVICTED + usize::from(!queue_full);
+        self.level(lock, i, 2, priority, relayed);
+    }
+
+    /// A waiting state message of `priority` replaced by a newer one.
+    pub(crate) fn superseded<M: RawMutex>(&self, lock: &Fallback<M>, priority: u8) {
+        self.level(lock, at::SUPERSEDED, 3, priority, false);
+    }
+
+    /// Raises the queue's high-water mark to `waiting` frames.
+    #[inline]
+    pub(crate) fn waiting<M: RawMutex>(&self, lock: &Fallback<M>, waiting: u32) {
+        let Some(w) = self.words.get(at::HIGH_WATER) else {
+            return;
+        };
+        if w.load(Relaxed) < waiting {
+            let _ = atomic::update(lock, w, |hw| (hw < waiting).then_some(waiting));
+        }
+    }
+
+    /// The counters as [`DeviceStats`], with `waiting` frames in the queue and, if
+    /// `in_flight`, one being written.
+    pub(crate) fn snapshot(&self, waiting: u16, in_flight: bool) -> DeviceStats {
+        let w = |i: usize| self.words.get(i).map_or(0, |w| w.load(Relaxed));
+        let block = |b: usize| {
+            let d = |r: usize| w(b + at::DROPPED + r);
+            let level = |l: usize| LevelStats {
+                submitted: w(b + at::LEVELS + 4 * l),
+                sent: w(b + at::LEVELS + 4 * l + 1),
+                lost: w(b + at::LEVELS + 4 * l + 2),
+                superseded: w(b + at::LEVELS + 4 * l + 3),
+            };
+            RelayedStats {
+                submitted: w(b + at::SUBMITTED),
+                sent: w(b + at::SENT),
+                dropped: DropCounts {
+                    too_large: d(0),
+                    encode: d(1),
+                    queue_full: d(2),
+                    arena_full: d(3),
+                    write_error: d(4),
+                    rate_limited: d(5),
+                    refused: d(6),
+                },
+                evicted: EvictCounts {
+                    queue_full: w(b + at::EVICTED),
+                    arena_full: w(b + at::EVICTED + 1),
+                },
+                levels: [level(0), level(1), level(2)],
+            }
+        };
+        let own = block(0);
+        DeviceStats {
+            submitted: own.submitted,
+            sent: own.sent,
+            bytes_sent: w(at::BYTES),
+            dropped: own.dropped,
+            evicted: own.evicted,
+            superseded: w(at::SUPERSEDED),
+            queued: waiting.saturating_add(u16::from(in_flight)),
+            waiting,
+            queue_high_water: w(at::HIGH_WATER) as u16,
+            levels: own.levels,
+            relayed: block(at::RELAYED),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -325,7 +475,7 @@ mod tests {
             bytes_sent: 5_000,
             ..Default::default()
         };
-        s.dropped.count(DropReason::QueueFull);
+        s.dropped.queue_full += 1;
         s.evicted.arena_full = 300;
         s.queued = 9;
         s.submitted = s.sent + s.lost() + u32::from(s.queued);

@@ -1,0 +1,80 @@
+//! Read-modify-write on `AtomicU32` for every core the crate supports: the core's own
+//! instructions where it has them (compare-and-swap, or load/store-exclusive), and a
+//! short lock of the caller's mutex where it has not (ARMv6-M, RV32IMC): loads and stores
+//! are atomic on every target, so the lock only has to keep other writers out.
+//!
+//! The queue and the counters are written with these, so that on the cores with
+//! compare-and-swap no lock of the send path masks interrupts for them.
+
+use core::sync::atomic::AtomicU32;
+#[cfg(not(target_has_atomic = "32"))]
+use core::sync::atomic::Ordering::SeqCst;
+#[cfg(target_has_atomic = "32")]
+use core::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed};
+
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
+
+/// The lock used in place of read-modify-write instructions on cores without them
+/// (never taken on the others: a zero-sized field for the usual mutexes).
+pub(crate) type Fallback<M> = Mutex<M, ()>;
+
+/// Adds `v` (wrapping) to a counter; no ordering with other memory.
+#[inline]
+pub(crate) fn add<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) {
+    #[cfg(target_has_atomic = "32")]
+    a.fetch_add(v, Relaxed);
+    #[cfg(not(target_has_atomic = "32"))]
+    _lock.lock(|()| a.store(a.load(SeqCst).wrapping_add(v), SeqCst));
+}
+
+/// `a |= v`, returning the previous value; acquires and releases.
+#[inline]
+pub(crate) fn or<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u32 {
+    #[cfg(target_has_atomic = "32")]
+    return a.fetch_or(v, AcqRel);
+    #[cfg(not(target_has_atomic = "32"))]
+    _lock.lock(|()| {
+        let old = a.load(SeqCst);
+        a.store(old | v, SeqCst);
+        old
+    })
+}
+
+/// `a &= v`, returning the previous value; acquires and releases.
+#[inline]
+pub(crate) fn and<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u32 {
+    #[cfg(target_has_atomic = "32")]
+    return a.fetch_and(v, AcqRel);
+    #[cfg(not(target_has_atomic = "32"))]
+    _lock.lock(|()| {
+        let old = a.load(SeqCst);
+        a.store(old & v, SeqCst);
+        old
+    })
+}
+
+/// Replaces the value `v` of `a` with `f(v)` unless `f` returns `None`, atomically;
+/// returns the value `f` saw last, `Ok` if it was replaced. Acquires and releases.
+#[inline]
+pub(crate) fn update<M: RawMutex>(
+    _lock: &Fallback<M>,
+    a: &AtomicU32,
+    f: impl FnMut(u32) -> Option<u32>,
+) -> Result<u32, u32> {
+    #[cfg(target_has_atomic = "32")]
+    return a.fetch_update(AcqRel, Acquire, f);
+    #[cfg(not(target_has_atomic = "32"))]
+    let mut f = f;
+    #[cfg(not(target_has_atomic = "32"))]
+    _lock.lock(|()| {
+        let old = a.load(SeqCst);
+        match f(old) {
+            Some(new) => {
+                a.store(new, SeqCst);
+                Ok(old)
+            }
+            None => Err(old),
+        }
+    })
+}
