@@ -839,3 +839,106 @@ mod model {
         }
     }
 }
+
+#[cfg(test)]
+mod concurrent {
+    //! The queue under real concurrency: several threads sending (with evictions, state
+    //! messages and arena evictions) while one takes and completes frames. Every frame
+    //! is taken at most once, nothing leaks from the arena, and the counters balance.
+
+    use super::*;
+    use crate::arena::FrameArena;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as RawM;
+    use std::collections::HashSet;
+    use std::sync::atomic::{AtomicBool, AtomicU32 as Count};
+
+    #[test]
+    fn threads_sending_evicting_and_taking_lose_nothing() {
+        const PER_SENDER: u32 = if cfg!(miri) { 60 } else { 4000 };
+        let arena: FrameArena<RawM, 1024> = FrameArena::new();
+        let queue: FrameQueue<'_, RawM, 12> = FrameQueue::new();
+        let seq = Count::new(0);
+        let done = AtomicBool::new(false);
+        let taken = std::thread::scope(|s| {
+            for sender in 0..3u32 {
+                let (arena, queue, seq) = (&arena, &queue, &seq);
+                s.spawn(move || {
+                    for n in 0..PER_SENDER {
+                        let priority = ((n * 7 + sender * 3) % 5) as u8 * 50;
+                        let latest = (n % 4 == 0).then_some(MessageKey {
+                            class: 1,
+                            msg_id: (n % 3) as u8,
+                        });
+                        let Ok(mut frame) = arena.alloc(8 + (n % 24) as usize) else {
+                            // The arena's way out, as the downlink takes it.
+                            if let Some(c) = queue.candidate() {
+                                queue.evict_for_arena(c);
+                            }
+                            queue.count_dropped(DropReason::ArenaFull, priority, false);
+                            continue;
+                        };
+                        frame[..4].copy_from_slice(&sender.to_le_bytes());
+                        frame[4..8].copy_from_slice(&n.to_le_bytes());
+                        let seq = seq.fetch_add(1, Relaxed);
+                        let depth = 4 + (n % 9) as usize;
+                        // Forwarded frames are never state messages.
+                        let relayed = n % 11 == 0 && latest.is_none();
+                        queue.push(priority, seq, latest, relayed, frame, depth);
+                        if n % 8 == 0 {
+                            // Lets the writer in: a queue that stays full tests less.
+                            std::thread::yield_now();
+                        }
+                    }
+                });
+            }
+            let consumer = s.spawn(|| {
+                let mut taken = Vec::new();
+                loop {
+                    let finished = done.load(SeqCst);
+                    match queue.try_receive(None) {
+                        Some(frame) => {
+                            let mut id = [0u8; 8];
+                            id.copy_from_slice(&frame[..8]);
+                            taken.push(u64::from_le_bytes(id));
+                            let outcome = if taken.len() % 13 == 0 {
+                                Err(DropReason::WriteError)
+                            } else {
+                                Ok(())
+                            };
+                            queue.complete(frame, outcome, false);
+                        }
+                        None if finished => return taken,
+                        None => std::thread::yield_now(),
+                    }
+                }
+            });
+            // The senders end before the scope's own end: wait for them by polling the
+            // counters, then let the consumer drain what is left.
+            while queue.stats().submitted < 3 * PER_SENDER {
+                std::thread::yield_now();
+            }
+            done.store(true, SeqCst);
+            consumer.join().expect("consumer")
+        });
+        let unique: HashSet<u64> = taken.iter().copied().collect();
+        assert_eq!(unique.len(), taken.len(), "a frame was taken twice");
+        let stats = queue.stats();
+        assert!(stats.is_balanced(), "{stats:?}");
+        assert_eq!(stats.queued, 0, "{stats:?}");
+        assert_eq!(
+            stats.sent + stats.dropped.write_error,
+            taken.len() as u32,
+            "{stats:?}"
+        );
+        assert_eq!(stats.submitted, 3 * PER_SENDER);
+        assert!(
+            stats.evicted.total() > 0 && stats.superseded > 0,
+            "{stats:?}"
+        );
+        assert!(
+            stats.sent > PER_SENDER / 2,
+            "the writer hardly ran: {stats:?}"
+        );
+        assert_eq!(arena.stats().live, 0, "a frame leaked");
+    }
+}
