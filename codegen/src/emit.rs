@@ -287,7 +287,7 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
                         lifetime,
                         doc: format!("A message of class `{}` (id {}).", c.name, c.id),
                         id: c.id,
-                        decode: set_decode_arm(c, &module, &opts.runtime),
+                        decode: set_decode_arm(c, &opts.runtime),
                     }
                 })
                 .collect(),
@@ -336,6 +336,7 @@ fn emit_any(out: &mut String, protocol: &Protocol, opts: &Options) {
             ],
             from_impls: false,
             allow_dead_code: true,
+            helpers: Some(protocol),
         },
     );
 }
@@ -704,29 +705,34 @@ fn emit_encode(out: &mut String, m: &MessageDef) {
 /// `impl Decode`: a reader over the payload, one read per field.
 fn emit_decode(out: &mut String, item: &MessageItem) {
     let MessageItem { m, ty, l, .. } = item;
-    let min = m.min_len();
     out!(out, "    impl<'a> __rt::Decode<'a> for {ty}{l} {{");
     out!(out, "        #[inline]");
     out!(
         out,
         "        fn decode(payload: &'a [u8]) -> {RESULT}<Self, __rt::DecodeError> {{"
     );
+    decode_body(out, m, "            ", "__rt", "Self", "msg");
+    out!(out, "        }}");
+    out!(out, "    }}\n");
+}
+
+/// The statements of a decoder of `m` from `payload`: a reader over it, one read per
+/// field into the struct `ty`, then `Ok(ok)` (an expression of `msg`, the message).
+fn decode_body(out: &mut String, m: &MessageDef, i: &str, rt: &str, ty: &str, ok: &str) {
+    let min = m.min_len();
     let mutr = if m.fields.is_empty() { "" } else { "mut " };
     if m.is_fixed_size() {
         out!(
             out,
-            "            let {mutr}r = __rt::wire::Reader::exact(payload, {min})?;"
+            "{i}let {mutr}r = {rt}::wire::Reader::exact(payload, {min})?;"
         );
     } else {
-        out!(
-            out,
-            "            let {mutr}r = __rt::wire::Reader::new(payload);"
-        );
+        out!(out, "{i}let {mutr}r = {rt}::wire::Reader::new(payload);");
     }
     if m.fields.is_empty() {
-        out!(out, "            let msg = Self;");
+        out!(out, "{i}let msg = {ty};");
     } else {
-        out!(out, "            let msg = Self {{");
+        out!(out, "{i}let msg = {ty} {{");
         for f in &m.fields {
             let call = match f.ty {
                 FieldType::Scalar(_) => "scalar",
@@ -734,18 +740,12 @@ fn emit_decode(out: &mut String, item: &MessageItem) {
                 FieldType::Vector(BaseType::Char) => "chars",
                 FieldType::Vector(_) => "vector",
             };
-            out!(
-                out,
-                "                {}: r.{call}()?,",
-                names::snake_case(&f.name)
-            );
+            out!(out, "{i}    {}: r.{call}()?,", names::snake_case(&f.name));
         }
-        out!(out, "            }};");
+        out!(out, "{i}}};");
     }
-    out!(out, "            r.finish()?;");
-    out!(out, "            {OK}(msg)");
-    out!(out, "        }}");
-    out!(out, "    }}\n");
+    out!(out, "{i}r.finish()?;");
+    out!(out, "{i}{OK}({ok})");
 }
 
 /// Typed accessors for enumerated fields (`mode_value()` -> `Option<values::GpsMode>`).
@@ -777,19 +777,16 @@ fn emit_value_accessors(out: &mut String, item: &MessageItem) {
     }
 }
 
-/// The arm of the set's `AnyMessage::decode` for `class`: a `match msg_id` that decodes
-/// the message straight into the set's variant, rather than calling the class's `decode`
-/// and wrapping its result (which the compiler builds in a temporary and copies).
-fn set_decode_arm(class: &Class, module: &str, rt: &str) -> String {
-    let variant = names::camel_case(&class.name);
+/// The arm of the set's `AnyMessage::decode` for `class`: a `match msg_id` that calls
+/// the message's helper of [`set_decode_helpers`].
+fn set_decode_arm(class: &Class, rt: &str) -> String {
     let mut arm = String::from("match msg_id {\n");
     for m in &class.messages {
-        let name = names::camel_case(&m.name);
         out!(
             arm,
-            "                {} => <{module}::{name}{} as {rt}::Decode>::decode(payload).map(|m| Self::{variant}({module}::AnyMessage::{name}(m))),",
+            "                {} => Self::{}(payload),",
             m.id,
-            lt(has_lifetime(m)),
+            set_decode_helper_name(class, m),
         );
     }
     out!(
@@ -798,6 +795,52 @@ fn set_decode_arm(class: &Class, module: &str, rt: &str) -> String {
     );
     arm.push_str("            }");
     arm
+}
+
+/// Name of the set-level helper that decodes message `m` of `class`: made of the ids,
+/// which are unique in the set (names joined by `_` could collide).
+fn set_decode_helper_name(class: &Class, m: &MessageDef) -> String {
+    format!("decode_{}_{}", class.id, m.id)
+}
+
+/// The set's `AnyMessage::decode` helpers, one per message: each reads the fields
+/// itself (the statements of the message's `Decode` impl) and builds the set's variant
+/// from them, so the message is written straight where the caller wants the result.
+///
+/// Calling the message's `Decode::decode` and wrapping its result instead costs, where
+/// the compiler keeps that call out of line (x86_64 at `opt-level = "s"`), a temporary
+/// `Result` and two copies of the message. A helper is its own function: where `decode`
+/// stays out of line, its dispatch jumps to the helper (a tail call); where `decode` is
+/// inlined into its caller (Cortex-M), so are the helpers, as the `Decode` impls were.
+fn set_decode_helpers(out: &mut String, protocol: &Protocol, rt: &str, input: &str) {
+    for class in &protocol.classes {
+        let module = names::module_name(&class.name);
+        let variant = names::camel_case(&class.name);
+        for m in &class.messages {
+            let name = names::camel_case(&m.name);
+            out!(
+                out,
+                "    /// Decodes `{}` of class `{}`.",
+                m.name,
+                class.name
+            );
+            out!(out, "    #[inline]");
+            out!(
+                out,
+                "    fn {}(payload: {input}) -> {RESULT}<Self, {rt}::DecodeError> {{",
+                set_decode_helper_name(class, m)
+            );
+            decode_body(
+                out,
+                m,
+                "        ",
+                rt,
+                &format!("{module}::{name}"),
+                &format!("Self::{variant}({module}::AnyMessage::{name}(msg))"),
+            );
+            out!(out, "    }}\n");
+        }
+    }
 }
 
 /// A class's `AnyMessage`: one variant per message.
@@ -878,6 +921,7 @@ fn emit_class_any(out: &mut String, class: &Class) {
             ],
             from_impls: true,
             allow_dead_code: false,
+            helpers: None,
         },
     );
 }
@@ -944,6 +988,9 @@ struct AnyEnum<'f> {
     /// Whether the enum and its inherent impl carry [`ALLOW_DEAD_CODE`] (at the top
     /// level; inside a class module, the module's attribute covers them).
     allow_dead_code: bool,
+    /// The set whose per-message decode helpers ([`set_decode_helpers`]) the inherent
+    /// impl holds (the set's `AnyMessage` only).
+    helpers: Option<&'f Protocol>,
 }
 
 /// An `AnyMessage` enum, its `decode`, its methods and, if asked, its `From` impls.
@@ -1015,6 +1062,9 @@ fn emit_any_enum(out: &mut String, e: &AnyEnum) {
     );
     out!(out, "{i}        }}");
     out!(out, "{i}    }}\n");
+    if let Some(protocol) = e.helpers {
+        set_decode_helpers(out, protocol, rt, input);
+    }
     for method in &e.methods {
         docs(out, &method.doc);
         out!(out, "{i}    pub fn {} {{", method.sig);

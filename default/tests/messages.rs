@@ -187,3 +187,42 @@ fn every_message_round_trips() {
         Ok(msg.encode(out).expect("a decoded message re-encodes"))
     });
 }
+
+/// The set's `decode` (its own reader per message) and the class's `decode` (which calls
+/// the message's `Decode` impl) agree on every message, for payloads of every length up
+/// to past the longest fixed message, well-formed or not: same message, or same error.
+#[test]
+fn set_decode_matches_class_decode() {
+    let by_class = |class: u8, id: u8, payload: &'static [u8]| match class {
+        1 => telemetry::AnyMessage::decode(id, payload).map(AnyMessage::Telemetry),
+        2 => datalink::AnyMessage::decode(id, payload).map(AnyMessage::Datalink),
+        _ => unreachable!("the default set has classes 1 and 2"),
+    };
+    static BYTES: [u8; 80] = {
+        let mut b = [0u8; 80];
+        let mut i = 0;
+        while i < b.len() {
+            // Small values at the start (vector lengths that fit), then varied bytes.
+            b[i] = if i < 4 {
+                i as u8
+            } else {
+                (i as u8).wrapping_mul(37) ^ 0x5A
+            };
+            i += 1;
+        }
+        b
+    };
+    for desc in MESSAGES.messages() {
+        for start in 0..4 {
+            for len in 0..=BYTES.len() - start {
+                let payload = &BYTES[start..start + len];
+                assert_eq!(
+                    AnyMessage::decode(desc.class_id, desc.id, payload),
+                    by_class(desc.class_id, desc.id, payload),
+                    "{} from {len} bytes at {start}",
+                    desc.name
+                );
+            }
+        }
+    }
+}

@@ -31,20 +31,108 @@ impl<'a> AnyMessage<'a> {
     pub fn decode(class_id: u8, msg_id: u8, payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
         match class_id {
             1 => match msg_id {
-                3 => <telemetry::Pong as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::Pong(m))),
-                7 => <telemetry::Mixed<'a> as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::Mixed(m))),
-                30 => <telemetry::DatalinkReport as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::DatalinkReport(m))),
-                31 => <telemetry::DlValue as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Telemetry(telemetry::AnyMessage::DlValue(m))),
+                3 => Self::decode_1_3(payload),
+                7 => Self::decode_1_7(payload),
+                30 => Self::decode_1_30(payload),
+                31 => Self::decode_1_31(payload),
                 _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
             },
             2 => match msg_id {
-                4 => <datalink::Setting as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Datalink(datalink::AnyMessage::Setting(m))),
-                8 => <datalink::Ping as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Datalink(datalink::AnyMessage::Ping(m))),
-                16 => <datalink::GetSetting as ::pprz_messages::Decode>::decode(payload).map(|m| Self::Datalink(datalink::AnyMessage::GetSetting(m))),
+                4 => Self::decode_2_4(payload),
+                8 => Self::decode_2_8(payload),
+                16 => Self::decode_2_16(payload),
                 _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
             },
             _ => ::core::result::Result::Err(::pprz_messages::DecodeError::UnknownMessage { class_id, msg_id }),
         }
+    }
+
+    /// Decodes `PONG` of class `telemetry`.
+    #[inline]
+    fn decode_1_3(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let r = ::pprz_messages::wire::Reader::exact(payload, 0)?;
+        let msg = telemetry::Pong;
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Telemetry(telemetry::AnyMessage::Pong(msg)))
+    }
+
+    /// Decodes `MIXED` of class `telemetry`.
+    #[inline]
+    fn decode_1_7(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let mut r = ::pprz_messages::wire::Reader::new(payload);
+        let msg = telemetry::Mixed {
+            mode: r.scalar()?,
+            samples: r.vector()?,
+            type_: r.array()?,
+            name: r.chars()?,
+            tag: r.array()?,
+            big: r.array()?,
+            lat: r.scalar()?,
+        };
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Telemetry(telemetry::AnyMessage::Mixed(msg)))
+    }
+
+    /// Decodes `DATALINK_REPORT` of class `telemetry`.
+    #[inline]
+    fn decode_1_30(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let mut r = ::pprz_messages::wire::Reader::exact(payload, 11)?;
+        let msg = telemetry::DatalinkReport {
+            uplink_lost_time: r.scalar()?,
+            uplink_nb_msgs: r.scalar()?,
+            downlink_nb_msgs: r.scalar()?,
+            downlink_rate: r.scalar()?,
+            uplink_rate: r.scalar()?,
+            downlink_ovrn: r.scalar()?,
+        };
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Telemetry(telemetry::AnyMessage::DatalinkReport(msg)))
+    }
+
+    /// Decodes `DL_VALUE` of class `telemetry`.
+    #[inline]
+    fn decode_1_31(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let mut r = ::pprz_messages::wire::Reader::exact(payload, 5)?;
+        let msg = telemetry::DlValue {
+            index: r.scalar()?,
+            value: r.scalar()?,
+        };
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Telemetry(telemetry::AnyMessage::DlValue(msg)))
+    }
+
+    /// Decodes `SETTING` of class `datalink`.
+    #[inline]
+    fn decode_2_4(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let mut r = ::pprz_messages::wire::Reader::exact(payload, 6)?;
+        let msg = datalink::Setting {
+            index: r.scalar()?,
+            ac_id: r.scalar()?,
+            value: r.scalar()?,
+        };
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Datalink(datalink::AnyMessage::Setting(msg)))
+    }
+
+    /// Decodes `PING` of class `datalink`.
+    #[inline]
+    fn decode_2_8(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let r = ::pprz_messages::wire::Reader::exact(payload, 0)?;
+        let msg = datalink::Ping;
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Datalink(datalink::AnyMessage::Ping(msg)))
+    }
+
+    /// Decodes `GET_SETTING` of class `datalink`.
+    #[inline]
+    fn decode_2_16(payload: &'a [u8]) -> ::core::result::Result<Self, ::pprz_messages::DecodeError> {
+        let mut r = ::pprz_messages::wire::Reader::exact(payload, 2)?;
+        let msg = datalink::GetSetting {
+            index: r.scalar()?,
+            ac_id: r.scalar()?,
+        };
+        r.finish()?;
+        ::core::result::Result::Ok(Self::Datalink(datalink::AnyMessage::GetSetting(msg)))
     }
 
     /// Class id of the message.
