@@ -7,10 +7,11 @@
 //! compare-and-swap no lock of the send path masks interrupts for them.
 
 use core::sync::atomic::AtomicU32;
+use core::sync::atomic::Ordering;
 #[cfg(not(target_has_atomic = "32"))]
 use core::sync::atomic::Ordering::SeqCst;
 #[cfg(target_has_atomic = "32")]
-use core::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed};
+use core::sync::atomic::Ordering::{Acquire, Relaxed};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
@@ -28,11 +29,13 @@ pub(crate) fn add<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) {
     _lock.lock(|()| a.store(a.load(SeqCst).wrapping_add(v), SeqCst));
 }
 
-/// `a |= v`, returning the previous value; acquires and releases.
+/// `a |= v` with `order`, returning the previous value.
 #[inline]
-pub(crate) fn or<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u32 {
+pub(crate) fn or<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32, order: Ordering) -> u32 {
     #[cfg(target_has_atomic = "32")]
-    return a.fetch_or(v, AcqRel);
+    return a.fetch_or(v, order);
+    #[cfg(not(target_has_atomic = "32"))]
+    let _ = order;
     #[cfg(not(target_has_atomic = "32"))]
     _lock.lock(|()| {
         let old = a.load(SeqCst);
@@ -41,11 +44,13 @@ pub(crate) fn or<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u32
     })
 }
 
-/// `a &= v`, returning the previous value; acquires and releases.
+/// `a &= v` with `order`, returning the previous value.
 #[inline]
-pub(crate) fn and<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u32 {
+pub(crate) fn and<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32, order: Ordering) -> u32 {
     #[cfg(target_has_atomic = "32")]
-    return a.fetch_and(v, AcqRel);
+    return a.fetch_and(v, order);
+    #[cfg(not(target_has_atomic = "32"))]
+    let _ = order;
     #[cfg(not(target_has_atomic = "32"))]
     _lock.lock(|()| {
         let old = a.load(SeqCst);
@@ -54,16 +59,27 @@ pub(crate) fn and<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u3
     })
 }
 
-/// Replaces the value `v` of `a` with `f(v)` unless `f` returns `None`, atomically;
-/// returns the value `f` saw last, `Ok` if it was replaced. Acquires and releases.
+/// Replaces the value `v` of `a` with `f(v)` unless `f` returns `None`, atomically, with
+/// `order` (a failed update acquires if `order` does); returns the value `f` saw last,
+/// `Ok` if it was replaced.
 #[inline]
 pub(crate) fn update<M: RawMutex>(
     _lock: &Fallback<M>,
     a: &AtomicU32,
+    order: Ordering,
     f: impl FnMut(u32) -> Option<u32>,
 ) -> Result<u32, u32> {
     #[cfg(target_has_atomic = "32")]
-    return a.fetch_update(AcqRel, Acquire, f);
+    {
+        let failure = match order {
+            Ordering::Acquire | Ordering::AcqRel | Ordering::SeqCst => Acquire,
+            _ => Relaxed,
+        };
+        #[allow(deprecated)] // `try_update` on newer toolchains; the same operation
+        return a.fetch_update(order, failure, f);
+    }
+    #[cfg(not(target_has_atomic = "32"))]
+    let _ = order;
     #[cfg(not(target_has_atomic = "32"))]
     let mut f = f;
     #[cfg(not(target_has_atomic = "32"))]

@@ -55,7 +55,8 @@
 #![allow(unsafe_code)]
 
 use core::cell::{Cell, UnsafeCell};
-use core::sync::atomic::{AtomicU32, Ordering::Relaxed, Ordering::SeqCst, fence};
+use core::sync::atomic::Ordering::{Acquire, Relaxed, Release, SeqCst};
+use core::sync::atomic::{AtomicU32, fence};
 use core::task::{Context, Waker};
 
 use embassy_sync::blocking_mutex::Mutex;
@@ -287,7 +288,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let mut best: Option<Seen> = None;
         let ready = self.ready.get(band)?;
         for (word, ready) in ready.iter().enumerate().take(Self::WORDS) {
-            let mut bits = ready.load(core::sync::atomic::Ordering::Acquire);
+            let mut bits = ready.load(Acquire);
             while bits != 0 {
                 let slot = 32 * word + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
@@ -316,7 +317,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let Some(ready) = self.ready.get(band).and_then(|r| r.get(word)) else {
             return false;
         };
-        if atomic::and(&self.lock, ready, !bit) & bit == 0 {
+        if atomic::and(&self.lock, ready, !bit, Acquire) & bit == 0 {
             return false;
         }
         // Sequence numbers are unique among the frames of a queue: a slot that holds the
@@ -337,7 +338,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     fn publish(&self, slot: usize, band: usize) {
         let (word, bit) = bit(slot);
         if let Some(ready) = self.ready.get(band).and_then(|r| r.get(word)) {
-            atomic::or(&self.lock, ready, bit);
+            atomic::or(&self.lock, ready, bit, Release);
         }
         // Pairs with the fence in `sleep`: either the writer sees the frame, or this
         // sees it sleeping.
@@ -384,10 +385,10 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let frame = unsafe { self.frames.get(slot)?.replace(None) };
         let (word, bit) = bit(slot);
         if let Some(used) = self.used.get(word) {
-            atomic::and(&self.lock, used, !bit);
+            atomic::and(&self.lock, used, !bit, Release);
         }
         // After the slot is free: a sender holding a unit of `len` finds a free slot.
-        let _ = atomic::update(&self.lock, &self.len, |n| n.checked_sub(1));
+        let _ = atomic::update(&self.lock, &self.len, Release, |n| n.checked_sub(1));
         frame
     }
 
@@ -403,7 +404,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
                     continue;
                 }
                 let bit = free & free.wrapping_neg();
-                if atomic::or(&self.lock, used, bit) & bit == 0 {
+                if atomic::or(&self.lock, used, bit, Acquire) & bit == 0 {
                     return Some(32 * word + bit.trailing_zeros() as usize);
                 }
             }
@@ -459,11 +460,16 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         let depth = depth.clamp(1, Q) as u32;
         let mut victim = None;
         let slot = loop {
-            if atomic::update(&self.lock, &self.len, |n| (n < depth).then_some(n + 1)).is_ok() {
+            if atomic::update(&self.lock, &self.len, Acquire, |n| {
+                (n < depth).then_some(n + 1)
+            })
+            .is_ok()
+            {
                 match self.claim_free() {
                     Some(slot) => break slot,
                     None => {
-                        let _ = atomic::update(&self.lock, &self.len, |n| n.checked_sub(1));
+                        let _ =
+                            atomic::update(&self.lock, &self.len, Relaxed, |n| n.checked_sub(1));
                         self.counters
                             .dropped(&self.lock, DropReason::QueueFull, priority, relayed);
                         return Pushed::Dropped;

@@ -292,12 +292,10 @@ pub(crate) struct Counters {
 }
 
 /// Layout of one block of [`Counters`] (the device's totals, then the forwarded part):
-/// submitted, sent, the drop reasons in [`DropCounts`]' order, the two eviction causes,
-/// then per level submitted, sent, lost, superseded.
+/// the drop reasons in [`DropCounts`]' order, the two eviction causes, then per level
+/// submitted, sent, lost, superseded (the totals submitted and sent are the levels' sums).
 mod at {
-    pub const SUBMITTED: usize = 0;
-    pub const SENT: usize = 1;
-    pub const DROPPED: usize = 2;
+    pub const DROPPED: usize = 0;
     pub const EVICTED: usize = DROPPED + 7;
     pub const LEVELS: usize = EVICTED + 2;
     pub const BLOCK: usize = LEVELS + 3 * 4;
@@ -326,19 +324,22 @@ impl Counters {
         }
     }
 
-    /// Adds one to counter `what` of level `priority`'s, in the device's block and, for a
-    /// forwarded frame, in the relayed block.
+    /// Adds one to counter `what` of level `priority`'s and to counter `total` if any
+    /// (submitted and sent have none: their totals are the sums of the levels), in the
+    /// device's block and, for a forwarded frame, in the relayed block.
     #[inline]
     fn level<M: RawMutex>(
         &self,
         lock: &Fallback<M>,
-        total: usize,
+        total: Option<usize>,
         what: usize,
         priority: u8,
         relayed: bool,
     ) {
         let level = at::LEVELS + 4 * pprz_messages::priority::level(priority) + what;
-        self.add(lock, total, 1);
+        if let Some(total) = total {
+            self.add(lock, total, 1);
+        }
         self.add(lock, level, 1);
         if relayed {
             self.relayed(lock, total, level);
@@ -348,15 +349,17 @@ impl Counters {
     /// The forwarded frames' share, out of the common path (the aircraft's own messages).
     #[cold]
     #[inline(never)]
-    fn relayed<M: RawMutex>(&self, lock: &Fallback<M>, total: usize, level: usize) {
-        self.add(lock, at::RELAYED + total, 1);
+    fn relayed<M: RawMutex>(&self, lock: &Fallback<M>, total: Option<usize>, level: usize) {
+        if let Some(total) = total {
+            self.add(lock, at::RELAYED + total, 1);
+        }
         self.add(lock, at::RELAYED + level, 1);
     }
 
     /// A message of `priority` accepted for sending.
     #[inline]
     pub(crate) fn submitted<M: RawMutex>(&self, lock: &Fallback<M>, priority: u8, relayed: bool) {
-        self.level(lock, at::SUBMITTED, 0, priority, relayed);
+        self.level(lock, None, 0, priority, relayed);
     }
 
     /// A frame of `len` bytes written completely.
@@ -369,7 +372,7 @@ impl Counters {
         len: usize,
     ) {
         self.add(lock, at::BYTES, len as u32);
-        self.level(lock, at::SENT, 1, priority, relayed);
+        self.level(lock, None, 1, priority, relayed);
     }
 
     /// A message dropped for `reason` (nothing for [`DropReason::NoDevice`], which the
@@ -384,7 +387,7 @@ impl Counters {
         let Some(i) = DropCounts::index(reason) else {
             return;
         };
-        self.level(lock, at::DROPPED + i, 2, priority, relayed);
+        self.level(lock, Some(at::DROPPED + i), 2, priority, relayed);
     }
 
     /// A queued frame evicted because the queue (`queue_full`) or the arena was full.
@@ -396,12 +399,12 @@ impl Counters {
         relayed: bool,
     ) {
         let i = at::EVICTED + usize::from(!queue_full);
-        self.level(lock, i, 2, priority, relayed);
+        self.level(lock, Some(i), 2, priority, relayed);
     }
 
     /// A waiting state message of `priority` replaced by a newer one.
     pub(crate) fn superseded<M: RawMutex>(&self, lock: &Fallback<M>, priority: u8) {
-        self.level(lock, at::SUPERSEDED, 3, priority, false);
+        self.level(lock, Some(at::SUPERSEDED), 3, priority, false);
     }
 
     /// Raises the queue's high-water mark to `waiting` frames.
@@ -411,7 +414,7 @@ impl Counters {
             return;
         };
         if w.load(Relaxed) < waiting {
-            let _ = atomic::update(lock, w, |hw| (hw < waiting).then_some(waiting));
+            let _ = atomic::update(lock, w, Relaxed, |hw| (hw < waiting).then_some(waiting));
         }
     }
 
@@ -427,9 +430,12 @@ impl Counters {
                 lost: w(b + at::LEVELS + 4 * l + 2),
                 superseded: w(b + at::LEVELS + 4 * l + 3),
             };
+            let levels = [level(0), level(1), level(2)];
+            let sum =
+                |f: fn(&LevelStats) -> u32| levels.iter().fold(0u32, |n, l| n.wrapping_add(f(l)));
             RelayedStats {
-                submitted: w(b + at::SUBMITTED),
-                sent: w(b + at::SENT),
+                submitted: sum(|l| l.submitted),
+                sent: sum(|l| l.sent),
                 dropped: DropCounts {
                     too_large: d(0),
                     encode: d(1),
@@ -443,7 +449,7 @@ impl Counters {
                     queue_full: w(b + at::EVICTED),
                     arena_full: w(b + at::EVICTED + 1),
                 },
-                levels: [level(0), level(1), level(2)],
+                levels,
             }
         };
         let own = block(0);
