@@ -46,12 +46,15 @@
 //!
 //! # Which mutex
 //!
-//! Every lock of the link (its queue, settings, health and registry) is the link's mutex
-//! `M`; the arena has its own, which should be the same.
+//! Every lock of the link (settings, health, registry, and the arena's, which should be
+//! the same mutex) is the link's mutex `M`. The queue itself takes no lock on cores with
+//! compare-and-swap: its frames change hands with atomic bit operations.
 //!
 //! * [`LinkMutex`] (`CriticalSectionRawMutex`, the default): any task of any executor,
-//!   and interrupt handlers, may send. Each lock masks interrupts while it is held: a few
-//!   hundred instructions at most on the send path of a Cortex-M4 (`BENCHMARKS.md`).
+//!   and interrupt handlers, may send. Each lock masks interrupts while it is held: on
+//!   the send path of a Cortex-M4, the arena's allocation and release (about 30 to 45
+//!   instructions each, up to about 160 when a frame of a new size is carved out;
+//!   `BENCHMARKS.md`).
 //! * `ThreadModeRawMutex` (embassy-sync, Cortex-M): for a single-core firmware whose
 //!   senders all run in thread mode (tasks of a thread-mode executor). The link never
 //!   masks an interrupt, so it never delays an interrupt handler; a send from an
@@ -111,8 +114,8 @@ pub type LinkMutex = CriticalSectionRawMutex;
 /// One device with telemetry, datalink and services, for message set `S`; see the
 /// [module documentation](self).
 ///
-/// * `Q`: the most frames waiting for the device (when full, less important frames are
-///   evicted, or the new one dropped, and counted).
+/// * `Q`: the most frames waiting for the device, 1 to 64 (when full, less important
+///   frames are evicted, or the new one dropped, and counted).
 /// * `SETTINGS`: capacity of the settings table.
 /// * `SUBSCRIBERS`: capacity of the subscriber registry (the services need none of it).
 /// * `M`: the mutex of every lock of the link ([`LinkMutex`] by default: sends from any

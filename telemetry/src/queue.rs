@@ -18,7 +18,9 @@
 //! owned by one context at a time, and ownership moves with atomic bit operations:
 //!
 //! * `used`: a bit per slot holding a frame (being queued, waiting, or being moved);
-//! * `ready`: a bit per slot whose frame waits and may be claimed;
+//! * `ready`: a bit per slot whose frame waits and may be claimed, in one set per
+//!   priority band (the top two bits of the priority), so that a search for the most or
+//!   the least important frame reads one band's frames only;
 //! * `len`: the frames waiting or being queued, reserved against the depth limit.
 //!
 //! A sender reserves one unit of `len` (or, when the queue is full, claims the weakest
@@ -26,15 +28,15 @@
 //! priority and sequence number into the slot, and publishes it by setting its `ready`
 //! bit. Whoever clears a `ready` bit owns that frame: the writer taking the most important
 //! frame, a sender evicting the least important one or replacing a state message in its
-//! place, the arena making room. A claimer reads the slot's priority and sequence number
-//! before its claim and checks them after: if the slot changed hands in between, it
-//! gives it back and looks again. The counters are atomic words too
-//! ([`Counters`](crate::stats::Counters)). On cores with compare-and-swap no operation of
-//! the queue masks interrupts; each frame is moved in or out of its slot under the
-//! mutex `M` (a few instructions, without contention: the slot's owner is the only one
-//! to touch it), and the writer's waker is taken under it when the writer sleeps. Cores
-//! without compare-and-swap (ARMv6-M) do each bit operation under `M` instead, a few
-//! instructions each.
+//! place, the arena making room. A claimer reads the slot's sequence number before its
+//! claim and checks it after (sequence numbers are unique among a queue's frames): if the
+//! slot changed hands in between, it gives it back and looks again. The counters are
+//! atomic words too ([`Counters`]).
+//!
+//! On cores with compare-and-swap no operation of the queue masks interrupts or waits;
+//! the only lock is the writer's waker's, taken when the writer sleeps and by the send
+//! that wakes it. Cores without compare-and-swap (ARMv6-M, RV32IMC) do each bit operation
+//! as a load and a store under the mutex `M`: a few instructions each.
 //!
 //! Under concurrent senders the order is the order of publication: a frame is visible
 //! once its bit is set. A frame being replaced in place, or claimed and given back, is
@@ -47,9 +49,10 @@
 //! `poll_ready_to_send` is buggy.
 //!
 //! # Time Complexity
-//! Every operation reads the `ready` bits (one or two words) and the priority and
-//! sequence number of each waiting frame: O(n) for `n` frames waiting, at most `Q <= 64`.
-//! On a link that keeps up, `n` is zero or one.
+//! Taking a frame, finding the eviction candidate or a waiting state message reads the
+//! priority and sequence number of each waiting frame of one band: O(n) for `n` frames
+//! waiting in that band, at most `Q <= 64`. Queueing without eviction is O(1). On a link
+//! that keeps up, `n` is zero or one.
 
 // The frames' cells (`FrameCell`): each use is explained where it is.
 #![allow(unsafe_code)]

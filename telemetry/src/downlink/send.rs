@@ -74,8 +74,19 @@ impl<Msg: Message> EncodeFields for Msg {
     }
 }
 
-/// The downlink of an aircraft: `D` devices with queues of capacity `Q`, frames in a
-/// shared arena that lives for `'a`. See the [module documentation](crate::downlink).
+/// The downlink of an aircraft: `D` devices with queues of capacity `Q` (1 to 64: a
+/// larger `Q` does not compile), frames in a shared arena that lives for `'a`. See the
+/// [module documentation](crate::downlink).
+///
+/// ```compile_fail
+/// use pprz_telemetry::{Downlink, FrameArena, LinkMutex};
+/// static ARENA: FrameArena<LinkMutex, 1024> = FrameArena::new();
+/// static DOWNLINK: Downlink<'static, LinkMutex, 1, 65> = Downlink::new(&ARENA, 7, [
+///     pprz_telemetry::DeviceConfig::new(pprz_telemetry::pprz_transports::AnyTransport::PprzV2(
+///         pprz_telemetry::pprz_transports::PprzV2::new(),
+///     )),
+/// ]);
+/// ```
 pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     arena: &'a (dyn FrameAlloc + Sync),
     devices: [DeviceConfig; D],
