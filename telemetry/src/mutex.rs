@@ -2,8 +2,8 @@
 //! priority ceiling (feature `basepri`).
 //!
 //! [`LinkMutex`](crate::LinkMutex), a critical section, masks every interrupt while the
-//! link holds a lock: a motor or sensor interrupt waits up to a few hundred instructions
-//! behind a send. [`BasepriRawMutex`] raises the processor's `BASEPRI` to a ceiling
+//! link holds a lock: a motor or sensor interrupt waits behind a send's arena allocation
+//! or release, up to about 160 instructions. [`BasepriRawMutex`] raises the processor's `BASEPRI` to a ceiling
 //! instead (`msr BASEPRI_MAX`), the method RTIC uses: only interrupts at the ceiling's
 //! priority or below wait, those above it (numerically lower priority values) run at once,
 //! so the link never delays them. It is the third choice beside `LinkMutex` (senders
