@@ -1,7 +1,9 @@
 //! Downlink statistics per device: what was submitted, sent, dropped (by reason) and
 //! evicted, queue high-water mark, and what the ground's DATALINK_REPORT needs.
 //!
-//! Accounting invariant, at every snapshot:
+//! Accounting invariant, in every snapshot taken while no other context sends or writes
+//! on the device (the counters are read one by one, without a lock: a snapshot taken
+//! meanwhile may be off by the messages in transit):
 //!
 //! ```text
 //! submitted = sent + dropped.total() + evicted.total() + superseded + queued
