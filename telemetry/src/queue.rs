@@ -834,10 +834,20 @@ mod model {
         EvictForArena,
     }
 
-    fn op() -> impl Strategy<Value = Op> {
+    /// Pushes (priorities of every band, a few state messages, depths up to `max_depth`),
+    /// takes and arena evictions.
+    fn op(max_depth: usize) -> impl Strategy<Value = Op> {
+        ops(max_depth, 4)
+    }
+
+    /// As [`op`], with `pushes` pushes for 2 takes and 1 arena eviction, and depth
+    /// `max_depth` for half of them (so that a large queue fills up).
+    fn ops(max_depth: usize, pushes: u32) -> impl Strategy<Value = Op> {
+        let priority = prop_oneof![(0u8..5).prop_map(|p| p * 60), any::<u8>()];
+        let depth = prop_oneof![1usize..max_depth, Just(max_depth)];
         prop_oneof![
-            4 => (0u8..5, prop::option::weighted(0.3, 0u8..3), 1usize..10)
-                .prop_map(|(p, key, depth)| Op::Push { priority: p * 60, key, depth }),
+            pushes => (priority, prop::option::weighted(0.3, 0u8..3), depth)
+                .prop_map(|(priority, key, depth)| Op::Push { priority, key, depth }),
             2 => Just(Op::Take),
             1 => Just(Op::EvictForArena),
         ]
@@ -846,84 +856,116 @@ mod model {
     /// Model entry: priority, seq, key, the id written in the frame.
     type M = (u8, u32, Option<MessageKey>, u32);
 
+    /// Runs `ops` on a queue of `Q` slots and on the model, comparing every result.
+    fn check<const Q: usize>(ops: Vec<Op>) -> Result<(), TestCaseError> {
+        let arena: FrameArena<RawM, 4096> = FrameArena::new();
+        let queue: FrameQueue<'_, RawM, Q> = FrameQueue::new();
+        let mut model: Vec<M> = Vec::new();
+        let mut seq = 0u32;
+        for op in ops {
+            match op {
+                Op::Push {
+                    priority,
+                    key,
+                    depth,
+                } => {
+                    seq += 1;
+                    let key = key.map(|k| MessageKey {
+                        class: 1,
+                        msg_id: k,
+                    });
+                    let mut frame = arena.alloc(4).expect("room");
+                    frame.copy_from_slice(&seq.to_le_bytes());
+                    let pushed = queue.push(priority, seq, key, false, frame, depth);
+                    let depth = depth.clamp(1, Q);
+                    let expected = if let Some(old) = model
+                        .iter_mut()
+                        .find(|m| key.is_some() && m.2 == key && m.0 == priority)
+                    {
+                        old.3 = seq;
+                        Pushed::Superseded
+                    } else {
+                        let mut result = Pushed::Queued;
+                        let mut admitted = true;
+                        if model.len() >= depth {
+                            let lowest = model.last().map(|m| m.0);
+                            match lowest {
+                                Some(l) if l < priority => {
+                                    let at = model.iter().position(|m| m.0 == l).unwrap();
+                                    model.remove(at);
+                                    result = Pushed::QueuedEvicting;
+                                }
+                                _ => admitted = false,
+                            }
+                        }
+                        if admitted {
+                            let at = model
+                                .iter()
+                                .position(|m| m.0 < priority)
+                                .unwrap_or(model.len());
+                            model.insert(at, (priority, seq, key, seq));
+                            result
+                        } else {
+                            Pushed::Dropped
+                        }
+                    };
+                    prop_assert_eq!(pushed, expected);
+                }
+                Op::Take => {
+                    let frame = queue.try_receive(None);
+                    let expected = (!model.is_empty()).then(|| model.remove(0));
+                    prop_assert_eq!(frame.is_some(), expected.is_some());
+                    if let (Some(frame), Some(m)) = (frame, expected) {
+                        let mut id = [0u8; 4];
+                        id.copy_from_slice(&frame[..4]);
+                        prop_assert_eq!(u32::from_le_bytes(id), m.3);
+                        queue.complete(frame, Ok(()), false);
+                    }
+                }
+                Op::EvictForArena => {
+                    let candidate = queue.candidate();
+                    let expected = model.last().map(|l| {
+                        let at = model.iter().position(|m| m.0 == l.0).unwrap();
+                        (
+                            at,
+                            Candidate {
+                                priority: model[at].0,
+                                seq: model[at].1,
+                            },
+                        )
+                    });
+                    prop_assert_eq!(candidate, expected.map(|e| e.1));
+                    if let Some((at, c)) = expected {
+                        prop_assert!(queue.evict_for_arena(c));
+                        model.remove(at);
+                    }
+                }
+            }
+            let stats = queue.stats();
+            prop_assert_eq!(usize::from(stats.waiting), model.len());
+            prop_assert!(stats.is_balanced());
+            prop_assert_eq!(arena.stats().live, model.len());
+        }
+        Ok(())
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, ..ProptestConfig::default() })]
 
         #[test]
-        fn the_queue_behaves_as_the_sorted_model(ops in prop::collection::vec(op(), 1..300)) {
-            const Q: usize = 8;
-            let arena: FrameArena<RawM, 2048> = FrameArena::new();
-            let queue: FrameQueue<'_, RawM, Q> = FrameQueue::new();
-            let mut model: Vec<M> = Vec::new();
-            let mut seq = 0u32;
-            for op in ops {
-                match op {
-                    Op::Push { priority, key, depth } => {
-                        seq += 1;
-                        let key = key.map(|k| MessageKey { class: 1, msg_id: k });
-                        let mut frame = arena.alloc(4).expect("room");
-                        frame.copy_from_slice(&seq.to_le_bytes());
-                        let pushed = queue.push(priority, seq, key, false, frame, depth);
-                        let depth = depth.clamp(1, Q);
-                        let expected = if let Some(old) = model
-                            .iter_mut()
-                            .find(|m| key.is_some() && m.2 == key && m.0 == priority)
-                        {
-                            old.3 = seq;
-                            Pushed::Superseded
-                        } else {
-                            let mut result = Pushed::Queued;
-                            let mut admitted = true;
-                            if model.len() >= depth {
-                                let lowest = model.last().map(|m| m.0);
-                                match lowest {
-                                    Some(l) if l < priority => {
-                                        let at = model.iter().position(|m| m.0 == l).unwrap();
-                                        model.remove(at);
-                                        result = Pushed::QueuedEvicting;
-                                    }
-                                    _ => admitted = false,
-                                }
-                            }
-                            if admitted {
-                                let at = model.iter().position(|m| m.0 < priority).unwrap_or(model.len());
-                                model.insert(at, (priority, seq, key, seq));
-                                result
-                            } else {
-                                Pushed::Dropped
-                            }
-                        };
-                        prop_assert_eq!(pushed, expected);
-                    }
-                    Op::Take => {
-                        let frame = queue.try_receive(None);
-                        let expected = (!model.is_empty()).then(|| model.remove(0));
-                        prop_assert_eq!(frame.is_some(), expected.is_some());
-                        if let (Some(frame), Some(m)) = (frame, expected) {
-                            let mut id = [0u8; 4];
-                            id.copy_from_slice(&frame[..4]);
-                            prop_assert_eq!(u32::from_le_bytes(id), m.3);
-                            queue.complete(frame, Ok(()), false);
-                        }
-                    }
-                    Op::EvictForArena => {
-                        let candidate = queue.candidate();
-                        let expected = model.last().map(|l| {
-                            let at = model.iter().position(|m| m.0 == l.0).unwrap();
-                            (at, Candidate { priority: model[at].0, seq: model[at].1 })
-                        });
-                        prop_assert_eq!(candidate, expected.map(|e| e.1));
-                        if let Some((at, c)) = expected {
-                            prop_assert!(queue.evict_for_arena(c));
-                            model.remove(at);
-                        }
-                    }
-                }
-                let stats = queue.stats();
-                prop_assert_eq!(usize::from(stats.waiting), model.len());
-                prop_assert!(stats.is_balanced());
-                prop_assert_eq!(arena.stats().live, model.len());
-            }
+        fn the_queue_behaves_as_the_sorted_model(ops in prop::collection::vec(op(10), 1..300)) {
+            check::<8>(ops)?;
+        }
+
+        #[test]
+        fn a_queue_of_one_slot_too(ops in prop::collection::vec(op(3), 1..100)) {
+            check::<1>(ops)?;
+        }
+
+        /// Two words of bits: push-heavy, so that the slots past the 32nd are used.
+        #[test]
+        fn a_queue_of_64_slots_too(ops in prop::collection::vec(ops(64, 12), 1..400)) {
+            check::<64>(ops)?;
         }
     }
 }
