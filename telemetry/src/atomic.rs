@@ -26,7 +26,7 @@ pub(crate) fn add<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) {
     #[cfg(target_has_atomic = "32")]
     a.fetch_add(v, Relaxed);
     #[cfg(not(target_has_atomic = "32"))]
-    _lock.lock(|()| a.store(a.load(SeqCst).wrapping_add(v), SeqCst));
+    let _ = locked(_lock, a, |old| Some(old.wrapping_add(v)));
 }
 
 /// `a |= v` with `order`, returning the previous value.
@@ -37,11 +37,7 @@ pub(crate) fn or<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32, order:
     #[cfg(not(target_has_atomic = "32"))]
     let _ = order;
     #[cfg(not(target_has_atomic = "32"))]
-    _lock.lock(|()| {
-        let old = a.load(SeqCst);
-        a.store(old | v, SeqCst);
-        old
-    })
+    locked(_lock, a, |old| Some(old | v)).unwrap_or_else(|old| old)
 }
 
 /// `a &= v` with `order`, returning the previous value.
@@ -52,11 +48,7 @@ pub(crate) fn and<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32, order
     #[cfg(not(target_has_atomic = "32"))]
     let _ = order;
     #[cfg(not(target_has_atomic = "32"))]
-    _lock.lock(|()| {
-        let old = a.load(SeqCst);
-        a.store(old & v, SeqCst);
-        old
-    })
+    locked(_lock, a, |old| Some(old & v)).unwrap_or_else(|old| old)
 }
 
 /// Replaces the value `v` of `a` with `f(v)` unless `f` returns `None`, atomically, with
@@ -81,9 +73,18 @@ pub(crate) fn update<M: RawMutex>(
     #[cfg(not(target_has_atomic = "32"))]
     let _ = order;
     #[cfg(not(target_has_atomic = "32"))]
-    let mut f = f;
-    #[cfg(not(target_has_atomic = "32"))]
-    _lock.lock(|()| {
+    locked(_lock, a, f)
+}
+
+/// The fallback of every operation above: a load and, unless `f` returns `None`, a store
+/// of `f`'s value, under the lock; the value seen, `Ok` if it was replaced.
+#[cfg(not(target_has_atomic = "32"))]
+fn locked<M: RawMutex>(
+    lock: &Fallback<M>,
+    a: &AtomicU32,
+    mut f: impl FnMut(u32) -> Option<u32>,
+) -> Result<u32, u32> {
+    lock.lock(|()| {
         let old = a.load(SeqCst);
         match f(old) {
             Some(new) => {

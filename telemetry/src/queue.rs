@@ -523,6 +523,14 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
         }
     }
 
+    /// The oldest waiting instance of the state message `meta` ([`pack`]ed: its priority
+    /// and key).
+    fn instance_of(&self, meta: u32) -> Option<Seen> {
+        self.pick(band(meta as u8), |s, best| {
+            s.meta & KEY == meta & KEY && best.is_none_or(|b| older(s.seq, b.seq))
+        })
+    }
+
     /// Puts `frame` in the place of the oldest waiting frame with the same [`pack`]ed key
     /// and returns that one's; `Err(frame)` if none waits.
     fn replace(
@@ -532,10 +540,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     ) -> Result<Option<FrameBuf<'a>>, FrameBuf<'a>> {
         let len = frame.len() as u32;
         loop {
-            let seen = self.pick(band(meta as u8), |s, best| {
-                s.meta & KEY == meta & KEY && best.is_none_or(|b| older(s.seq, b.seq))
-            });
-            let Some(seen) = seen else {
+            let Some(seen) = self.instance_of(meta) else {
                 return Err(frame);
             };
             if self.claim(&seen) {
@@ -677,10 +682,7 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
     /// counting it (tests: the queue itself only supersedes in place).
     #[cfg(test)]
     fn remove_latest(&self, priority: u8, key: MessageKey) -> Option<FrameBuf<'a>> {
-        let meta = pack(priority, Some(key), false);
-        let seen = self.pick(band(priority), |s, best| {
-            s.meta & KEY == meta & KEY && best.is_none_or(|b| older(s.seq, b.seq))
-        })?;
+        let seen = self.instance_of(pack(priority, Some(key), false))?;
         if self.claim(&seen) {
             self.vacate(seen.slot)
         } else {
