@@ -20,13 +20,14 @@ use embassy_sync::blocking_mutex::raw::RawMutex;
 /// (never taken on the others: a zero-sized field for the usual mutexes).
 pub(crate) type Fallback<M> = Mutex<M, ()>;
 
-/// Adds `v` (wrapping) to a counter; no ordering with other memory.
+/// Adds `v` (wrapping) to a counter, returning the previous value; no ordering with other
+/// memory.
 #[inline]
-pub(crate) fn add<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) {
+pub(crate) fn add<M: RawMutex>(_lock: &Fallback<M>, a: &AtomicU32, v: u32) -> u32 {
     #[cfg(target_has_atomic = "32")]
-    a.fetch_add(v, Relaxed);
+    return a.fetch_add(v, Relaxed);
     #[cfg(not(target_has_atomic = "32"))]
-    let _ = locked(_lock, a, |old| Some(old.wrapping_add(v)));
+    locked(_lock, a, |old| Some(old.wrapping_add(v))).unwrap_or_else(|old| old)
 }
 
 /// `a |= v` with `order`, returning the previous value.

@@ -66,11 +66,10 @@ fn check_stats<const N: usize>(stats: ArenaStats, live: &[(FrameBuf<'_>, u32)]) 
     let owned: usize = live.iter().map(|(f, _)| f.capacity()).sum();
     assert_eq!(stats.used, Arena::<N>::RESERVED + owned);
     assert!(stats.high_water >= stats.used && stats.high_water <= N);
-    // Free blocks are coalesced: only live frames and cached blocks separate them.
-    assert!(stats.cached <= 16);
+    // Free units need no merging: only live frames separate free runs.
     assert!(
-        stats.free_blocks <= live.len() + stats.cached + 1,
-        "free blocks are coalesced"
+        stats.free_blocks <= live.len() + 1,
+        "free runs are separated by frames"
     );
 }
 
@@ -105,16 +104,13 @@ proptest! {
                     }
                     Err(AllocError::Full { len: l }) => {
                         prop_assert_eq!(l, len);
-                        prop_assert_eq!(arena.stats().cached, 0);
-                        // A failure first returns the cached blocks. Free blocks are never
-                        // adjacent, so there are then at most `live + 1` of them and the
-                        // largest holds at least `free / (live + 1)` units. A request of `s` units succeeds when some free block has
-                        // `s + s / 16` units (its size class rounded up), so a failure
-                        // means every free block is smaller.
+                        // There are at most `live + 1` free runs, so the longest holds at
+                        // least `free / (live + 1)` units; a failure means it is shorter
+                        // than the request's `s` units.
                         let free = (N - arena.stats().used) / GRANULARITY;
                         let s = units(len);
                         prop_assert!(
-                            free <= (live.len() + 1) * (s + s / 16 - 1),
+                            free <= (live.len() + 1) * (s - 1),
                             "failed to allocate {} units with {} free units and {} frames",
                             s, free, live.len()
                         );
@@ -145,11 +141,10 @@ proptest! {
             prop_assert_eq!(stats.failures, failures);
         }
         drop(live);
-        // Everything returned: one free block besides the cached ones, and the largest
-        // frame fits again (the cached blocks merge back into it).
+        // Everything returned: one free run, and the largest frame fits again.
         let stats = arena.stats();
         prop_assert_eq!((stats.used, stats.live), (initial.used, 0));
-        prop_assert!(stats.free_blocks <= stats.cached + 1);
+        prop_assert_eq!(stats.free_blocks, 1);
         prop_assert_eq!(stats.allocs, stats.frees);
         prop_assert!(arena.alloc(Arena::<N>::MAX_ALLOC).is_ok());
     }
@@ -175,8 +170,8 @@ fn errors_and_edges() {
     assert_eq!(arena.stats().failures, 3);
     drop((empty, rest));
     let stats = arena.stats();
-    // Released while the arena was full: nothing was cached, all merged into one block.
-    assert_eq!((stats.cached, stats.free_blocks), (0, 1));
+    // All released: one free run.
+    assert_eq!(stats.free_blocks, 1);
     assert_eq!(
         (stats.used, stats.high_water),
         (Arena::<1024>::RESERVED, 1024)
@@ -193,21 +188,19 @@ fn errors_and_edges() {
         format!("{frame:?}"),
         "FrameBuf { offset: 0, len: 5, capacity: 24 }"
     );
-    // Released while the arena is almost empty, a frame's block is cached whole and
-    // serves the next frame of its size in units.
+    // Each frame goes where the last one ended, even after a release before it.
     let one = arena.alloc(3).unwrap();
     assert_eq!(
         format!("{one:?}"),
         "FrameBuf { offset: 24, len: 3, capacity: 8 }"
     );
     drop(one);
-    assert_eq!((arena.stats().cached, arena.stats().free_blocks), (1, 1));
+    assert_eq!(arena.stats().free_blocks, 1);
     let two = arena.alloc(8).unwrap();
     assert_eq!(
         format!("{two:?}"),
-        "FrameBuf { offset: 24, len: 8, capacity: 8 }"
+        "FrameBuf { offset: 32, len: 8, capacity: 8 }"
     );
-    assert_eq!(arena.stats().cached, 0);
     assert_eq!(
         AllocError::Full { len: 9 }.to_string(),
         "frame arena full: no free block of 9 bytes"
@@ -215,7 +208,7 @@ fn errors_and_edges() {
     let _: &dyn core::error::Error = &AllocError::Full { len: 9 };
 }
 
-/// A freed block merges with both neighbours, whatever the order of release.
+/// A released frame joins the free units on both sides, whatever the order of release.
 #[test]
 fn coalescing() {
     let arena = Arena::<2048>::new();
@@ -300,8 +293,8 @@ fn frames_across_threads() {
     let stats = ARENA.stats();
     assert_eq!((stats.live, stats.used), (0, Arena::<N>::RESERVED));
     assert_eq!(stats.allocs, stats.frees);
-    assert!(stats.free_blocks <= stats.cached + 1);
-    // The largest frame fits again (cached blocks merge back when it needs them).
+    assert_eq!(stats.free_blocks, 1);
+    // The largest frame fits again.
     assert!(ARENA.alloc(Arena::<N>::MAX_ALLOC).is_ok());
 }
 
