@@ -437,30 +437,41 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
         }
     }
 
-    /// Where the first run of `units` free units lies (first fit): its first unit, or
-    /// `None`.
+    /// Where the first run of `units` free units lies, looking from the word where the
+    /// last allocation ended round to it again (next fit): its first unit, or `None`.
     fn search(&self, units: usize) -> Option<usize> {
-        // Free units up to the end of the previous word, contiguous with this one.
+        let from = (self.next.load(Relaxed) as usize / WORD_UNITS).min(Self::WORDS - 1);
+        // Free units up to the end of the previous word read, contiguous with this one.
         let mut run = 0;
-        for i in 0..Self::WORDS {
+        let mut i = from;
+        // Once round, then on while a run that began before `from` goes on (at most 4
+        // more words: a run of 128 units is long enough for any frame).
+        for k in 0.. {
+            if k > 0 {
+                i = if i + 1 == Self::WORDS { 0 } else { i + 1 };
+            }
+            if i == 0 {
+                run = 0; // the storage's end does not continue at its start
+            }
+            if k >= Self::WORDS && run == 0 {
+                break;
+            }
             let w = self.taken(i);
             // The run so far, continued by this word's free low units.
             if run + w.trailing_zeros() as usize >= units {
                 return Some(i * WORD_UNITS - run);
             }
             if units <= WORD_UNITS {
-                // Bit `p` of `fits` stays set iff units `p .. p + units` are all free:
-                // and-ing the free bits with themselves shifted right by 1, 2, 4, ...
-                // (doubling, then the remainder) until `units` bits are covered.
-                let mut fits = !w;
-                let mut covered = 1;
-                while covered < units && fits != 0 {
-                    let shift = covered.min(units - covered);
-                    fits &= fits >> shift;
-                    covered += shift;
-                }
-                if fits != 0 {
-                    return Some(i * WORD_UNITS + fits.trailing_zeros() as usize);
+                // Each run of free units inside the word, lowest first (a few per word).
+                let mut free = !w;
+                while free != 0 {
+                    let first = free.trailing_zeros();
+                    let len = (!(free >> first)).trailing_zeros() as usize;
+                    if len >= units {
+                        return Some(i * WORD_UNITS + first as usize);
+                    }
+                    // Adding the run's lowest bit carries through the run, clearing it.
+                    free &= free.wrapping_add(1 << first);
                 }
             }
             run = if w == 0 {
@@ -894,16 +905,28 @@ mod tests {
         arena.word(7).store(0, Relaxed);
         assert_eq!(arena.search(28), Some(224));
         assert_eq!(arena.search(29), None);
-        // The first fit, not the last.
+        // The first fit from the word where the last allocation ended, round to it.
         arena.word(0).store(0xFFFF_00FF, Relaxed);
         assert_eq!(arena.search(8), Some(8));
         assert_eq!(arena.search(9), Some(224));
+        arena.next.store(230, Relaxed);
+        assert_eq!(arena.search(8), Some(224));
+        assert_eq!(arena.search(29), None);
+        arena.word(7).store(u32::MAX, Relaxed);
+        assert_eq!(arena.search(8), Some(8), "round to the start");
+        // A run that begins before the starting word and ends after it.
+        arena.word(5).store(0x0000_FFFF, Relaxed); // units 176..192 free
+        arena.word(6).store(0xFFFF_0000, Relaxed); // units 192..208 free
+        arena.next.store(6 * 32, Relaxed);
+        assert_eq!(arena.search(20), Some(176));
+        arena.next.store(5 * 32, Relaxed);
+        assert_eq!(arena.search(32), Some(176));
     }
 
     /// An allocation goes where the last one ended if it fits there, else to the first
-    /// run that fits.
+    /// run that fits from there on, round to the start.
     #[test]
-    fn next_where_the_last_ended_else_first_fit() {
+    fn next_fit() {
         let arena: Arena<2048> = FrameArena::new();
         let offset = |f: &FrameBuf<'_>| f.offset() / GRANULARITY;
         let a = arena.alloc(24).unwrap();
@@ -922,7 +945,11 @@ mod tests {
         assert_eq!((offset(&big), offset(&last)), (7, 135));
         drop(c);
         let d = arena.alloc(24).unwrap();
-        assert_eq!(offset(&d), 0, "the first run of 3 free units");
+        assert_eq!(
+            offset(&d),
+            0,
+            "the first run of 3 free units, round to the start"
+        );
         assert_eq!(arena.alloc(32).unwrap_err(), AllocError::Full { len: 32 });
         drop((b, d, big, last));
     }
