@@ -59,9 +59,13 @@ fn the_arena_workload_holds_its_fill_level() {
         let summary = arena::churn(&mut state);
         assert_eq!(summary.percent, percent);
         let target = percent as f64 / 100.0;
-        // Within one largest frame (256 of 16384 bytes) of the target, on average.
+        // Within one largest frame (256 of 16384 bytes) of the target, on average; at
+        // 90 % allocations fail (a failure releases instead), and the fill settles near
+        // the level at which they start to (87 % on average for this arena and these
+        // sizes, `tests/arena.rs` in pprz-telemetry).
+        let tolerance = if percent < 90 { 0.02 } else { 0.05 };
         assert!(
-            (summary.mean_fill - target).abs() < 0.02,
+            (summary.mean_fill - target).abs() < tolerance,
             "{percent} %: mean fill {:.3}",
             summary.mean_fill
         );
