@@ -379,13 +379,16 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
     ///
     /// Reads every bitmap word once (to count the free runs); takes no lock.
     pub fn stats(&self) -> ArenaStats {
-        let allocs = self.allocs.load(Relaxed);
+        // `frees` first: a frame's release is counted after its allocation, so `allocs`
+        // read later is not behind (and a difference that is still negative, across
+        // cores, reads as none).
         let frees = self.frees.load(Relaxed);
+        let allocs = self.allocs.load(Relaxed);
         let units = |v: &AtomicU32| Self::RESERVED + v.load(Relaxed) as usize * GRANULARITY;
         ArenaStats {
             capacity: N,
             used: units(&self.used),
-            live: allocs.wrapping_sub(frees) as usize,
+            live: (allocs.wrapping_sub(frees) as i32).max(0) as usize,
             high_water: units(&self.high_water),
             free_blocks: self.free_runs(),
             allocs,
