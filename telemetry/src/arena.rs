@@ -31,11 +31,12 @@
 //! whether a frame holds it. The bits are packed 32 to a word, in `AtomicU32`s at the end of
 //! the storage ([`FrameArena::RESERVED`], 1/65 of `N`, is the only fixed overhead).
 //!
-//! * **Allocation** looks for the first run of free units long enough for the frame,
-//!   starting at the word where the previous allocation ended (*next fit*: a telemetry
-//!   stream allocates and releases frames in roughly the order it sends them, so the space
-//!   after the last frame is usually free), and claims the run with one compare-and-swap per
-//!   word it spans (one for most frames: a word covers 256 bytes).
+//! * **Allocation** tries the units right after the previous allocation first (a telemetry
+//!   stream allocates and releases frames in roughly the order it sends them, so they are
+//!   usually free). Otherwise it looks for the first run of free units long enough for
+//!   the frame, from the word where the previous allocation ended round to it again (*next
+//!   fit*), reading each word's free runs with bit scans. It claims the run with one
+//!   compare-and-swap per word it spans (one for most frames: a word covers 256 bytes).
 //! * **Release** clears the frame's bits, one atomic AND per word. Free runs need no
 //!   merging: neighbouring free units are simply neighbouring zero bits.
 //! * **No per-frame header.** A live frame's run is described by its [`FrameBuf`] (start
@@ -53,9 +54,9 @@
 //!
 //! | `N`    | used, mean (worst round) | payload, mean |
 //! |--------|--------------------------|---------------|
-//! | 4 KiB  | FILL4                    | PAY4          |
-//! | 16 KiB | FILL16                   | PAY16         |
-//! | 64 KiB | FILL64                   | PAY64         |
+//! | 4 KiB  | 83.3 % (63.3 %)          | 78.3 %        |
+//! | 16 KiB | 87.4 % (77.8 %)          | 82.1 %        |
+//! | 64 KiB | 90.9 % (87.4 %)          | 85.7 %        |
 //!
 //! Smaller arenas fill less at the first failure mostly because a 255-byte request is a
 //! larger share of them.
@@ -80,17 +81,19 @@
 //! # Time Complexity
 //!
 //! Releasing a frame is one atomic AND per word its run spans (at most 5, for the largest
-//! frame) and two counter updates. An allocation examines each bitmap word at most once
-//! per attempt (`N / 260` words: 16 for 4 KiB), with a few shifts per word, and claims its
-//! run. In steady state it finds room in the first word it reads. An attempt is repeated
+//! frame) and two counter updates. In steady state an allocation finds the units after the
+//! previous frame free: one load and one compare-and-swap, and three counter updates.
+//! Otherwise it examines each bitmap word at most once per attempt (`N / 260` words: 16
+//! for 4 KiB; up to four more for a run that began before its first word), with a few bit
+//! scans per word, and claims its run. An attempt is repeated
 //! only when another context changed the bitmap meanwhile: it claimed some of the same
 //! units first, or released frames in words already read (then the failure might not be
 //! genuine, so the scan runs again).
 //!
 //! # Concurrency and `unsafe`
 //!
-//! Nothing masks interrupts on cores with compare-and-swap (every Cortex-M3 and above,
-//! RP2040 excepted, x86, RISC-V with the A extension): the bitmap and the counters are
+//! Nothing masks interrupts on cores with compare-and-swap (Cortex-M3 and above, x86,
+//! RISC-V with the A extension): the bitmap and the counters are
 //! atomic words, changed with read-modify-write instructions. On cores without them
 //! (ARMv6-M, RV32IMC) each read-modify-write takes the arena's mutex `M` for a few
 //! instructions instead (see [`FrameArena`]).
