@@ -523,8 +523,8 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
 
     /// Finds and claims a run of `units` free units: where the last allocation ended if
     /// it is free there (a telemetry stream releases frames in about the order it
-    /// allocated them), else the first that fits. `None` if none fits in a scan during
-    /// which no bits were cleared.
+    /// allocated them), else the first that fits from that word on, round to it again.
+    /// `None` if none fits in a scan during which no bits were cleared.
     fn take(&self, units: usize) -> Option<usize> {
         let hint = self.next.load(Relaxed) as usize;
         let (i, bit) = (hint / WORD_UNITS, hint % WORD_UNITS);
