@@ -79,6 +79,7 @@ pub(crate) struct Outstanding {
 }
 
 impl Outstanding {
+    #[cfg_attr(not(feature = "xbee"), allow(dead_code))]
     pub(crate) const fn new() -> Self {
         Self {
             frames: heapless::Vec::new(),

@@ -423,50 +423,58 @@ impl Counters {
     /// The counters as [`DeviceStats`], with `waiting` frames in the queue and, if
     /// `in_flight`, one being written.
     pub(crate) fn snapshot(&self, waiting: u16, in_flight: bool) -> DeviceStats {
-        let w = |i: usize| self.words.get(i).map_or(0, |w| w.load(Relaxed));
-        let block = |b: usize| {
-            let d = |r: usize| w(b + at::DROPPED + r);
-            let level = |l: usize| LevelStats {
-                submitted: w(b + at::LEVELS + 4 * l),
-                sent: w(b + at::LEVELS + 4 * l + 1),
-                lost: w(b + at::LEVELS + 4 * l + 2),
-                superseded: w(b + at::LEVELS + 4 * l + 3),
-            };
-            let levels = [level(0), level(1), level(2)];
-            let sum =
-                |f: fn(&LevelStats) -> u32| levels.iter().fold(0u32, |n, l| n.wrapping_add(f(l)));
-            RelayedStats {
-                submitted: sum(|l| l.submitted),
-                sent: sum(|l| l.sent),
-                dropped: DropCounts {
-                    too_large: d(0),
-                    encode: d(1),
-                    queue_full: d(2),
-                    arena_full: d(3),
-                    write_error: d(4),
-                    rate_limited: d(5),
-                    refused: d(6),
-                },
-                evicted: EvictCounts {
-                    queue_full: w(b + at::EVICTED),
-                    arena_full: w(b + at::EVICTED + 1),
-                },
-                levels,
-            }
-        };
-        let own = block(0);
+        let own = self.block(0);
         DeviceStats {
             submitted: own.submitted,
             sent: own.sent,
-            bytes_sent: w(at::BYTES),
+            bytes_sent: self.word(at::BYTES),
             dropped: own.dropped,
             evicted: own.evicted,
-            superseded: w(at::SUPERSEDED),
+            superseded: self.word(at::SUPERSEDED),
             queued: waiting.saturating_add(u16::from(in_flight)),
             waiting,
-            queue_high_water: w(at::HIGH_WATER) as u16,
+            queue_high_water: self.word(at::HIGH_WATER) as u16,
             levels: own.levels,
-            relayed: block(at::RELAYED),
+            relayed: self.block(at::RELAYED),
+        }
+    }
+
+    /// Counter `i`.
+    fn word(&self, i: usize) -> u32 {
+        self.words.get(i).map_or(0, |w| w.load(Relaxed))
+    }
+
+    /// The block of counters at `b` (the device's, or the forwarded frames'). Out of line:
+    /// a snapshot reads two blocks, and one copy of this code is half the flash.
+    #[inline(never)]
+    fn block(&self, b: usize) -> RelayedStats {
+        let w = |i: usize| self.word(b + i);
+        let level = |l: usize| LevelStats {
+            submitted: w(at::LEVELS + 4 * l),
+            sent: w(at::LEVELS + 4 * l + 1),
+            lost: w(at::LEVELS + 4 * l + 2),
+            superseded: w(at::LEVELS + 4 * l + 3),
+        };
+        let levels = [level(0), level(1), level(2)];
+        let sum = |f: fn(&LevelStats) -> u32| levels.iter().fold(0u32, |n, l| n.wrapping_add(f(l)));
+        let d = |r: usize| w(at::DROPPED + r);
+        RelayedStats {
+            submitted: sum(|l| l.submitted),
+            sent: sum(|l| l.sent),
+            dropped: DropCounts {
+                too_large: d(0),
+                encode: d(1),
+                queue_full: d(2),
+                arena_full: d(3),
+                write_error: d(4),
+                rate_limited: d(5),
+                refused: d(6),
+            },
+            evicted: EvictCounts {
+                queue_full: w(at::EVICTED),
+                arena_full: w(at::EVICTED + 1),
+            },
+            levels,
         }
     }
 }

@@ -23,9 +23,13 @@
 //! }
 //! ```
 
-use crate::pprz::{PprzV1, PprzV2};
+#[cfg(feature = "v1")]
+use crate::pprz::PprzV1;
+use crate::pprz::PprzV2;
+#[cfg(feature = "pprzlog")]
 use crate::pprzlog::PprzLog;
 use crate::transport::{Control, EncodeError, Encoder, Frame, Framing, RxError, TxMeta};
+#[cfg(feature = "xbee")]
 use crate::xbee::{XBee24, XBee868};
 
 /// One of the transports of this crate, chosen at run time.
@@ -33,32 +37,41 @@ use crate::xbee::{XBee24, XBee868};
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum AnyTransport {
-    /// PPRZ protocol v1.
+    /// PPRZ protocol v1 (feature `v1`).
+    #[cfg(feature = "v1")]
     PprzV1(PprzV1),
-    /// PPRZ protocol v2.
+    /// PPRZ protocol v2 (always there).
     PprzV2(PprzV2),
-    /// XBee 802.15.4 API.
+    /// XBee 802.15.4 API (feature `xbee`).
+    #[cfg(feature = "xbee")]
     XBee24(XBee24),
-    /// XBee 868 API.
+    /// XBee 868 API (feature `xbee`).
+    #[cfg(feature = "xbee")]
     XBee868(XBee868),
-    /// PPRZLOG records.
+    /// PPRZLOG records (feature `pprzlog`).
+    #[cfg(feature = "pprzlog")]
     PprzLog(PprzLog),
 }
 
 macro_rules! dispatch {
     ($self:ident, $t:ident => $e:expr) => {
         match $self {
+            #[cfg(feature = "v1")]
             AnyTransport::PprzV1($t) => $e,
             AnyTransport::PprzV2($t) => $e,
+            #[cfg(feature = "xbee")]
             AnyTransport::XBee24($t) => $e,
+            #[cfg(feature = "xbee")]
             AnyTransport::XBee868($t) => $e,
+            #[cfg(feature = "pprzlog")]
             AnyTransport::PprzLog($t) => $e,
         }
     };
 }
 
 macro_rules! impl_from {
-    ($($t:ident),*) => {$(
+    ($($feature:literal $t:ident),*) => {$(
+        #[cfg(feature = $feature)]
         impl From<$t> for AnyTransport {
             fn from(t: $t) -> Self {
                 Self::$t(t)
@@ -66,7 +79,13 @@ macro_rules! impl_from {
         }
     )*};
 }
-impl_from!(PprzV1, PprzV2, XBee24, XBee868, PprzLog);
+impl_from!("v1" PprzV1, "xbee" XBee24, "xbee" XBee868, "pprzlog" PprzLog);
+
+impl From<PprzV2> for AnyTransport {
+    fn from(t: PprzV2) -> Self {
+        Self::PprzV2(t)
+    }
+}
 
 /// Frame ids and transmit statuses, for a writer that keeps at most a few frames
 /// inside the radio module and waits for each one's status.
@@ -94,7 +113,11 @@ impl AnyTransport {
     /// Whether frames of this transport carry a frame id that the radio module answers
     /// with a transmit status ([`TxStatus`](crate::TxStatus)): the XBee transports.
     pub const fn has_tx_status(&self) -> bool {
-        matches!(self, Self::XBee24(_) | Self::XBee868(_))
+        match self {
+            #[cfg(feature = "xbee")]
+            Self::XBee24(_) | Self::XBee868(_) => true,
+            _ => false,
+        }
     }
 
     /// The frame id of `frame`, a frame this transport encoded (bytes after it are
@@ -103,9 +126,14 @@ impl AnyTransport {
     /// this transport.
     pub fn frame_id(&self, frame: &[u8]) -> Option<u8> {
         match self {
+            #[cfg(feature = "xbee")]
             Self::XBee24(t) => t.tx_frame_id(frame),
+            #[cfg(feature = "xbee")]
             Self::XBee868(t) => t.tx_frame_id(frame),
-            Self::PprzV1(_) | Self::PprzV2(_) | Self::PprzLog(_) => None,
+            _ => {
+                let _ = frame;
+                None
+            }
         }
     }
 
@@ -116,9 +144,14 @@ impl AnyTransport {
     /// it (0, [`NO_FRAME_ID`](crate::xbee::NO_FRAME_ID), asks for no status).
     pub fn set_frame_id(&self, frame: &mut [u8], id: u8) -> bool {
         match self {
+            #[cfg(feature = "xbee")]
             Self::XBee24(t) => t.set_tx_frame_id(frame, id),
+            #[cfg(feature = "xbee")]
             Self::XBee868(t) => t.set_tx_frame_id(frame, id),
-            Self::PprzV1(_) | Self::PprzV2(_) | Self::PprzLog(_) => false,
+            _ => {
+                let _ = (frame, id);
+                false
+            }
         }
     }
 }

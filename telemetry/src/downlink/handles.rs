@@ -200,16 +200,12 @@ impl<'d> Device<'d> {
     /// place in the [`DeliveryWindow`] and counts the outcome; a status for no
     /// outstanding frame is counted and ignored.
     pub fn tx_status(&self, status: &TxStatus) {
-        self.core
-            .outstanding(self.index(), &mut |o| o.status(status));
+        self.core.tx_status(self.index(), status);
     }
 
     /// What the transmit statuses of this device said.
     pub fn delivery_stats(&self) -> DeliveryStats {
-        let mut stats = DeliveryStats::default();
-        self.core
-            .outstanding(self.index(), &mut |o| stats = o.stats);
-        stats
+        self.core.delivery_stats(self.index()).unwrap_or_default()
     }
 
     /// Whether a frame may go to the modem now under `window`, else the deadline of the
@@ -220,20 +216,12 @@ impl<'d> Device<'d> {
         now: u64,
         cx: Option<&mut Context<'_>>,
     ) -> Result<(), u64> {
-        let mut cx = cx;
-        let mut room = Ok(());
-        self.core.outstanding(self.index(), &mut |o| {
-            room = o.room(window, now, cx.take());
-        });
-        room
+        self.core.delivery_room(self.index(), window, now, cx)
     }
 
     /// A fresh frame id for a frame going to the modem now, recorded as outstanding.
     pub(crate) fn delivery_start(&self, window: &DeliveryWindow, now: u64) -> Option<u8> {
-        let mut id = None;
-        self.core
-            .outstanding(self.index(), &mut |o| id = o.start(window, now));
-        id
+        self.core.delivery_start(self.index(), window, now)
     }
 
     /// Statistics of this device.

@@ -2,18 +2,20 @@
 //! non-generic function that encodes a message into arena memory and queues it on each
 //! of its devices, evicting less important frames when there is no room.
 
-use core::cell::{Cell, RefCell};
+use core::cell::Cell;
+#[cfg(feature = "xbee")]
+use core::cell::RefCell;
 use core::task::Context;
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use pprz_messages::Message;
-use pprz_transports::{Encoder, MsgHeader, TxMeta};
+use pprz_transports::{Encoder, MsgHeader, TxMeta, TxStatus};
 
 use super::config::DeviceConfig;
 use super::options::{Route, SendError, SendOptions};
 use crate::arena::{AllocError, ArenaStats, FrameArena, FrameBuf};
-use crate::delivery::{DeliveryStats, Outstanding};
+use crate::delivery::{DeliveryStats, DeliveryWindow, Outstanding};
 use crate::queue::{FrameQueue, MessageKey, Pushed};
 use crate::route::{Routes, Targets};
 use crate::stats::{DeviceStats, DropReason};
@@ -100,7 +102,9 @@ pub struct Downlink<'a, M: RawMutex, const D: usize, const Q: usize> {
     undeliverable: Mutex<M, Cell<u32>>,
     /// Per device, the reply rate limit's state (see [`ReplyLimit::admit`]).
     reply_tat: [Mutex<M, Cell<u64>>; D],
-    /// Per device, the frames awaiting their transmit status.
+    /// Per device, the frames awaiting their transmit status (only XBee radios send
+    /// transmit statuses).
+    #[cfg(feature = "xbee")]
     outstanding: [Mutex<M, RefCell<Outstanding>>; D],
     /// PPRZLOG time stamps, in 100 µs ticks.
     clock: fn() -> u32,
@@ -178,6 +182,7 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
             ports_taken: Mutex::new(Cell::new(false)),
             undeliverable: Mutex::new(Cell::new(0)),
             reply_tat: [const { Mutex::new(Cell::new(0)) }; D],
+            #[cfg(feature = "xbee")]
             outstanding: [const { Mutex::new(RefCell::new(Outstanding::new())) }; D],
             clock: no_clock,
             routes: Routes::DIRECT,
@@ -234,9 +239,28 @@ impl<'a, M: RawMutex + Sync, const D: usize, const Q: usize> Downlink<'a, M, D, 
     /// What the transmit statuses of device `index` said (all zero for a device without
     /// a [`DeliveryWindow`](crate::DeliveryWindow)); `None` if there is no such device.
     pub fn delivery_stats(&self, index: usize) -> Option<DeliveryStats> {
-        self.outstanding
-            .get(index)
-            .map(|o| o.lock(|o| o.borrow().stats))
+        self.with_outstanding(index, |o| o.stats)
+            .or_else(|| (index < D).then(DeliveryStats::default))
+    }
+
+    /// Runs `f` on device `device`'s outstanding frames, under the lock; `None` for a bad
+    /// index, and always without the `xbee` feature (no other transport has transmit
+    /// statuses, so no frame is ever outstanding).
+    fn with_outstanding<R>(
+        &self,
+        device: usize,
+        f: impl FnOnce(&mut Outstanding) -> R,
+    ) -> Option<R> {
+        #[cfg(feature = "xbee")]
+        {
+            let o = self.outstanding.get(device)?;
+            Some(o.lock(|o| f(&mut o.borrow_mut())))
+        }
+        #[cfg(not(feature = "xbee"))]
+        {
+            let _ = (device, f);
+            None
+        }
     }
 
     /// Statistics of the shared arena.
@@ -477,10 +501,21 @@ pub(crate) trait Core: Sync {
     fn arena_stats(&self) -> ArenaStats;
     fn try_receive(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<FrameBuf<'_>>;
     fn peek_len(&self, device: usize, cx: Option<&mut Context<'_>>) -> Option<usize>;
-    /// Runs `f` on device `device`'s outstanding frames (nothing for a bad index).
-    fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding));
+    /// [`Outstanding::room`] of device `device` (`Ok` for a bad index).
+    fn delivery_room(
+        &self,
+        device: usize,
+        window: &DeliveryWindow,
+        now: u64,
+        cx: Option<&mut Context<'_>>,
+    ) -> Result<(), u64>;
+    /// [`Outstanding::start`] of device `device`.
+    fn delivery_start(&self, device: usize, window: &DeliveryWindow, now: u64) -> Option<u8>;
+    /// [`Outstanding::status`] of device `device`.
+    fn tx_status(&self, device: usize, status: &TxStatus);
+    fn delivery_stats(&self, device: usize) -> Option<DeliveryStats>;
     /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it;
-    /// with `take_next`, then takes the device's next frame under the same lock.
+    /// with `take_next`, then takes the device's next frame.
     fn complete(
         &self,
         device: usize,
@@ -536,10 +571,27 @@ impl<M: RawMutex + Sync, const D: usize, const Q: usize> Core for Downlink<'_, M
         self.queues.get(device)?.peek_len(cx)
     }
 
-    fn outstanding(&self, device: usize, f: &mut dyn FnMut(&mut Outstanding)) {
-        if let Some(o) = self.outstanding.get(device) {
-            o.lock(|o| f(&mut o.borrow_mut()));
-        }
+    fn delivery_room(
+        &self,
+        device: usize,
+        window: &DeliveryWindow,
+        now: u64,
+        cx: Option<&mut Context<'_>>,
+    ) -> Result<(), u64> {
+        self.with_outstanding(device, |o| o.room(window, now, cx))
+            .unwrap_or(Ok(()))
+    }
+
+    fn delivery_start(&self, device: usize, window: &DeliveryWindow, now: u64) -> Option<u8> {
+        self.with_outstanding(device, |o| o.start(window, now))?
+    }
+
+    fn tx_status(&self, device: usize, status: &TxStatus) {
+        self.with_outstanding(device, |o| o.status(status));
+    }
+
+    fn delivery_stats(&self, device: usize) -> Option<DeliveryStats> {
+        Downlink::delivery_stats(self, device)
     }
 
     fn complete(
