@@ -46,15 +46,16 @@
 //!
 //! # Which mutex
 //!
-//! Every lock of the link (settings, health, registry, and the arena's, which should be
-//! the same mutex) is the link's mutex `M`. The queue itself takes no lock on cores with
-//! compare-and-swap: its frames change hands with atomic bit operations.
+//! Every lock of the link (settings, health, registry, the writer's waker, and the
+//! arena's, which should be the same mutex) is the link's mutex `M`. The queue and the
+//! arena take no lock on cores with compare-and-swap: frames and memory change hands with
+//! atomic bit operations. (Cores without it, such as the Cortex-M0, do each of those as
+//! a load and a store under `M`.)
 //!
 //! * [`LinkMutex`] (`CriticalSectionRawMutex`, the default): any task of any executor,
 //!   and interrupt handlers, may send. Each lock masks interrupts while it is held: on
-//!   the send path of a Cortex-M4, the arena's allocation and release (about 30 to 45
-//!   instructions each, up to about 160 when a frame of a new size is carved out;
-//!   `BENCHMARKS.md`).
+//!   the send path of a Cortex-M4, only when a send wakes the sleeping writer (at most
+//!   about 20 instructions; `BENCHMARKS.md`).
 //! * `ThreadModeRawMutex` (embassy-sync, Cortex-M): for a single-core firmware whose
 //!   senders all run in thread mode (tasks of a thread-mode executor). The link never
 //!   masks an interrupt, so it never delays an interrupt handler; a send from an
