@@ -169,6 +169,15 @@ impl Encoder for AnyTransport {
         dispatch!(self, t => t.max_payload_len())
     }
 
+    // One dispatch each, rather than one per length the default methods read.
+    fn frame_len(&self, payload_len: usize) -> Result<usize, EncodeError> {
+        dispatch!(self, t => t.frame_len(payload_len))
+    }
+
+    fn payload_area<'b>(&self, frame: &'b mut [u8]) -> &'b mut [u8] {
+        dispatch!(self, t => t.payload_area(frame))
+    }
+
     // Not inlined: callers (the downlink's send path) would otherwise hoist the
     // constants of every transport's header out of their loops, whichever one is used.
     #[inline(never)]
