@@ -82,7 +82,8 @@
 //!
 //! Releasing a frame is one atomic AND per word its run spans (at most 5, for the largest
 //! frame) and two counter updates. In steady state an allocation finds the units after the
-//! previous frame free: one load and one compare-and-swap, and three counter updates.
+//! previous frame free: a load and a compare-and-swap per word (one, or two when the run
+//! crosses into the next word), and three counter updates.
 //! Otherwise it examines each bitmap word at most once per attempt (`N / 260` words: 16
 //! for 4 KiB; up to four more for a run that began before its first word), with a few bit
 //! scans per word, and claims its run. An attempt is repeated
@@ -513,6 +514,22 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
         atomic::update(&self.lock, self.word(i), Acquire, free).is_ok()
     }
 
+    /// Sets the bits `lo` of word `i` and `hi` of word `i + 1` if they are all clear (one
+    /// compare-and-swap each); if the second part was taken first, gives the first back
+    /// (counted in `rollbacks`) and returns `false`.
+    #[inline(always)]
+    fn claim_pair(&self, i: usize, lo: u32, hi: u32) -> bool {
+        if !self.claim_word(i, lo) {
+            return false;
+        }
+        if self.claim_word(i + 1, hi) {
+            return true;
+        }
+        atomic::and(&self.lock, self.word(i), !lo, Release);
+        atomic::add(&self.lock, &self.rollbacks, 1);
+        false
+    }
+
     /// Bits cleared so far (releases and given-back claims): an allocation that finds no
     /// room rescans if this changed while it scanned.
     fn cleared(&self) -> u32 {
@@ -531,6 +548,13 @@ impl<M: RawMutex, const N: usize> FrameArena<M, N> {
         if bit + units <= WORD_UNITS && i < Self::WORDS {
             let mask = ones(units) << bit;
             if self.taken(i) & mask == 0 && self.claim_word(i, mask) {
+                return Some(hint);
+            }
+        } else if units <= WORD_UNITS && i + 1 < Self::WORDS {
+            // The run crosses into the next word (half of the frames of random sizes do).
+            let (lo, hi) = (u32::MAX << bit, ones(bit + units - WORD_UNITS));
+            if self.taken(i) & lo == 0 && self.taken(i + 1) & hi == 0 && self.claim_pair(i, lo, hi)
+            {
                 return Some(hint);
             }
         }
@@ -975,6 +999,35 @@ mod tests {
         );
         assert!(arena.claim(20, 49));
         assert_eq!(arena.bits().iter().filter(|b| **b).count(), 50);
+    }
+
+    #[test]
+    fn a_run_across_two_words_is_claimed_whole_or_not_at_all() {
+        let arena: Arena<2048> = FrameArena::new();
+        // Where the last allocation ended: units 28..36 span words 0 and 1.
+        arena.next.store(28, Relaxed);
+        assert_eq!(arena.take(8), Some(28));
+        let set = |arena: &Arena<2048>| -> Vec<usize> {
+            let bits = arena.bits();
+            (0..bits.len()).filter(|&u| bits[u]).collect()
+        };
+        assert_eq!(set(&arena), (28..36).collect::<Vec<_>>());
+        // The second word's part taken by another context in the meantime.
+        arena.word(2).store(1, Relaxed); // unit 64
+        let before = arena.cleared();
+        assert!(!arena.claim_pair(1, u32::MAX << 30, 1)); // units 62..65
+        let mut expected: Vec<usize> = (28..36).collect();
+        expected.push(64);
+        assert_eq!(set(&arena), expected, "units 62 and 63 given back");
+        assert_ne!(
+            arena.cleared(),
+            before,
+            "a rollback makes failed scans repeat"
+        );
+        // Seen taken before any claim: the search places the frame elsewhere.
+        arena.next.store(62, Relaxed);
+        let start = arena.take(3).expect("room");
+        assert!(start + 3 <= 64 || start > 64, "not over unit 64: {start}");
     }
 
     #[derive(Clone, Debug)]
