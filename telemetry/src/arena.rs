@@ -54,9 +54,9 @@
 //!
 //! | `N`    | used, mean (worst round) | payload, mean |
 //! |--------|--------------------------|---------------|
-//! | 4 KiB  | 83.3 % (63.3 %)          | 78.3 %        |
-//! | 16 KiB | 87.4 % (77.8 %)          | 82.1 %        |
-//! | 64 KiB | 90.9 % (87.4 %)          | 85.7 %        |
+//! | 4 KiB  | 83.4 % (64.5 %)          | 78.4 %        |
+//! | 16 KiB | 87.1 % (79.3 %)          | 81.9 %        |
+//! | 64 KiB | 90.9 % (87.0 %)          | 85.8 %        |
 //!
 //! Smaller arenas fill less at the first failure mostly because a 255-byte request is a
 //! larger share of them.
