@@ -198,7 +198,8 @@ impl<'d> Device<'d> {
     /// A transmit status the radio sent for one of this device's frames (the device's
     /// [`Reader`](crate::reader::Reader) passes on those it decodes): frees that frame's
     /// place in the [`DeliveryWindow`] and counts the outcome; a status for no
-    /// outstanding frame is counted and ignored.
+    /// outstanding frame is counted and ignored. Without the `xbee` feature no transport
+    /// has transmit statuses, no frame is outstanding, and this does nothing.
     pub fn tx_status(&self, status: &TxStatus) {
         self.core.tx_status(self.index(), status);
     }

@@ -610,6 +610,29 @@ mod tests {
     use crate::queue::Candidate;
 
     #[test]
+    fn delivery_stats_exist_for_each_device_only() {
+        use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex as M;
+        let arena: crate::FrameArena<M, 1024> = crate::FrameArena::new();
+        let config = || crate::DeviceConfig::new(pprz_transports::PprzV2::new().into());
+        let downlink: super::Downlink<'_, M, 2, 4> =
+            super::Downlink::new(&arena, 7, [config(), config()]);
+        let status = pprz_transports::TxStatus {
+            frame_id: 1,
+            delivered: true,
+            status: 0,
+            retries: 0,
+        };
+        // No frame is outstanding: counted as unexpected with the `xbee` feature (its
+        // window exists), ignored without it (no transport has statuses).
+        downlink.device(1).tx_status(&status);
+        let unexpected = u32::from(cfg!(feature = "xbee"));
+        let stats = downlink.delivery_stats(1).expect("device 1");
+        assert_eq!(stats.unexpected, unexpected);
+        assert_eq!(downlink.delivery_stats(0), Some(Default::default()));
+        assert_eq!(downlink.delivery_stats(2), None);
+    }
+
+    #[test]
     fn candidate_order() {
         let a = Candidate {
             priority: 1,
