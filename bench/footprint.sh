@@ -8,7 +8,9 @@
 #
 # Without an ELF argument, builds the firmware in bench/footprint twice (release,
 # thumbv7em-none-eabihf): as is, and with the `encoders-only` feature, which links only
-# the generated encoders (one out-of-line `encode::<Msg>` per message).
+# the generated encoders (one out-of-line `encode::<Msg>` per message). The firmware
+# speaks PPRZ v2 only: it takes pprz-telemetry and pprz-transports without their default
+# features (the other transports). The core's target is 10 KiB (FOOTPRINT_CORE_TARGET).
 #
 # Method: the ELF's symbols (`nm -S --size-sort -C`), demangled. Build with
 # `-C symbol-mangling-version=v0` (bench/footprint/.cargo/config.toml does) so generic
@@ -35,7 +37,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 
-core_target=${FOOTPRINT_CORE_TARGET:-8192}
+core_target=${FOOTPRINT_CORE_TARGET:-10240}
 msg_target=${FOOTPRINT_MSG_TARGET:-200}
 app=${FOOTPRINT_APP:-pprz_footprint}
 # Generic functions of the application that only wrap stack code (`poll_task::<Future>`,

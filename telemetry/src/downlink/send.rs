@@ -513,6 +513,7 @@ pub(crate) trait Core: Sync {
     fn delivery_start(&self, device: usize, window: &DeliveryWindow, now: u64) -> Option<u8>;
     /// [`Outstanding::status`] of device `device`.
     fn tx_status(&self, device: usize, status: &TxStatus);
+    /// [`Downlink::delivery_stats`].
     fn delivery_stats(&self, device: usize) -> Option<DeliveryStats>;
     /// Counts the outcome of `frame`, device `device`'s in-flight frame, and releases it;
     /// with `take_next`, then takes the device's next frame.
