@@ -588,18 +588,14 @@ impl<'a, M: RawMutex, const Q: usize> FrameQueue<'a, M, Q> {
 
     /// The length of the most important frame, without taking it; with a context,
     /// registers the waker when there is none.
-    pub fn peek_len(&self, cx: Option<&mut Context<'_>>) -> Option<usize> {
-        let len = || {
-            let s = self.strongest()?;
-            Some(self.info.get(s.slot)?.len.load(Relaxed) as usize)
-        };
-        match (len(), cx) {
-            (Some(len), _) => Some(len),
-            (None, None) => None,
-            (None, Some(cx)) => {
-                self.sleep(cx.waker());
-                len()
+    pub fn peek_len(&self, mut cx: Option<&mut Context<'_>>) -> Option<usize> {
+        // At most twice round: once more after registering the waker (one copy of the
+        // search in flash).
+        loop {
+            if let Some(s) = self.strongest() {
+                return Some(self.info.get(s.slot)?.len.load(Relaxed) as usize);
             }
+            self.sleep(cx.take()?.waker());
         }
     }
 
