@@ -216,6 +216,10 @@ impl Framing for AnyTransport {
         dispatch!(self, t => t.control(frame))
     }
 
+    fn has_control(&self) -> bool {
+        self.has_tx_status()
+    }
+
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
         dispatch!(self, t => t.view(frame))
     }

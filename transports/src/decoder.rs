@@ -222,23 +222,6 @@ impl<F, const N: usize> Decoder<F, N> {
         &self.stats
     }
 
-    /// The oldest transmit status not taken yet (statuses come out in the order they
-    /// were received), or `None`.
-    ///
-    /// Statuses are decoded by [`feed`](Decoder::feed),
-    /// [`feed_borrowed`](Decoder::feed_borrowed) and [`flush`](Decoder::flush), which
-    /// never hand them out as frames; take them after each call (see
-    /// [`TX_STATUS_CAPACITY`]).
-    pub fn take_tx_status(&mut self) -> Option<TxStatus> {
-        if self.statuses_len == 0 {
-            return None;
-        }
-        let status = self.statuses.get(self.statuses_head).copied();
-        self.statuses_head = (self.statuses_head + 1) % TX_STATUS_CAPACITY;
-        self.statuses_len -= 1;
-        status
-    }
-
     /// Transmit statuses waiting for [`take_tx_status`](Decoder::take_tx_status).
     pub const fn tx_statuses_pending(&self) -> usize {
         self.statuses_len
@@ -298,6 +281,23 @@ impl<F, const N: usize> Decoder<F, N> {
 }
 
 impl<F: Framing, const N: usize> Decoder<F, N> {
+    /// The oldest transmit status not taken yet (statuses come out in the order they
+    /// were received), or `None`.
+    ///
+    /// Statuses are decoded by [`feed`](Decoder::feed),
+    /// [`feed_borrowed`](Decoder::feed_borrowed) and [`flush`](Decoder::flush), which
+    /// never hand them out as frames; take them after each call (see
+    /// [`TX_STATUS_CAPACITY`]).
+    pub fn take_tx_status(&mut self) -> Option<TxStatus> {
+        if !self.framing.has_control() || self.statuses_len == 0 {
+            return None;
+        }
+        let status = self.statuses.get(self.statuses_head).copied();
+        self.statuses_head = (self.statuses_head + 1) % TX_STATUS_CAPACITY;
+        self.statuses_len -= 1;
+        status
+    }
+
     /// Takes bytes from the front of `input` and returns the next verified frame,
     /// or `None` once `input` is empty and no complete frame is buffered. Control
     /// frames met on the way are consumed, not returned (their statuses wait for

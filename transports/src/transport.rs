@@ -620,6 +620,14 @@ pub trait Framing {
         None
     }
 
+    /// Whether [`control`](Framing::control) can find a control frame at all: `false`
+    /// by default (PPRZ v1/v2, PPRZLOG), `true` for the XBee transports. A
+    /// [`Decoder`](crate::Decoder) of a transport without control frames has no transmit
+    /// status to hand out, and the code that takes them compiles away.
+    fn has_control(&self) -> bool {
+        false
+    }
+
     /// The valid control frame at the start of `buf` (bytes after it are ignored) and
     /// its length, or `None` if there is none there (no complete frame, or a message
     /// frame, or an invalid control frame). The counterpart of

@@ -701,6 +701,10 @@ impl Framing for XBee24 {
         control(frame)
     }
 
+    fn has_control(&self) -> bool {
+        true
+    }
+
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {
         use field::{rx16, tx16};
         let packet = Packet::new_checked(frame)?;
@@ -823,6 +827,10 @@ impl Framing for XBee868 {
 
     fn control(&self, frame: &[u8]) -> Option<Result<Control, RxError>> {
         control(frame)
+    }
+
+    fn has_control(&self) -> bool {
+        true
     }
 
     fn view<'a>(&self, frame: &'a [u8]) -> Result<Frame<'a>, RxError> {

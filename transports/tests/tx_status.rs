@@ -432,3 +432,18 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn only_the_xbee_transports_have_control_frames() {
+    for t in all_transports() {
+        assert_eq!(t.has_control(), t.has_tx_status(), "{t:?}");
+    }
+    assert!(XBee24::new().has_control() && XBee868::new().has_control());
+    // A decoder of a concrete XBee transport hands its statuses out as AnyTransport's does.
+    let (a, sa) = status_24(5, status::SUCCESS);
+    let mut d: Decoder<XBee24> = Decoder::new(XBee24::new());
+    let mut input = &a[..];
+    assert!(d.feed(&mut input).is_none());
+    assert_eq!(d.take_tx_status(), Some(sa));
+    assert_eq!(d.take_tx_status(), None);
+}
