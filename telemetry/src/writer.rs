@@ -420,6 +420,8 @@ async fn wait_for_room(device: Device<'_>, window: &DeliveryWindow) {
 #[derive(Debug, Clone, Copy)]
 struct ModemModel {
     pacing: Pacing,
+    /// The air time of the modem's budget, in ticks.
+    budget: u64,
     empty_at: u64,
 }
 
@@ -427,6 +429,7 @@ impl ModemModel {
     fn new(pacing: Pacing) -> Self {
         Self {
             pacing,
+            budget: pacing.air_ticks(usize::from(pacing.modem_budget)),
             empty_at: 0,
         }
     }
@@ -435,9 +438,8 @@ impl ModemModel {
     /// plus the frame are at most the budget (a frame longer than the budget waits for
     /// an empty modem).
     fn ready_at(&self, len: usize) -> u64 {
-        let budget = self.pacing.air_ticks(usize::from(self.pacing.modem_budget));
         let own = self.pacing.air_ticks(len);
-        self.empty_at.saturating_sub(budget.saturating_sub(own))
+        self.empty_at.saturating_sub(self.budget.saturating_sub(own))
     }
 
     /// `len` bytes handed to the modem at `now`.

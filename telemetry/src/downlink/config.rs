@@ -85,6 +85,8 @@ impl Pacing {
     }
 
     /// Time the air takes to carry `bytes` bytes, in embassy-time ticks (rounded up).
+    /// Out of line: one copy of the 64-bit division for the writer's modem model.
+    #[inline(never)]
     pub(crate) fn air_ticks(&self, bytes: usize) -> u64 {
         let rate = u64::from(self.air_rate.max(1));
         (bytes as u64)
