@@ -1,12 +1,14 @@
 //! The writer task of a device: takes the most important frame from the device's
-//! [`Port`], writes it with `embedded_io_async::Write::write_all` (and `flush` when the
-//! device is configured so), counts the outcome and releases the frame's arena memory.
+//! [`Port`], writes it with `embedded_io_async::Write::write` until the whole frame is out
+//! (and `flush` when the device is configured so), counts the outcome and releases the
+//! frame's arena memory.
 //!
 //! A stalled device blocks only its own writer (and so only its own queue, which sheds
 //! by priority as it fills); a write error is counted as a
 //! [`DropReason::WriteError`] drop and the writer goes on
-//! with the next frame. If the writer future is dropped in the middle of a write, that
-//! frame is counted the same way.
+//! with the next frame. So is a write that reports no byte written or more bytes than it
+//! was given (a device breaking the `Write` contract; `write_all` would panic). If the
+//! writer future is dropped in the middle of a write, that frame is counted the same way.
 //!
 //! Embassy tasks cannot be generic, so a firmware wraps this in one task per device:
 //!
@@ -380,7 +382,7 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
                 config.transport.set_frame_id(frame.bytes_mut(), id);
             }
         }
-        let mut written = io.write_all(&frame).await.is_ok();
+        let mut written = write_frame(&mut io, &frame).await;
         if written && config.flush {
             written = io.flush().await.is_ok();
         }
@@ -388,6 +390,26 @@ pub async fn run_writer_with<W: Write, L: LinkLayer + ?Sized>(
         // failed write when it drops. A frame taken here is never held across an
         // `.await` before its write.
         frame.finish_and_take(written, back_to_back);
+    }
+}
+
+/// Writes the whole of `frame` to `io`, in as many writes as it takes: `false` if a write
+/// fails, reports no byte written, or reports more bytes than it was given (where
+/// `embedded_io_async`'s `write_all` would panic).
+async fn write_frame<W: Write>(io: &mut W, mut frame: &[u8]) -> bool {
+    if frame.is_empty() {
+        return true;
+    }
+    loop {
+        match io.write(frame).await {
+            // The usual case: the device took the whole frame.
+            Ok(n) if n == frame.len() => return true,
+            Ok(n) if n > 0 => match frame.get(n..) {
+                Some(rest) => frame = rest,
+                None => return false,
+            },
+            _ => return false,
+        }
     }
 }
 
@@ -439,7 +461,8 @@ impl ModemModel {
     /// an empty modem).
     fn ready_at(&self, len: usize) -> u64 {
         let own = self.pacing.air_ticks(len);
-        self.empty_at.saturating_sub(self.budget.saturating_sub(own))
+        self.empty_at
+            .saturating_sub(self.budget.saturating_sub(own))
     }
 
     /// `len` bytes handed to the modem at `now`.

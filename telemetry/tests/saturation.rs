@@ -191,6 +191,82 @@ impl embedded_io_async::Write for Flaky {
     }
 }
 
+/// A device that breaks the `Write` contract in turn: it writes the first byte of a
+/// frame only, then claims to have written nothing, then more bytes than it was given,
+/// then writes what it is given.
+struct Liar {
+    writes: u32,
+    wire: Vec<u8>,
+}
+
+impl embedded_io_async::ErrorType for Liar {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Write for Liar {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        self.writes += 1;
+        Ok(match self.writes % 4 {
+            1 => {
+                self.wire.extend_from_slice(&buf[..1]);
+                1
+            }
+            2 => 0,
+            3 => buf.len() + 5,
+            _ => {
+                self.wire.extend_from_slice(buf);
+                buf.len()
+            }
+        })
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+#[test]
+fn a_device_that_reports_no_byte_or_too_many_costs_a_write_error_not_a_panic() {
+    let _serial = mock_time();
+    let arena: FrameArena<CriticalSectionRawMutex, 2048> = FrameArena::new();
+    let downlink: Downlink<'_, CriticalSectionRawMutex, 1, 8> =
+        Downlink::new(&arena, 7, [DeviceConfig::new(PprzV2::new().into())]);
+    let [mut port] = downlink.ports().unwrap();
+    for index in 0..6u8 {
+        downlink.send(&DlValue { index, value: 0.0 }).unwrap();
+    }
+    let mut liar = Liar {
+        writes: 0,
+        wire: Vec::new(),
+    };
+    run_with_mock_time(
+        select(
+            run_writer(&mut port, &mut liar),
+            Timer::after(Duration::from_millis(10)),
+        ),
+        Duration::from_micros(100),
+        1_000,
+    );
+    // Writes 1-2: one byte, then none (a write error); 3: too many (a write error); 4: a
+    // whole frame; 5-6: one byte then none; 7: too many; 8: a whole frame.
+    let stats = downlink.stats(0).unwrap();
+    assert_eq!((stats.sent, stats.dropped.write_error), (2, 4), "{stats:?}");
+    assert!(stats.is_balanced(), "{stats:?}");
+    assert_eq!(arena.stats().live, 0, "every frame's memory came back");
+    // On the wire: the stray first bytes of the failed frames, and two whole frames that
+    // decode (behind a false start: the stray start byte reads the next one as a length).
+    let mut decoder: Decoder<PprzV2> = Decoder::new(PprzV2::new());
+    let mut input = &liar.wire[..];
+    let mut frames = 0;
+    while decoder.feed(&mut input).is_some() {
+        frames += 1;
+    }
+    while decoder.flush().is_some() {
+        frames += 1;
+    }
+    assert_eq!(frames, 2);
+}
+
 #[test]
 fn a_stalled_device_blocks_only_its_own_queue_and_errors_are_counted() {
     let _serial = mock_time();
