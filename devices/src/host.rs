@@ -260,7 +260,15 @@ fn rx_thread(shared: &Shared, mut recv: impl FnMut(&mut [u8]) -> io::Result<usiz
         if shared.lock().rx_closed {
             return;
         }
-        let result = recv(&mut buf);
+        // More bytes than the buffer holds: a reader breaking the `io::Read` contract,
+        // counted as a read error.
+        let result = recv(&mut buf).and_then(|n| {
+            if n <= buf.len() {
+                Ok(n)
+            } else {
+                Err(io::ErrorKind::InvalidData.into())
+            }
+        });
         let mut s = shared.lock();
         match result {
             Ok(0) if !shared.datagrams => {
@@ -383,7 +391,8 @@ fn write_stream(
     while !chunk.is_empty() {
         match send(chunk) {
             Ok(0) => return Err(io::ErrorKind::WriteZero.into()),
-            Ok(n) => chunk = &chunk[n..],
+            // More than it was given: a writer breaking the `io::Write` contract.
+            Ok(n) => chunk = chunk.get(n..).ok_or(io::ErrorKind::InvalidData)?,
             Err(e) if retry(e.kind()) => {}
             Err(e) => return Err(e),
         }

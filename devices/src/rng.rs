@@ -42,13 +42,15 @@ impl SplitMix64 {
         self.next_u64() % 100 < percent
     }
 
-    /// Uniform in `lo..=hi` (the modulo bias is irrelevant here).
-    ///
-    /// # Panics
-    /// If `hi < lo`.
+    /// Uniform in `lo..=hi` (the modulo bias is irrelevant here); `lo` if `hi < lo`.
     pub fn range(&mut self, lo: usize, hi: usize) -> usize {
-        assert!(lo <= hi, "empty range {lo}..={hi}");
-        lo + (self.next_u64() % (hi - lo + 1) as u64) as usize
+        let span = hi.saturating_sub(lo) as u64;
+        let r = match span.checked_add(1) {
+            Some(n) => self.next_u64() % n,
+            None => self.next_u64(),
+        };
+        // `r <= span`, so the sum is at most `hi`.
+        lo + r as usize
     }
 
     /// Fills `dst` with the little-endian bytes of successive outputs (the last one cut
@@ -71,6 +73,17 @@ mod tests {
         let mut rng = SplitMix64::new(1_234_567);
         assert_eq!(rng.next_u64(), 6_457_827_717_110_365_317);
         assert_eq!(rng.next_u64(), 3_203_168_211_198_807_973);
+    }
+
+    #[test]
+    fn ranges_at_the_edges_never_panic() {
+        let mut rng = SplitMix64::new(7);
+        for _ in 0..100 {
+            assert_eq!(rng.range(5, 3), 5, "empty: the low end");
+            assert_eq!(rng.range(9, 9), 9);
+            let _ = rng.range(0, usize::MAX);
+            assert!(rng.range(usize::MAX - 1, usize::MAX) >= usize::MAX - 1);
+        }
     }
 
     #[test]

@@ -57,7 +57,7 @@
 use core::fmt;
 use core::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
-use embassy_time::{Duration, with_timeout};
+use embassy_time::{Duration, Instant, with_deadline};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::driver::{Driver, EndpointError};
 use embassy_usb::{Builder, Config, UsbDevice};
@@ -366,9 +366,13 @@ impl<'c, S: PacketSender> UsbTx<'c, S> {
 
     async fn send(&mut self, packet: &[u8]) -> Result<(), UsbError> {
         let result = match self.config.write_timeout {
-            Some(timeout) => with_timeout(timeout, self.sender.write_packet(packet))
-                .await
-                .map_err(|_| UsbError::Timeout),
+            Some(timeout) => {
+                // Saturating: a timeout too long to add to the clock never expires.
+                let at = Instant::now().checked_add(timeout).unwrap_or(Instant::MAX);
+                with_deadline(at, self.sender.write_packet(packet))
+                    .await
+                    .map_err(|_| UsbError::Timeout)
+            }
             None => Ok(self.sender.write_packet(packet).await),
         };
         match result {

@@ -332,6 +332,43 @@ fn write_error_is_sticky_and_counted() {
     assert!(s.tx_errors >= 3, "{s:?}");
 }
 
+/// A reader and a writer that claim more bytes than they were given.
+struct Boaster;
+
+impl std::io::Read for Boaster {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        Ok(buf.len() + 1)
+    }
+}
+
+impl std::io::Write for Boaster {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        Ok(buf.len() + 1)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+#[test]
+fn a_reader_or_writer_reporting_too_many_bytes_is_an_error_not_a_panic() {
+    let mut rx = HostRx::from_reader(Boaster, HostConfig::default()).unwrap();
+    let mut buf = [0u8; 8];
+    assert_eq!(
+        block_on(rx.read(&mut buf)),
+        Err(HostError::Io(std::io::ErrorKind::InvalidData))
+    );
+    assert_eq!(rx.stats().rx_errors, 1);
+    let mut tx = HostTx::from_writer(Boaster, HostConfig::default()).unwrap();
+    let result = block_on(async {
+        tx.write_all(&[1; 10]).await?;
+        tx.flush().await
+    });
+    assert_eq!(result, Err(HostError::Io(std::io::ErrorKind::InvalidData)));
+    assert!(tx.stats().tx_errors >= 1, "{:?}", tx.stats());
+}
+
 static EXECUTOR: static_cell::StaticCell<embassy_executor::Executor> =
     static_cell::StaticCell::new();
 

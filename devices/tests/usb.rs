@@ -262,6 +262,25 @@ fn host_that_stops_reading_times_out() {
 }
 
 #[test]
+fn a_timeout_too_long_for_the_clock_never_expires() {
+    let _t = mock_time();
+    let host = connected();
+    let counters = UsbCounters::new();
+    let config = UsbConfig {
+        write_timeout: Some(Duration::MAX),
+        ..UsbConfig::default()
+    };
+    let mut tx = UsbTx::new(Fake(host.clone(), 64), &counters, config);
+    // Past the clock's start, so that `now + timeout` overflows.
+    MockDriver::get().advance(Duration::from_secs(1));
+    assert_eq!(
+        run(tx.write(&[1; 100]), Duration::from_millis(1)).0,
+        Ok(100)
+    );
+    assert_eq!(counters.snapshot().timeouts, 0);
+}
+
+#[test]
 fn unplugged_mid_write_reports_what_was_sent() {
     let host = connected();
     host.borrow_mut().unplug_after = Some(1);

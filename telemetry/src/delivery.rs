@@ -112,7 +112,9 @@ impl Outstanding {
         cx: Option<&mut Context<'_>>,
     ) -> Result<(), u64> {
         self.expire(now);
-        if self.frames.len() < usize::from(window.in_modem) {
+        // Clamped as `new` clamps (`in_modem` is a public field): a window of none would
+        // never let a frame out, one past the record's capacity would send untracked ones.
+        if self.frames.len() < usize::from(window.in_modem).clamp(1, MAX_IN_MODEM) {
             return Ok(());
         }
         if let Some(cx) = cx {
@@ -216,6 +218,27 @@ mod tests {
         assert_eq!(o.stats.delivered, 258);
         assert_eq!(DeliveryWindow::new(0, 1).in_modem, 1);
         assert_eq!(DeliveryWindow::new(200, 1).in_modem, MAX_IN_MODEM as u8);
+        // The same clamp when the field is set directly.
+        let mut fresh = Outstanding::new();
+        let none = DeliveryWindow {
+            in_modem: 0,
+            ..DeliveryWindow::new(1, 100)
+        };
+        assert_eq!(fresh.room(&none, 0, None), Ok(()), "one frame may go");
+        assert!(fresh.start(&none, 0).is_some());
+        assert!(fresh.room(&none, 0, None).is_err());
+        let many = DeliveryWindow {
+            in_modem: u8::MAX,
+            ..none
+        };
+        for _ in 1..MAX_IN_MODEM {
+            assert_eq!(fresh.room(&many, 0, None), Ok(()));
+            assert!(fresh.start(&many, 0).is_some());
+        }
+        assert!(
+            fresh.room(&many, 0, None).is_err(),
+            "no more than it can track"
+        );
         // A timeout of 0 still gives a status one tick.
         assert!(o.start(&window, 5).is_some());
         assert_eq!(o.room(&window, 5, None), Err(6));

@@ -234,7 +234,8 @@ impl Kept {
         }
         [config.degraded_after, config.lost_after]
             .into_iter()
-            .map(|t| last + t)
+            // An instant past the clock's end is never reached: no deadline.
+            .filter_map(|t| last.checked_add(t))
             .filter(|&at| at > now)
             .min()
     }

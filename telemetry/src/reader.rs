@@ -303,7 +303,8 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
     }
 
     /// Reads and delivers forever. Read errors are counted and reading goes on (after a
-    /// short pause, so a failing device cannot spin the executor).
+    /// short pause, so a failing device cannot spin the executor); so is a read that
+    /// reports more bytes than it was given (a device breaking the `Read` contract).
     pub async fn run<'x, I: Inbox<'x> + ?Sized>(&mut self, inbox: &I) -> !
     where
         'd: 'x,
@@ -313,7 +314,9 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
             let pending = self.decoder.buffered() > 0;
             let read = match self.idle {
                 Some(idle) if pending => {
-                    match select(self.io.read(&mut buf), Timer::after(idle)).await {
+                    // Saturating: an idle time too long to add to the clock never ends.
+                    let at = Instant::now().checked_add(idle).unwrap_or(Instant::MAX);
+                    match select(self.io.read(&mut buf), Timer::at(at)).await {
                         Either::First(result) => Some(result),
                         Either::Second(()) => None,
                     }
@@ -328,10 +331,10 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
                         Timer::after(Duration::from_millis(10)).await;
                     }
                 }
-                Some(Ok(n)) => {
+                Some(Ok(n)) if n <= buf.len() => {
                     self.feed(buf.get(..n).unwrap_or_default(), inbox);
                 }
-                Some(Err(_)) => {
+                Some(Ok(_) | Err(_)) => {
                     inbox.read_error();
                     Timer::after(Duration::from_millis(10)).await;
                 }

@@ -334,7 +334,8 @@ fn an_idle_line_flushes_frames_held_behind_a_false_start() {
     // A false start announcing a 240-byte frame, then a PING, then silence.
     let mut bytes = vec![0x99, 0xF0];
     bytes.extend(uplink_frame(&Ping, AC_ID));
-    for idle in [None, Some(Duration::from_millis(20))] {
+    // An idle time too long to add to the clock never ends (and does not panic).
+    for idle in [None, Some(Duration::from_millis(20)), Some(Duration::MAX)] {
         PINGS.store(0, Ordering::Relaxed);
         let chunks = VecDeque::from([(Duration::from_millis(1), bytes.clone())]);
         let mut reader = Reader::<_, _>::new(ScriptedRx { chunks }, PprzV2::new(), port.device())
@@ -347,13 +348,49 @@ fn an_idle_line_flushes_frames_held_behind_a_false_start() {
             Duration::from_micros(100),
             10_000,
         );
-        let expected = u32::from(idle.is_some());
+        let expected = u32::from(idle.is_some_and(|i| i < Duration::MAX));
         assert_eq!(
             PINGS.load(Ordering::Relaxed),
             expected,
             "idle flush {idle:?}"
         );
     }
+}
+
+/// A device whose every read claims one byte more than the buffer holds.
+struct Boaster;
+
+impl embedded_io_async::ErrorType for Boaster {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_io_async::Read for Boaster {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        Timer::after(Duration::from_millis(1)).await;
+        Ok(buf.len() + 1)
+    }
+}
+
+#[test]
+fn a_read_of_more_bytes_than_the_buffer_is_a_counted_read_error() {
+    let _clock = mock_time();
+    let arena: FrameArena<M, 1024> = FrameArena::new();
+    let downlink: Downlink<'_, M, 1, 4> = Downlink::new(&arena, AC_ID, [v2()]);
+    let [port] = downlink.ports().unwrap();
+    let datalink: Datalink<'_, M, 1> = Datalink::new(AC_ID);
+    let mut reader = Reader::<_, _>::new(Boaster, PprzV2::new(), port.device());
+    run_with_mock_time(
+        select(
+            reader.run(&datalink),
+            Timer::after(Duration::from_millis(100)),
+        ),
+        Duration::from_micros(100),
+        10_000,
+    );
+    // One read, then a 10 ms pause after each error: about 9 in 100 ms.
+    let errors = datalink.stats().read_errors;
+    assert!((5..=10).contains(&errors), "{errors} read errors");
+    assert_eq!(reader.decoder_stats().frames, 0);
 }
 
 #[test]

@@ -211,6 +211,30 @@ fn a_device_that_is_not_a_ground_link_does_not_count() {
     assert_eq!(HEALTH.device_state(2), None, "no such device");
 }
 
+/// "Never": timeouts too long to add to the clock give no deadline, and the watcher
+/// waits for frames instead of panicking.
+#[test]
+fn timeouts_past_the_clock_s_end_never_expire() {
+    let _clock = mock_time();
+    static HEALTH: LinkHealth<M, 1> = LinkHealth::new(
+        HealthConfig::new()
+            .heard(Heard::Manual)
+            .degraded_after(Duration::MAX)
+            .lost_after(Duration::MAX),
+    );
+    HEALTH.heard(0, Instant::now());
+    let mut watch = Watch::new(&HEALTH);
+    watch.poll();
+    MockDriver::get().advance(Duration::from_secs(3600));
+    watch.poll();
+    assert_eq!(HEALTH.state(), Health::Up);
+    assert!(watch.changes.is_empty(), "{:?}", watch.changes);
+    // Heard at the clock's end: no deadline either.
+    HEALTH.heard(0, Instant::MAX);
+    watch.poll();
+    assert_eq!(HEALTH.state(), Health::Up);
+}
+
 /// With a recovery rule of 3 frames at most 500 ms apart, single frames on a dying link
 /// do not make a Lost link Up.
 #[test]

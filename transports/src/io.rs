@@ -17,6 +17,9 @@ pub enum WriteFrameError<E> {
     Io(E),
     /// The writer accepted no byte (`Ok(0)`); part of the frame may have been written.
     WriteZero,
+    /// The writer reported more bytes written than it was given (it breaks the `Write`
+    /// contract); part of the frame may have been written.
+    Overrun,
 }
 
 impl<E: fmt::Debug> fmt::Display for WriteFrameError<E> {
@@ -25,6 +28,7 @@ impl<E: fmt::Debug> fmt::Display for WriteFrameError<E> {
             Self::Encode(e) => write!(f, "cannot encode frame: {e}"),
             Self::Io(e) => write!(f, "write error: {e:?}"),
             Self::WriteZero => f.write_str("writer accepted no byte"),
+            Self::Overrun => f.write_str("writer reported more bytes than it was given"),
         }
     }
 }
@@ -37,6 +41,7 @@ impl<E: embedded_io_async::Error> embedded_io_async::Error for WriteFrameError<E
             Self::Encode(_) => ErrorKind::InvalidInput,
             Self::Io(e) => e.kind(),
             Self::WriteZero => ErrorKind::WriteZero,
+            Self::Overrun => ErrorKind::InvalidData,
         }
     }
 }
@@ -77,7 +82,7 @@ where
     while !rest.is_empty() {
         match w.write(rest).await {
             Ok(0) => return Err(WriteFrameError::WriteZero),
-            Ok(n) => rest = rest.get(n..).unwrap_or_default(),
+            Ok(n) => rest = rest.get(n..).ok_or(WriteFrameError::Overrun)?,
             Err(e) => return Err(WriteFrameError::Io(e)),
         }
     }

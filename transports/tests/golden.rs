@@ -383,3 +383,28 @@ fn write_frame_handles_short_writes() {
         assert_eq!(r, Err(WriteFrameError::WriteZero));
     }
 }
+
+/// A writer that claims to have written more bytes than it was given.
+struct Boaster;
+
+impl embedded_io_async::ErrorType for Boaster {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_io_async::Write for Boaster {
+    async fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        Ok(buf.len() + 1)
+    }
+
+    async fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+#[test]
+fn write_frame_refuses_a_writer_that_reports_too_many_bytes() {
+    for t in all_transports() {
+        let r = embassy_futures::block_on(write_frame(&mut Boaster, &t, &META, &FIELDS));
+        assert_eq!(r, Err(WriteFrameError::Overrun));
+    }
+}
