@@ -16,6 +16,7 @@ use embassy_time::Instant;
 use pprz_default::messages::datalink::Ping;
 use pprz_example_app::AC_ID;
 use pprz_ground::escape;
+use pprz_ground::input::DATAGRAM_BUFFER;
 use pprz_ground::monitor::Monitor;
 use pprz_ground::secure::GroundSecure;
 use pprz_ground::set::RuntimeSet;
@@ -205,7 +206,8 @@ impl Ground<'_> {
         for socket in &self.sockets {
             let _ = socket.set_read_timeout(Some(StdDuration::from_millis(wait)));
         }
-        let mut buf = [0u8; 2048];
+        // Room for any datagram: a longer one would be cut short without an error.
+        let mut buf = vec![0u8; DATAGRAM_BUFFER];
         while !stop.load(Ordering::SeqCst) && start.elapsed().as_secs_f64() < wall_limit {
             let t = sim_now();
             self.clock = t;

@@ -219,6 +219,7 @@ pub fn figures(args: &Args, aircraft: &Aircraft) -> LinkFigures {
                 failsafes: failsafes(&ap_modes),
                 ap_modes,
                 silences,
+                events_omitted: r.map_or(0, |r| r.omitted),
             }
         })
         .collect();

@@ -179,6 +179,23 @@ pub struct AircraftRecord {
     /// Times the ground heard nothing from it for more than [`SILENCE_US`]: the last
     /// message before and the first after (µs).
     pub silences: Vec<(u64, u64)>,
+    /// Health changes, `ap_mode` changes and silences past the first [`MAX_EVENTS`] of
+    /// each, counted but not kept.
+    pub omitted: u64,
+}
+
+/// Events an aircraft's record keeps per list (health changes, `ap_mode` changes,
+/// silences): the first ones; later ones are counted in [`AircraftRecord::omitted`], so
+/// the record of a long run stays bounded.
+pub const MAX_EVENTS: usize = 10_000;
+
+/// Appends `event` to `list` if it holds fewer than [`MAX_EVENTS`], else counts it.
+fn keep<T>(list: &mut Vec<T>, omitted: &mut u64, event: T) {
+    if list.len() < MAX_EVENTS {
+        list.push(event);
+    } else {
+        *omitted = omitted.saturating_add(1);
+    }
 }
 
 /// A gap between two messages from an aircraft longer than this (µs) is a silence in
@@ -191,7 +208,7 @@ impl AircraftRecord {
         if let Some(last) = self.last_heard_us
             && now_us.saturating_sub(last) > SILENCE_US
         {
-            self.silences.push((last, now_us));
+            keep(&mut self.silences, &mut self.omitted, (last, now_us));
         }
         self.last_heard_us = Some(now_us);
     }
@@ -203,7 +220,11 @@ impl AircraftRecord {
             return;
         };
         if self.ap_modes.last().map(|&(_, m)| m) != Some(status.ap_mode) {
-            self.ap_modes.push((now_us, status.ap_mode));
+            keep(
+                &mut self.ap_modes,
+                &mut self.omitted,
+                (now_us, status.ap_mode),
+            );
         }
     }
 }
@@ -284,12 +305,9 @@ pub fn uplink(destination: u8, class_id: u8, msg_id: u8, payload: &[u8], now: In
 
 /// The link health of aircraft `ac` became `state` at `at`.
 pub fn health(ac: u8, at: Instant, state: Health) {
-    lock()
-        .aircraft
-        .entry(ac)
-        .or_default()
-        .health
-        .push((at.as_micros(), state));
+    let mut record = lock();
+    let r = record.aircraft.entry(ac).or_default();
+    keep(&mut r.health, &mut r.omitted, (at.as_micros(), state));
 }
 
 /// A message from `source` arrived at the ground end of the radio at `now`.
@@ -372,6 +390,18 @@ mod tests {
     use pprz_default::messages::telemetry::Attitude;
 
     use super::*;
+
+    #[test]
+    fn an_aircraft_keeps_its_first_events_and_counts_the_rest() {
+        let mut r = AircraftRecord::default();
+        // A silence of 2 s between each two messages.
+        for k in 0..=(MAX_EVENTS as u64 + 5) {
+            r.heard(k * 2 * SILENCE_US);
+        }
+        assert_eq!(r.silences.len(), MAX_EVENTS);
+        assert_eq!(r.silences[0], (0, 2 * SILENCE_US));
+        assert_eq!(r.omitted, 5);
+    }
 
     #[test]
     fn percentiles_are_nearest_rank() {

@@ -89,6 +89,9 @@ pub struct AircraftLink {
     pub failsafes: Vec<Failsafe>,
     /// Times the ground heard nothing from it for more than a second.
     pub silences: Vec<Silence>,
+    /// Health changes, `ap_mode` changes and silences past the first 10 000 of each:
+    /// counted, not listed (the record of a long run stays bounded).
+    pub events_omitted: u64,
 }
 
 /// An outage window.

@@ -486,6 +486,7 @@ fn summary_json_has_the_documented_fields() {
     assert_eq!(ac["ap_modes"][0]["ap_mode"], "NAV", "{ac:#}");
     assert_eq!(ac["failsafes"].as_array().map(Vec::len), Some(0), "{ac:#}");
     assert_eq!(ac["silences"].as_array().map(Vec::len), Some(0), "{ac:#}");
+    assert_eq!(uint(ac, "/events_omitted"), 0, "{ac:#}");
 }
 
 /// Issue 13, scenario a: a 57600-baud UART into a modem with a 2048-byte buffer that
