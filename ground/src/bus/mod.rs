@@ -10,6 +10,11 @@
 //! ([`Bus::next_request`]); beyond [`MAX_REQUESTS`] waiting, requests are dropped and
 //! counted ([`Bus::flooded`]).
 //!
+//! What a session takes from the network is bounded: Zenoh drops a message longer than
+//! [`MAX_MESSAGE`] before reassembling it, and a command or a settings query whose
+//! payload is longer than [`MAX_PAYLOAD`] is not copied nor queued: it comes to the
+//! loop as a [`Request::TooLarge`] (a query is answered with an error at once).
+//!
 //! ```no_run
 //! use pprz_ground::bus::{Bus, BusConfig};
 //! let mut bus = Bus::open(&BusConfig::client("tcp/127.0.0.1:7447")).unwrap();
@@ -34,6 +39,19 @@ pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
 
 /// Requests (commands, settings queries) waiting for the gateway's loop at most.
 pub const MAX_REQUESTS: usize = 1024;
+
+/// The longest payload of a command or a settings query taken: the longest JSON text
+/// the gateway reads ([`crate::json::MAX_TEXT`]).
+pub const MAX_PAYLOAD: usize = crate::json::MAX_TEXT;
+
+/// The longest message a session receives (Zenoh's `transport/link/rx/max_message_size`,
+/// 1 GiB by default): [`MAX_PAYLOAD`] with room for a key, an attachment and Zenoh's
+/// headers. Zenoh drops longer messages as their fragments come, without closing the
+/// session; shorter ones are not fragmented or are reassembled within this bound.
+pub const MAX_MESSAGE: usize = MAX_PAYLOAD + 16 * 1024;
+
+/// Bytes of its key kept for a request dropped for its size.
+const MAX_KEY_KEPT: usize = 256;
 
 /// Keys with a publisher of their own at most; further keys are put without one
 /// (a little slower, never refused).
@@ -75,7 +93,7 @@ impl BusConfig {
         }
     }
 
-    /// The Zenoh configuration.
+    /// The Zenoh configuration (messages received bounded by [`MAX_MESSAGE`]).
     ///
     /// # Errors
     /// An endpoint Zenoh refuses (its message).
@@ -93,6 +111,11 @@ impl BusConfig {
         let multicast = if self.multicast { "true" } else { "false" };
         set(&mut c, "scouting/multicast/enabled", multicast)?;
         set(&mut c, "scouting/gossip/enabled", multicast)?;
+        set(
+            &mut c,
+            "transport/link/rx/max_message_size",
+            &MAX_MESSAGE.to_string(),
+        )?;
         Ok(c)
     }
 }
@@ -106,8 +129,34 @@ pub enum Request {
         /// Its payload (JSON text, unchecked).
         payload: Vec<u8>,
     },
-    /// A query on `pprz/<ac_id>/settings/<name>`, to answer with [`Query::reply`].
+    /// A query on `pprz/<ac_id>/settings/<name>`, to answer with [`Query::reply`]; its
+    /// payload, if any, is at most [`MAX_PAYLOAD`] bytes.
     Setting(Query),
+    /// A command or a settings query whose payload is longer than [`MAX_PAYLOAD`]:
+    /// dropped without being copied (the query already answered with an error).
+    TooLarge {
+        /// Its key (its first 256 bytes at most).
+        key: String,
+        /// The payload's length in bytes.
+        len: usize,
+    },
+}
+
+impl Request {
+    /// The [`TooLarge`](Self::TooLarge) request for a payload of `len` bytes on `key`
+    /// when it is longer than [`MAX_PAYLOAD`]; `None` when it may be taken.
+    fn too_large(key: &str, len: usize) -> Option<Self> {
+        (len > MAX_PAYLOAD).then(|| {
+            let mut end = key.len().min(MAX_KEY_KEPT);
+            while !key.is_char_boundary(end) {
+                end -= 1;
+            }
+            Self::TooLarge {
+                key: key[..end].to_owned(),
+                len,
+            }
+        })
+    }
 }
 
 /// A session on the bus (module doc).
@@ -155,10 +204,14 @@ impl Bus {
             .session
             .declare_subscriber(keys::UPLINK_ALL)
             .callback(move |sample| {
-                let request = Request::Command {
-                    key: sample.key_expr().as_str().to_owned(),
-                    payload: sample.payload().to_bytes().into_owned(),
-                };
+                let key = sample.key_expr().as_str();
+                let request =
+                    Request::too_large(key, sample.payload().len()).unwrap_or_else(|| {
+                        Request::Command {
+                            key: key.to_owned(),
+                            payload: sample.payload().to_bytes().into_owned(),
+                        }
+                    });
                 queue(&tx, request, &flooded);
             })
             .wait()
@@ -166,7 +219,18 @@ impl Bus {
         let settings = self
             .session
             .declare_queryable(keys::SETTINGS_ALL)
-            .callback(move |query| queue(&tx2, Request::Setting(query), &flooded2))
+            .callback(move |query| {
+                let len = query.payload().map_or(0, ZBytes::len);
+                let request = match Request::too_large(query.key_expr().as_str(), len) {
+                    Some(refused) => {
+                        let why = too_large_message(len);
+                        let _ = query.reply_err(why).wait();
+                        refused
+                    }
+                    None => Request::Setting(query),
+                };
+                queue(&tx2, request, &flooded2);
+            })
             .wait()
             .map_err(|e| format!("zenoh: {e}"))?;
         self.requests = Some(rx);
@@ -263,6 +327,11 @@ impl Bus {
     pub fn session(&self) -> &Session {
         &self.session
     }
+}
+
+/// Why a payload of `len` bytes is refused.
+pub fn too_large_message(len: usize) -> String {
+    format!("{len} bytes of payload: at most {MAX_PAYLOAD}")
 }
 
 /// Queues a request for the loop, or counts it when the queue is full (or gone).

@@ -6,7 +6,9 @@
 //! the `messages.xml`. An `ac_id` field may be left out (the key's aircraft is used);
 //! given, it must be the key's. Each aircraft takes at most
 //! [`uplink_rate`](Service::with_uplink_rate) commands a second (a burst of as many);
-//! beyond, they are refused. Every refusal is counted by reason and published on
+//! beyond, they are refused (below one a second, one command goes every `1/rate`
+//! seconds). A command or a settings query whose payload is longer than
+//! [`MAX_PAYLOAD`](crate::bus::MAX_PAYLOAD) is refused unread. Every refusal is counted by reason and published on
 //! `pprz/gateway/<name>/refused` with the key and the reason.
 //!
 //! A settings query on `pprz/<ac_id>/settings/<name>` (a name of the settings files,
@@ -24,7 +26,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::query::Query;
 
 use super::{Arrival, Delivered, Gateway};
-use crate::bus::{Bus, Request, keys};
+use crate::bus::{self, Bus, MAX_PAYLOAD, Request, keys};
 use crate::cli::SettingArg;
 use crate::device::Uplink;
 use crate::json;
@@ -59,6 +61,9 @@ pub enum Refusal {
     BadSetting,
     /// More settings queries than [`MAX_PENDING_SETTINGS`] were waiting.
     TooManyQueries,
+    /// The payload of the command or the settings query is longer than
+    /// [`MAX_PAYLOAD`] bytes (dropped unread).
+    TooLarge,
 }
 
 impl Refusal {
@@ -73,6 +78,7 @@ impl Refusal {
             Self::NoLink => "no_link",
             Self::BadSetting => "bad_setting",
             Self::TooManyQueries => "too_many_queries",
+            Self::TooLarge => "too_large",
         }
     }
 }
@@ -80,10 +86,35 @@ impl Refusal {
 /// A result, or why the request is refused (the reason, and a message for the client).
 type Checked<T> = Result<T, (Refusal, String)>;
 
-/// A token bucket per aircraft.
+/// An aircraft's token bucket: `rate` tokens a second, at most `rate.max(1.0)` (a rate
+/// below one lets one command go every `1/rate` seconds).
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Bucket {
     tokens: f64,
     at: f64,
+}
+
+impl Bucket {
+    /// A full bucket at `now`.
+    fn full(now: f64, rate: f64) -> Self {
+        Self {
+            tokens: rate.max(1.0),
+            at: now,
+        }
+    }
+
+    /// Takes a token at `now` (a clock going back is taken as still): whether there
+    /// was one.
+    fn take(&mut self, now: f64, rate: f64) -> bool {
+        let elapsed = (now - self.at).max(0.0);
+        self.tokens = (self.tokens + elapsed * rate).min(rate.max(1.0));
+        self.at = self.at.max(now);
+        if self.tokens < 1.0 {
+            return false;
+        }
+        self.tokens -= 1.0;
+        true
+    }
 }
 
 /// A settings query waiting for its DL_VALUE.
@@ -231,12 +262,16 @@ impl Service {
                     }
                 }
                 Request::Setting(query) => self.setting_query(now, query),
+                Request::TooLarge { key, len } => {
+                    self.refuse(&key, Refusal::TooLarge, &bus::too_large_message(len));
+                }
             }
         }
     }
 
     /// One command: checked, framed and sent.
     fn command(&mut self, now: f64, key: &str, payload: &[u8]) -> Checked<()> {
+        check_length(payload)?;
         let (ac, name) = keys::parse_uplink(key).ok_or((
             Refusal::BadKey,
             "not pprz/<ac_id>/uplink/<MESSAGE>".to_owned(),
@@ -254,14 +289,8 @@ impl Service {
                 "the payload is not UTF-8 text".to_owned(),
             )
         })?;
-        let mut value: Value = if text.len() > json::MAX_TEXT {
-            return Err((
-                Refusal::BadFields,
-                format!("{} bytes of JSON: at most {}", text.len(), json::MAX_TEXT),
-            ));
-        } else {
-            serde_json::from_str(text).map_err(|e| (Refusal::BadFields, e.to_string()))?
-        };
+        let mut value: Value =
+            serde_json::from_str(text).map_err(|e| (Refusal::BadFields, e.to_string()))?;
         if desc.fields.iter().any(|f| f.name == "ac_id")
             && let Some(obj) = value.as_object_mut()
         {
@@ -312,19 +341,16 @@ impl Service {
     /// Takes a command token of aircraft `ac`.
     fn take_token(&mut self, now: f64, ac: u8) -> Checked<()> {
         let rate = self.rate;
-        let b = self.buckets.entry(ac).or_insert(Bucket {
-            tokens: rate,
-            at: now,
-        });
-        b.tokens = (b.tokens + (now - b.at).max(0.0) * rate).min(rate);
-        b.at = now;
-        if b.tokens < 1.0 {
+        let b = self
+            .buckets
+            .entry(ac)
+            .or_insert_with(|| Bucket::full(now, rate));
+        if !b.take(now, rate) {
             return Err((
                 Refusal::Rate,
                 format!("more than {rate} commands a second for aircraft {ac}"),
             ));
         }
-        b.tokens -= 1.0;
         Ok(())
     }
 
@@ -344,6 +370,8 @@ impl Service {
     /// A settings query: read, or set and wait for the DL_VALUE.
     fn setting_query(&mut self, now: f64, query: Query) {
         let key = query.key_expr().as_str().to_owned();
+        // (The bus refused longer payloads before queueing the query; the set below is
+        // checked again before it is parsed.)
         let payload = query.payload().map(|p| p.to_bytes().into_owned());
         let sets = payload.as_ref().is_some_and(|p| !p.is_empty());
         if sets && self.pending.len() >= MAX_PENDING_SETTINGS {
@@ -403,6 +431,7 @@ impl Service {
         let Some(payload) = payload.filter(|p| !p.is_empty()) else {
             return Ok(None);
         };
+        check_length(payload)?;
         let v: Value = serde_json::from_slice(payload).map_err(|e| bad(e.to_string()))?;
         let text = match v.get("value") {
             Some(Value::Number(n)) => n.to_string(),
@@ -578,6 +607,14 @@ impl Service {
     }
 }
 
+/// Refuses a payload longer than [`MAX_PAYLOAD`] (before it is read).
+fn check_length(payload: &[u8]) -> Checked<()> {
+    if payload.len() > MAX_PAYLOAD {
+        return Err((Refusal::TooLarge, bus::too_large_message(payload.len())));
+    }
+    Ok(())
+}
+
 /// Publishes a delivered message: its JSON on its key (when the set decodes it), its
 /// PPRZ v2 frame on the aircraft's frame key.
 fn publish(bus: &mut Bus, d: &Delivered<'_>) {
@@ -589,4 +626,55 @@ fn publish(bus: &mut Bus, d: &Delivered<'_>) {
         bus.put(&key, body, Some(d.received.to_vec()));
     }
     bus.put(&keys::frame(m.source), m.raw.to_vec(), None);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Bucket;
+
+    /// Whether each command at `times` goes, at `rate` a second.
+    fn goes(rate: f64, times: &[f64]) -> Vec<bool> {
+        let mut b = Bucket::full(times[0], rate);
+        times.iter().map(|&t| b.take(t, rate)).collect()
+    }
+
+    #[test]
+    fn below_one_a_second_one_command_goes_every_one_over_rate_seconds() {
+        let times = [
+            0.0, 0.1, 1.0, 1.9, 2.0, 2.5, 3.5, 4.0, 100.0, 100.0, 101.0, 102.0,
+        ];
+        let expect = [
+            true, false, false, false, true, false, false, true, true, false, false, true,
+        ];
+        assert_eq!(goes(0.5, &times), expect);
+        // The slowest rate the command line takes.
+        assert_eq!(
+            goes(0.1, &[0.0, 5.0, 10.0, 15.0, 20.0]),
+            [true, false, true, false, true]
+        );
+    }
+
+    #[test]
+    fn at_one_a_second_and_above_the_burst_is_the_rate() {
+        assert_eq!(goes(1.0, &[0.0, 0.0, 0.5, 1.0]), [true, false, false, true]);
+        let burst = goes(20.0, &[0.0; 21]);
+        assert_eq!(burst.iter().filter(|&&g| g).count(), 20);
+        assert!(!burst[20]);
+        // A twentieth of a second later, one more.
+        let mut b = Bucket::full(0.0, 20.0);
+        for _ in 0..20 {
+            assert!(b.take(0.0, 20.0));
+        }
+        assert!(b.take(0.05, 20.0));
+        assert!(!b.take(0.05, 20.0));
+    }
+
+    #[test]
+    fn a_clock_going_back_gives_no_tokens() {
+        let mut b = Bucket::full(10.0, 0.5);
+        assert!(b.take(10.0, 0.5));
+        assert!(!b.take(5.0, 0.5));
+        assert!(!b.take(11.0, 0.5));
+        assert!(b.take(12.0, 0.5));
+    }
 }
