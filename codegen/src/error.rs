@@ -1,7 +1,12 @@
 //! Generator errors: every problem names the file, line and column, and the message and
 //! field it is about.
+//!
+//! Their `Display` escapes the text they quote from the inputs (see [`crate::escape`]):
+//! a diagnostic is printed as it is, never with a raw control character.
 
-use std::fmt;
+use std::fmt::{self, Write as _};
+
+use crate::escape::Escaping;
 
 /// Where a problem is and what it is about.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -296,6 +301,13 @@ pub enum SettingProblem {
 
 impl fmt::Display for SettingProblem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.write(&mut Escaping(f))
+    }
+}
+
+impl SettingProblem {
+    /// The text, unescaped (`Display::fmt` escapes it).
+    fn write(&self, f: &mut dyn fmt::Write) -> fmt::Result {
         match self {
             Self::DuplicateAttribute {
                 attribute,
@@ -343,15 +355,13 @@ impl fmt::Display for SettingProblem {
                 f,
                 "type `{ty}` cannot be stored: a persistent setting is bool, int8, int16, int32, uint8, uint16, uint32 or float"
             ),
-            _ => self.fmt_warning(f),
+            _ => self.write_warning(f),
         }
     }
-}
 
-impl SettingProblem {
     /// The text of the kinds that are warnings; the others are written by
-    /// `Display::fmt`.
-    fn fmt_warning(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    /// [`write`](Self::write).
+    fn write_warning(&self, f: &mut dyn fmt::Write) -> fmt::Result {
         match self {
             Self::MissingSpace { attribute } => write!(
                 f,
@@ -398,6 +408,13 @@ impl SettingProblem {
 
 impl fmt::Display for ErrorKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.write(&mut Escaping(f))
+    }
+}
+
+impl ErrorKind {
+    /// The text, unescaped (`Display::fmt` escapes it).
+    fn write(&self, f: &mut dyn fmt::Write) -> fmt::Result {
         match self {
             Self::Io(e) => write!(f, "cannot read file: {e}"),
             Self::Write(e) => write!(f, "cannot write output file: {e}"),
@@ -407,7 +424,7 @@ impl fmt::Display for ErrorKind {
             | Self::NestedEntity { .. }
             | Self::TooManyEntities { .. }
             | Self::TooManyEntityReferences { .. }
-            | Self::EntityExpansionTooLarge { .. } => self.fmt_limit(f),
+            | Self::EntityExpansionTooLarge { .. } => self.write_limit(f),
             Self::Xml(e) => write!(f, "malformed XML: {e}"),
             Self::UnexpectedElement { found, expected } => {
                 write!(f, "unexpected element <{found}>, expected {expected}")
@@ -473,18 +490,18 @@ impl fmt::Display for ErrorKind {
             Self::UnknownSelection(n) => write!(f, "selected `{n}` does not exist in the input"),
             Self::Telemetry(e) => f.write_str(e),
             Self::NoInput(what) => f.write_str(what),
-            Self::Setting { var, problem } => match var {
-                Some(var) => write!(f, "setting `{var}`: {problem}"),
-                None => write!(f, "{problem}"),
-            },
+            Self::Setting { var, problem } => {
+                if let Some(var) = var {
+                    write!(f, "setting `{var}`: ")?;
+                }
+                problem.write(f)
+            }
         }
     }
-}
 
-impl ErrorKind {
     /// The text of a kind that reports an input beyond one of the [`crate::limits`];
-    /// the other kinds are written by `Display::fmt`.
-    fn fmt_limit(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    /// the other kinds are written by [`write`](Self::write).
+    fn write_limit(&self, f: &mut dyn fmt::Write) -> fmt::Result {
         match self {
             Self::InputTooLarge { size, max } => write!(
                 f,
@@ -524,7 +541,8 @@ impl ErrorKind {
 
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
+        let f = &mut Escaping(f);
+        f.write_str(&self.file)?;
         if self.line > 0 {
             write!(f, ":{}", self.line)?;
             if self.column > 0 {
@@ -539,7 +557,7 @@ impl fmt::Display for Diagnostic {
             }
             f.write_str(": ")?;
         }
-        write!(f, "{}", self.kind)
+        self.kind.write(f)
     }
 }
 

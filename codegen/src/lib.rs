@@ -228,6 +228,7 @@
 
 mod emit;
 mod error;
+pub mod escape;
 pub mod limits;
 pub mod model;
 mod names;
@@ -240,6 +241,7 @@ use std::path::{Path, PathBuf};
 
 pub use error::{Diagnostic, Error, ErrorKind, SettingProblem};
 pub use model::{Class, FieldDef, MessageDef, Protocol, Units};
+pub use names::is_rust_path;
 pub use settings::{SettingDef, SettingsSet};
 pub use telemetry::{Schedule, ScheduleOptions, TelemetryConfig};
 

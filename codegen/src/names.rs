@@ -27,6 +27,46 @@ pub fn is_identifier(name: &str) -> bool {
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
+/// Whether `path` can name a crate or module in the generated code (the crate path
+/// options, e.g. [`Generator::runtime_crate`](crate::Generator::runtime_crate)): an
+/// optional leading `::`, then identifiers (ASCII letters, digits and `_`, not
+/// starting with a digit, not a keyword) separated by `::`; without the leading `::`,
+/// the first may be `crate`, `self` or `super`, and `super` may follow `self` or
+/// `super` at the start.
+///
+/// ```
+/// use pprz_codegen::is_rust_path;
+/// for ok in ["pprz_messages", "::my_crate::rt", "crate::rt", "super::super::m"] {
+///     assert!(is_rust_path(ok), "{ok}");
+/// }
+/// for bad in ["", "a b", "a\nb", "a::", "::", "1x", "::crate", "a::self", "a::fn"] {
+///     assert!(!is_rust_path(bad), "{bad:?}");
+/// }
+/// ```
+pub fn is_rust_path(path: &str) -> bool {
+    let (absolute, rest) = match path.strip_prefix("::") {
+        Some(rest) => (true, rest),
+        None => (false, path),
+    };
+    // Whether `self` or `super` may come: only at the start of a relative path.
+    let mut at_start = !absolute;
+    let mut first = true;
+    for segment in rest.split("::") {
+        let ok = match segment {
+            "crate" | "self" => first && at_start,
+            "super" => at_start,
+            "_" | "Self" => false,
+            _ => is_identifier(segment) && !KEYWORDS.contains(&segment),
+        };
+        if !ok {
+            return false;
+        }
+        at_start = at_start && matches!(segment, "self" | "super");
+        first = false;
+    }
+    true
+}
+
 /// Splits a name into words at `_` and at lower-to-upper case changes
 /// (`GPS_INT` -> `GPS`, `INT`; `asAirsFilt` -> `as`, `Airs`, `Filt`).
 fn words(name: &str) -> Vec<String> {
@@ -199,5 +239,50 @@ mod tests {
         assert!(snake_name_problem("_").is_some() && snake_name_problem("___").is_some());
         assert_eq!(snake_name_problem("_1"), None);
         assert_eq!(snake_name_problem("self"), None);
+    }
+
+    #[test]
+    fn rust_paths() {
+        for ok in [
+            "pprz_messages",
+            "::pprz_messages",
+            "::my_crate::rt",
+            "crate",
+            "crate::rt",
+            "self::m",
+            "super",
+            "super::super::m",
+            "self::super::m",
+            "_x::Y9",
+        ] {
+            assert!(is_rust_path(ok), "{ok}");
+        }
+        for bad in [
+            "",
+            "::",
+            "a b",
+            "a\nb",
+            "a::",
+            "::a::",
+            "1x",
+            "a::1x",
+            "a:::b",
+            "a:b",
+            "::crate",
+            "::self",
+            "a::crate",
+            "a::super",
+            "crate::super",
+            "crate::crate",
+            "fn",
+            "a::type",
+            "Self",
+            "_",
+            "r#type",
+            "a\u{1b}",
+            "é",
+        ] {
+            assert!(!is_rust_path(bad), "{bad:?}");
+        }
     }
 }

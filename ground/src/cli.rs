@@ -181,7 +181,9 @@ pub struct Args {
     #[arg(long)]
     pub lines: bool,
     /// Record every received frame to this PPRZLOG file (replay it with --file and
-    /// --transport pprzlog). It must not be one of the inputs.
+    /// --transport pprzlog). It must not be one of the inputs. Its time stamps count
+    /// 100 µs in 32 bits, as PPRZLOG does: they wrap to 0 every 429 497 s (about 5 days)
+    /// of recording, and a replay unwraps them.
     #[arg(long, value_name = "PATH")]
     pub record: Option<PathBuf>,
     /// Serve the decoded telemetry to Foxglove or Lichtblick over the Foxglove WebSocket

@@ -25,20 +25,9 @@
 use std::fmt::Write as _;
 
 /// Whether `c` must not reach a terminal or a log as is: control characters (C0, DEL,
-/// C1) and the invisible formatting characters that reorder or hide text (bidirectional
-/// overrides and isolates, zero-width characters, line and paragraph separators, the
-/// byte order mark).
-pub fn is_unsafe(c: char) -> bool {
-    c.is_control()
-        || matches!(
-            c,
-            '\u{200B}'..='\u{200F}'
-                | '\u{2028}'..='\u{202E}'
-                | '\u{2060}'..='\u{206F}'
-                | '\u{FEFF}'
-                | '\u{FFF9}'..='\u{FFFB}'
-        )
-}
+/// C1) and the invisible formatting characters that reorder or hide text (the same set
+/// as the code generator's diagnostics escape).
+pub use pprz_codegen::escape::is_unsafe;
 
 /// Whether `c` separates the parts of a `--lines` line or of a field
 /// (`name=value [unit]`, arrays `1,2`, labels `3(ON)`, text `"..."`).

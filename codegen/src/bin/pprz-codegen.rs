@@ -2,12 +2,19 @@
 //! and list one; with `--telemetry`, the same for the periodic telemetry schedule of a
 //! `telemetry.xml` resolved against it; with `--settings`, the same for the settings
 //! table of `settings.xml` files (no `messages.xml` then).
+//!
+//! Everything printed that comes from the inputs (names, types, file names) has its
+//! control characters escaped: the diagnostics by their own `Display`, the rest with
+//! [`pprz_codegen::escape::text`].
+//!
+//! Exit status: 0 on success, 1 when an input has errors or the output cannot be
+//! written, 2 for invalid options.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Parser;
-use pprz_codegen::{Generator, Schedule, SettingsSet};
+use pprz_codegen::{Generator, Schedule, SettingsSet, escape, is_rust_path};
 
 /// Generate Rust message types from a Paparazzi messages.xml (or, with --telemetry, the
 /// periodic telemetry schedule tables of a telemetry.xml; with --settings, the settings
@@ -25,10 +32,12 @@ struct Args {
         "telemetry_class", "tick_frequency", "stagger",
     ])]
     settings: Vec<PathBuf>,
-    /// Path of the pprz-telemetry crate in the generated settings code (with --settings).
+    /// Path of the pprz-telemetry crate in the generated settings code (with --settings):
+    /// a Rust path such as `::pprz_telemetry` or `crate::tm`.
     #[arg(long, default_value = "::pprz_telemetry", conflicts_with = "messages")]
     telemetry_crate: String,
-    /// Path of the embassy-sync crate in the generated settings code (with --settings).
+    /// Path of the embassy-sync crate in the generated settings code (with --settings):
+    /// a Rust path.
     #[arg(long, default_value = "::embassy_sync", conflicts_with = "messages")]
     embassy_sync_crate: String,
     /// Only these classes (name or id); repeatable.
@@ -41,7 +50,8 @@ struct Args {
     #[arg(long)]
     units: Option<PathBuf>,
     /// Path of the pprz-messages crate in the generated code (message types and, with
-    /// --telemetry, schedule tables; with --settings, setting descriptions).
+    /// --telemetry, schedule tables; with --settings, setting descriptions): a Rust path
+    /// such as `::pprz_messages` or `crate`.
     #[arg(long, default_value = "::pprz_messages")]
     runtime_crate: String,
     /// Priority of messages without a `priority` attribute.
@@ -77,6 +87,34 @@ struct Args {
     stagger: f64,
 }
 
+impl Args {
+    /// Checks the crate path options, which are pasted into the generated code: each
+    /// must be a Rust path ([`is_rust_path`]).
+    ///
+    /// # Errors
+    /// The message for the user, naming the option and its value (escaped).
+    fn check_crate_paths(&self) -> Result<(), String> {
+        for (option, value) in [
+            ("--runtime-crate", &self.runtime_crate),
+            ("--telemetry-crate", &self.telemetry_crate),
+            ("--embassy-sync-crate", &self.embassy_sync_crate),
+        ] {
+            if !is_rust_path(value) {
+                return Err(format!(
+                    "error: {option} `{}` is not a Rust path: give identifiers (letters, digits and `_`, not starting with a digit) separated by `::`, optionally after a leading `::` or starting with `crate`, `self` or `super` (e.g. `::pprz_messages`, `crate::rt`)",
+                    escape::text(value)
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A file name given on the command line, for a message: control characters escaped.
+fn shown(path: &Path) -> String {
+    escape::text(&path.display().to_string())
+}
+
 fn list_schedule(s: &Schedule) {
     println!(
         "{:<10} {:<16} {:<28} {:>4} {:>4} {:>8} {:>7}  phase",
@@ -91,9 +129,9 @@ fn list_schedule(s: &Schedule) {
                 };
                 println!(
                     "{:<10} {:<16} {:<28} {:>4} {:>4} {:>8} {:>7}  {phase}",
-                    p.name,
-                    m.name,
-                    msg.name,
+                    escape::text(&p.name),
+                    escape::text(&m.name),
+                    escape::text(&msg.name),
                     msg.class_id,
                     msg.msg_id,
                     msg.period_s,
@@ -121,7 +159,7 @@ fn telemetry(args: &Args, generator: Generator) -> Result<(), pprz_codegen::Erro
         }
         println!(
             "{}: {} processes, {} modes, {} periodic messages at {} Hz: ok",
-            file.display(),
+            shown(file),
             s.processes.len(),
             s.mode_count(),
             s.entry_count(),
@@ -145,17 +183,7 @@ fn telemetry(args: &Args, generator: Generator) -> Result<(), pprz_codegen::Erro
 /// per setting), or `-` when empty.
 fn or_dash(s: Option<&str>) -> String {
     match s.filter(|s| !s.is_empty()) {
-        Some(s) => s
-            .chars()
-            .flat_map(|c| {
-                let escaped: Vec<char> = if c.is_control() {
-                    c.escape_default().collect()
-                } else {
-                    vec![c]
-                };
-                escaped
-            })
-            .collect(),
+        Some(s) => escape::text(s),
         None => "-".to_owned(),
     }
 }
@@ -250,6 +278,10 @@ fn settings(args: &Args) -> Result<(), pprz_codegen::Error> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    if let Err(e) = args.check_crate_paths() {
+        eprintln!("{e}");
+        return ExitCode::from(2);
+    }
     let Some(messages) = &args.messages else {
         return finish(settings(&args));
     };
@@ -279,9 +311,9 @@ fn main() -> ExitCode {
                         };
                         println!(
                             "{:<10} {:>3}  {:<32} {:>8}  {size}",
-                            c.name,
+                            escape::text(&c.name),
                             m.id,
-                            m.name,
+                            escape::text(&m.name),
                             m.priority.unwrap_or(args.default_priority)
                         );
                     }
@@ -289,7 +321,7 @@ fn main() -> ExitCode {
             }
             println!(
                 "{}: {} classes, {} messages: ok",
-                messages.display(),
+                shown(messages),
                 p.classes.len(),
                 p.message_count()
             );
@@ -306,6 +338,7 @@ fn finish(result: Result<(), pprz_codegen::Error>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            // Escaped by the diagnostics' `Display`.
             eprintln!("{e}");
             ExitCode::FAILURE
         }

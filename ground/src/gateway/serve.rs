@@ -8,8 +8,8 @@
 //! [`uplink_rate`](Service::with_uplink_rate) commands a second (a burst of as many);
 //! beyond, they are refused (below one a second, one command goes every `1/rate`
 //! seconds). A command or a settings query whose payload is longer than
-//! [`MAX_PAYLOAD`](crate::bus::MAX_PAYLOAD) is refused unread. Every refusal is counted by reason and published on
-//! `pprz/gateway/<name>/refused` with the key and the reason.
+//! [`MAX_PAYLOAD`] is refused unread. Every refusal is counted by reason and published
+//! on `pprz/gateway/<name>/refused` with the key and the reason.
 //!
 //! A settings query on `pprz/<ac_id>/settings/<name>` (a name of the settings files,
 //! or an index) is answered with the setting's latest value from the aircraft's

@@ -8,7 +8,7 @@ use pprz_transports::{AnyTransport, BROADCAST_ID, Framing, GROUND_ID, PprzV2};
 
 use super::events::Logged;
 use super::state::{Aircraft, count_message};
-use super::{Event, MAX_AIRCRAFT, MAX_SECURE_OUT, Monitor, Notice, REJECT_COALESCE};
+use super::{Event, LogClock, MAX_AIRCRAFT, MAX_SECURE_OUT, Monitor, Notice, REJECT_COALESCE};
 use crate::format;
 use crate::input::Drops;
 use crate::secure::{GroundSecure, HandshakeEvent, Incoming, SecureSetupError, SecureStatus};
@@ -84,7 +84,7 @@ impl Monitor {
         self.byte_rate.add(now, bytes.len() as u64);
         let mut input = bytes;
         while let Some(frame) = self.decoder.feed(&mut input) {
-            let received = Received::of(&frame);
+            let received = Received::of(&frame, &mut self.log_clock);
             self.deliver(now, received, &mut on_message);
         }
     }
@@ -118,7 +118,7 @@ impl Monitor {
     pub fn flush(&mut self, now: f64, mut on_message: impl FnMut(&Decoded<'_>)) {
         self.advance(now);
         while let Some(frame) = self.decoder.flush() {
-            let received = Received::of(&frame);
+            let received = Received::of(&frame, &mut self.log_clock);
             self.deliver(now, received, &mut on_message);
         }
     }
@@ -362,15 +362,13 @@ struct Received {
 }
 
 impl Received {
-    fn of(frame: &pprz_transports::Frame<'_>) -> Self {
+    fn of(frame: &pprz_transports::Frame<'_>, clock: &mut LogClock) -> Self {
         Self {
             header: Header::of(frame),
             payload: frame.payload().to_vec(),
             data: frame.data().to_vec(),
             raw: frame.raw().to_vec(),
-            log_time: frame
-                .timestamp()
-                .map(|ticks| std::time::Duration::from_micros(u64::from(ticks) * 100)),
+            log_time: frame.timestamp().map(|ticks| clock.time(ticks)),
         }
     }
 }

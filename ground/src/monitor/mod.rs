@@ -175,6 +175,32 @@ pub struct Monitor {
     table: Option<Arc<SettingsTable>>,
     /// Whether messages get their text forms (the line, the latest values).
     text: bool,
+    /// PPRZLOG time stamps, unwrapped.
+    log_clock: LogClock,
+}
+
+/// PPRZLOG time stamps unwrapped: the format counts 100 µs ticks in 32 bits, which wrap
+/// every 429 497 s (about 5 days) of recording. A stamp more than half the range below
+/// the previous one is a wrap (a smaller step back is records out of order).
+#[derive(Debug, Default)]
+struct LogClock {
+    last: Option<u32>,
+    wraps: u64,
+}
+
+impl LogClock {
+    /// The time of a record stamped `ticks`, from the start of the recording.
+    fn time(&mut self, ticks: u32) -> std::time::Duration {
+        if self.last.is_some_and(|l| ticks < l && l - ticks >= 1 << 31) {
+            self.wraps = self.wraps.saturating_add(1);
+        }
+        self.last = Some(ticks);
+        let ticks = self
+            .wraps
+            .saturating_mul(1 << 32)
+            .saturating_add(u64::from(ticks));
+        std::time::Duration::from_micros(ticks.saturating_mul(100))
+    }
 }
 
 impl Monitor {
@@ -209,6 +235,7 @@ impl Monitor {
             clock: 0.0,
             table: None,
             text: true,
+            log_clock: LogClock::default(),
         }
     }
 

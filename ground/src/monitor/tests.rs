@@ -623,3 +623,27 @@ fn without_text_a_monitor_counts_the_same_and_formats_nothing() {
     assert!(quiet.messages().values().all(|m| m.last.is_empty()));
     assert!(!quiet.has_text() && plain.has_text());
 }
+
+#[test]
+fn pprzlog_time_stamps_are_unwrapped() {
+    let mut clock = super::LogClock::default();
+    let at = |ticks: u64| std::time::Duration::from_micros(ticks * 100);
+    let wrap = 1u64 << 32;
+    let times: Vec<_> = [100, u32::MAX - 5, 10, 20, 15, u32::MAX, 3]
+        .into_iter()
+        .map(|t| clock.time(t))
+        .collect();
+    assert_eq!(
+        times,
+        [
+            at(100),
+            at(u64::from(u32::MAX) - 5),
+            at(wrap + 10),
+            at(wrap + 20),
+            // A small step back is a record out of order, not a wrap.
+            at(wrap + 15),
+            at(wrap + u64::from(u32::MAX)),
+            at(2 * wrap + 3),
+        ]
+    );
+}

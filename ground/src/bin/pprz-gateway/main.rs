@@ -15,6 +15,7 @@ use clap::Parser;
 use pprz_ground::bus::Bus;
 use pprz_ground::device::Source;
 use pprz_ground::device::Uplink;
+use pprz_ground::escape;
 use pprz_ground::gateway::options::GatewayArgs;
 use pprz_ground::gateway::serve::Service;
 use pprz_ground::gateway::{Gateway, GatewayLink};
@@ -111,6 +112,8 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // The diagnostics of the messages and settings files escape the text they quote
+    // (their `Display`, see `pprz_codegen::escape`): printed as they are.
     let set = match RuntimeSet::load(&args.link.messages) {
         Ok(s) => s,
         Err(e) => {
@@ -127,7 +130,9 @@ fn main() -> ExitCode {
         match SettingsTable::load(&args.settings_files) {
             Ok(t) => Some(Arc::new(t)),
             Err(e) => {
-                eprintln!("pprz-gateway: {e}");
+                for d in e.diagnostics() {
+                    eprintln!("pprz-gateway: {d}");
+                }
                 return ExitCode::from(2);
             }
         }
@@ -135,7 +140,7 @@ fn main() -> ExitCode {
     match run(&args, set, table, &links) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("pprz-gateway: {e}");
+            eprintln!("pprz-gateway: {}", escape::lines(&e));
             ExitCode::FAILURE
         }
     }

@@ -301,16 +301,18 @@ fn prepare(args: &Args) -> Result<Prepared, String> {
     let table = if args.settings_files.is_empty() {
         None
     } else {
+        // The diagnostics escape the text they quote (their `Display`): printed as
+        // they are, not escaped twice.
         let table = SettingsTable::load(&args.settings_files).map_err(|e| {
             let lines: Vec<String> = e
                 .diagnostics()
                 .iter()
-                .map(|d| format!("error: {}", escape::lines(&d.to_string())))
+                .map(|d| format!("error: {d}"))
                 .collect();
             lines.join("\n")
         })?;
         for w in table.warnings() {
-            eprintln!("warning: {}", escape::lines(&w.to_string()));
+            eprintln!("warning: {w}");
         }
         Some(Arc::new(table))
     };
@@ -351,7 +353,14 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    match run(&args, secure, prepared) {
+    let set = match load_set(&args.link.messages) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match run(&args, set, secure, prepared) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", escape::lines(&e));
@@ -360,8 +369,12 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<(), String> {
-    let set = load_set(&args.link.messages)?;
+fn run(
+    args: &Args,
+    set: RuntimeSet,
+    secure: Option<GroundSecure>,
+    prepared: Prepared,
+) -> Result<(), String> {
     let transport: AnyTransport = args.link.transport.any();
     let (source, uplink_sink, mut inputs) = open_input(args, set)?;
     let recorder = open_recorder(args, &mut inputs, transport)?;
@@ -417,7 +430,7 @@ fn run(args: &Args, secure: Option<GroundSecure>, prepared: Prepared) -> Result<
 }
 
 /// Reads the message set; a failure is one line per problem, with the hint to give
-/// `--messages`.
+/// `--messages` (the diagnostics escape the text they quote: printed as they are).
 fn load_set(path: &Path) -> Result<RuntimeSet, String> {
     RuntimeSet::load(path).map_err(|e| {
         let problems: Vec<String> = e.diagnostics().iter().map(ToString::to_string).collect();

@@ -7,6 +7,9 @@
 //!   opened *before* it is truncated, so a refused file is left untouched.
 //! * [`Recorder`] keeps the first write error, stops writing, and reports it; its
 //!   [`finish`](Recorder::finish) flushes and reports a flush error too.
+//! * Time stamps, 100 µs ticks since the start in 32 bits, wrap to 0 after 2^32 ticks
+//!   (429 496.7296 s, about 5 days) instead of sticking at their largest value: no
+//!   record loses its time, a reader adds 2^32 ticks at each wrap ([`log_stamp`]).
 
 use std::fmt;
 use std::fs::File;
@@ -156,8 +159,17 @@ pub fn open_recording(path: &Path, inputs: &[(FileId, String)]) -> Result<File, 
     Ok(file)
 }
 
-/// Writes received frames as PPRZLOG records (time stamps in 100 µs ticks) and keeps
-/// the first error.
+/// The PPRZLOG time stamp of `now` seconds since the start: 100 µs ticks, modulo 2^32
+/// (a recording longer than 429 496.7296 s wraps, as the format does, rather than
+/// giving every later record the same, largest stamp). Negative or NaN times stamp 0.
+pub fn log_stamp(now: f64) -> u32 {
+    // `as u64` saturates (NaN to 0); a year of ticks is far below `u64::MAX`.
+    let ticks = (now * 10_000.0) as u64;
+    (ticks & u64::from(u32::MAX)) as u32
+}
+
+/// Writes received frames as PPRZLOG records (time stamps in 100 µs ticks, see
+/// [`log_stamp`]) and keeps the first error.
 #[derive(Debug)]
 pub struct Recorder<W: Write> {
     out: W,
@@ -203,7 +215,7 @@ impl<W: Write> Recorder<W> {
             frame.msg_id(),
         )
         .with_component(frame.component());
-        let meta = TxMeta::new(header).at((now * 10_000.0) as u32);
+        let meta = TxMeta::new(header).at(log_stamp(now));
         let Ok(n) = self.log.encode(&meta, frame.payload(), &mut self.buf) else {
             return Ok(());
         };
@@ -308,6 +320,35 @@ mod tests {
             (7, 2, &[1, 2, 3][..])
         );
         assert_eq!(rec.timestamp(), Some(15_000));
+    }
+
+    /// Issue: past 429 497 s every record got the stamp `u32::MAX`: the time of days of
+    /// a long recording was lost. The stamps wrap instead, as the format does.
+    #[test]
+    fn stamps_wrap_after_2_pow_32_ticks() {
+        // Times whose ticks are exact in an `f64`.
+        assert_eq!(log_stamp(0.0), 0);
+        assert_eq!(log_stamp(1.5), 15_000);
+        assert_eq!(log_stamp(429_496.0), 4_294_960_000);
+        // 4 295 000 000 ticks - 2^32.
+        assert_eq!(log_stamp(429_500.0), 32_704);
+        let year = pprz_ground::cli::MAX_DURATION;
+        assert_eq!(
+            u64::from(log_stamp(year)),
+            (year as u64 * 10_000) % (1 << 32)
+        );
+        assert_eq!((log_stamp(-1.0), log_stamp(f64::NAN)), (0, 0));
+        let t = AnyTransport::from(PprzV2::new());
+        let mut r = Recorder::new(Vec::new(), t);
+        r.record(1.5, &frame()).unwrap();
+        r.record(900_000.5, &frame()).unwrap();
+        let log = r.finish().unwrap();
+        let pprzlog = AnyTransport::from(PprzLog::TELEMETRY);
+        let (first, n) = pprzlog.parse(&log).unwrap();
+        assert_eq!(first.timestamp(), Some(15_000));
+        let (second, _) = pprzlog.parse(&log[n..]).unwrap();
+        // 9 000 005 000 ticks - 2 x 2^32: wrapped twice.
+        assert_eq!(second.timestamp(), Some(410_070_408));
     }
 
     fn temp_dir(name: &str) -> PathBuf {
