@@ -5,38 +5,11 @@
 
 mod common;
 
-use std::path::PathBuf;
 use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use common::{MESSAGES, monitor, run};
 
-/// A file of the test's own in the temporary directory, removed when dropped.
-struct Temp(PathBuf);
-
-/// Files made so far: each has a name of its own (tests run at the same time).
-static MADE: AtomicUsize = AtomicUsize::new(0);
-
-impl Temp {
-    fn new(name: &str, content: &str) -> Self {
-        let name = format!("{}-{name}", MADE.fetch_add(1, Ordering::Relaxed));
-        let dir = std::env::temp_dir().join(format!("pprz-ground-cli-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join(name);
-        std::fs::write(&path, content).unwrap();
-        Self(path)
-    }
-
-    fn arg(&self) -> &str {
-        self.0.to_str().unwrap()
-    }
-}
-
-impl Drop for Temp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
+type Temp = pprz_test_support::temp::TempFile;
 
 /// A `messages.xml` named with an ESC, with a U+009B in a message name and in types.
 fn hostile_messages() -> Temp {

@@ -6,11 +6,13 @@
 //! whether its absence (or that of any other precondition) skips a test or fails it.
 //! [`rng`] is the deterministic generator of fixed-seed tests, fuzz targets and
 //! benchmark workloads. [`chunked`] feeds a decoder its input in chunks. [`viewer_tools`] finds the independent
-//! MCAP and Foxglove readers the viewer tests use.
+//! MCAP and Foxglove readers the viewer tests use. [`temp::TempFile`] is a file of a
+//! test's own, removed when dropped.
 
 #![forbid(unsafe_code)]
 
 pub mod chunked;
 pub mod reference;
 pub mod rng;
+pub mod temp;
 pub mod viewer_tools;
