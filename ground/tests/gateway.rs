@@ -863,7 +863,7 @@ fn nonsense_command_lines_exit_with_status_2_and_a_message() {
         cmd
     };
     let link = "a=udp:127.0.0.1:9,uplink=127.0.0.1:10";
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["--dedup-window", "0"], "window 0 is out of range"),
         (&["--dedup-window", "nan"], "out of range"),
         (&["--uplink-rate", "-1"], "rate -1 is out of range"),
@@ -871,11 +871,21 @@ fn nonsense_command_lines_exit_with_status_2_and_a_message() {
         (&["--link", link, "--link", link], "two links are named a"),
         (&["--link", link, "--udp", "127.0.0.1:11"], "not both"),
         (&["--name", "a/b"], "gateway name"),
+        // Checked and printed escaped, never echoed raw.
+        (
+            &["--zenoh-listen", "tcp/\u{1b}[2J:1"],
+            "not a Zenoh TCP endpoint",
+        ),
+        (
+            &["--zenoh-connect", "udp/127.0.0.1:7447"],
+            "not a Zenoh TCP endpoint",
+        ),
     ];
     for (args, message) in cases {
         let (code, out, err) = run(gateway().args(args));
         assert_eq!(code, Some(2), "{args:?}: {err}");
         assert!(err.contains(message), "{args:?}: {err}");
+        assert!(!err.contains('\u{1b}'), "{args:?}: {err}");
         assert!(out.is_empty(), "{args:?}: {out}");
     }
 }

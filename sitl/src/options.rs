@@ -124,7 +124,7 @@ pub struct Args {
     /// multicast scouting off), publishing `pprz/<ac>/telemetry/<MSG>` and taking
     /// commands on `pprz/<ac>/uplink/<MSG>`. Needs the in-process ground, PPRZ v2 and no
     /// `--secure`.
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = cli::parse_zenoh_endpoint)]
     pub zenoh: Option<String>,
     /// Seed of the simulated radios' errors (bit errors, XBee failures): each radio's
     /// seed is derived from it and the radio's index, so runs are reproducible and the

@@ -214,6 +214,7 @@ fn nonsense_options_are_refused() {
         ("--fleet", "33"),
         ("--bit-error-rate", "0.5"),
         ("--bit-error-rate", "NaN"),
+        ("--zenoh", "udp/127.0.0.1:7447"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_sitl"))
             .args(["--headless", &format!("{option}={value}")])

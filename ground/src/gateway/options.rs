@@ -87,10 +87,10 @@ pub struct GatewayArgs {
     #[arg(long, default_value = "gw", value_parser = parse_name)]
     pub name: String,
     /// Zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:7447).
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = crate::cli::parse_zenoh_endpoint)]
     pub zenoh_listen: Vec<String>,
     /// Zenoh endpoint to connect to: a zenohd router or another peer (repeatable).
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = crate::cli::parse_zenoh_endpoint)]
     pub zenoh_connect: Vec<String>,
     /// Find other Zenoh peers by multicast scouting on the local network (off by
     /// default: only the endpoints given are used, nothing leaves the machine
