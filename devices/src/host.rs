@@ -33,8 +33,9 @@
 //! # Datagrams (UDP)
 //!
 //! Each `write` call sends one datagram of at most [`HostConfig::max_datagram`] bytes
-//! (the telemetry writer hands each frame to one `write`, so one frame per datagram). Received datagrams are concatenated into the byte stream `read`
-//! returns (frames are self-delimiting).
+//! (the telemetry writer hands each frame to one `write`, so one frame per datagram).
+//! Received datagrams are concatenated into the byte stream `read` returns (frames are
+//! self-delimiting).
 //!
 //! # When the peer is gone
 //!

@@ -368,7 +368,7 @@ impl<'c, S: PacketSender> UsbTx<'c, S> {
         let result = match self.config.write_timeout {
             Some(timeout) => {
                 // Saturating: a timeout too long to add to the clock never expires.
-                let at = Instant::now().checked_add(timeout).unwrap_or(Instant::MAX);
+                let at = Instant::now().saturating_add(timeout);
                 with_deadline(at, self.sender.write_packet(packet))
                     .await
                     .map_err(|_| UsbError::Timeout)

@@ -315,7 +315,7 @@ impl<'d, R: Read, F: Framing, const N: usize> Reader<'d, R, F, N> {
             let read = match self.idle {
                 Some(idle) if pending => {
                     // Saturating: an idle time too long to add to the clock never ends.
-                    let at = Instant::now().checked_add(idle).unwrap_or(Instant::MAX);
+                    let at = Instant::now().saturating_add(idle);
                     match select(self.io.read(&mut buf), Timer::at(at)).await {
                         Either::First(result) => Some(result),
                         Either::Second(()) => None,

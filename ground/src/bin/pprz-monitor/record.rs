@@ -322,8 +322,8 @@ mod tests {
         assert_eq!(rec.timestamp(), Some(15_000));
     }
 
-    /// Issue: past 429 497 s every record got the stamp `u32::MAX`: the time of days of
-    /// a long recording was lost. The stamps wrap instead, as the format does.
+    /// Past 429 497 s the stamps wrap, as the format does, rather than every later
+    /// record getting the stamp `u32::MAX`.
     #[test]
     fn stamps_wrap_after_2_pow_32_ticks() {
         // Times whose ticks are exact in an `f64`.
