@@ -226,6 +226,8 @@
 #![warn(missing_docs)]
 #![deny(unsafe_code)]
 
+#[cfg(feature = "cli")]
+pub mod cli;
 mod emit;
 mod error;
 pub mod escape;

@@ -1,7 +1,7 @@
 //! `pprz-gateway` and `pprz-monitor` never print a control character read from a
 //! hostile `messages.xml` or `settings.xml` (names, types, values, entity names, file
-//! names): their diagnostics show it escaped, once (ESC as `\x1b`, U+009B, the
-//! one-byte CSI, as `\u{9b}`).
+//! names) or given on their command line: their diagnostics show it escaped, once (ESC
+//! as `\x1b`, U+009B, the one-byte CSI, as `\u{9b}`).
 
 mod common;
 
@@ -135,6 +135,30 @@ fn monitor_escapes_what_the_files_quote_once() {
             "no known conversion from `x\\u{9b}`",
         ],
     );
+}
+
+/// An invalid command-line value: clap's message and the option's own validator both
+/// quote it, escaped (a line break in it forges no line).
+#[test]
+fn invalid_values_on_the_command_line_are_shown_escaped() {
+    let hostile = "1\u{9b}[2J\r\nerror: forged";
+    let shown = "1\\u{9b}[2J\\r\\nerror: forged";
+    for (tool, args) in [
+        (monitor(), vec!["--duration", hostile]),
+        (monitor(), vec!["--stdin", hostile]),
+        (
+            Command::new(env!("CARGO_BIN_EXE_pprz-gateway")),
+            vec!["--dedup-window", hostile],
+        ),
+    ] {
+        let mut tool = tool;
+        let (code, _, stderr) = run(tool.args(&args).stdin(Stdio::null()));
+        assert_eq!(code, Some(2), "{args:?}: {stderr}");
+        assert_escaped(&stderr, &[shown]);
+        assert!(stderr.starts_with("error: "), "{stderr}");
+        assert_eq!(stderr.matches("error: ").count(), 1 + stderr.matches(shown).count());
+        assert!(!stderr.lines().any(|l| l.starts_with("error: forged")), "{stderr}");
+    }
 }
 
 /// PPRZLOG time stamps wrap after 2^32 ticks of 100 µs; `--help` says so.

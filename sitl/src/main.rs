@@ -54,8 +54,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant as StdInstant;
 
+use clap::CommandFactory;
 use clap::error::ErrorKind;
-use clap::{CommandFactory, Parser};
 use pprz_devices::host::{HostConfig, HostDevice};
 use pprz_example_app::AC_ID;
 use pprz_secure::Responder;
@@ -69,7 +69,7 @@ use crate::radio::RadioPlan;
 use crate::report::JsonFile;
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let args: Args = pprz_codegen::cli::parse();
     let plan = plan_or_exit(&args);
     match run(&args, &plan) {
         Ok(()) => ExitCode::SUCCESS,

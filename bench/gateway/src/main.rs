@@ -84,8 +84,8 @@ fn parse_args() -> Result<Args, String> {
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
-        let value = it.next().ok_or(format!("{flag} needs a value"))?;
-        let bad = |e: &dyn std::fmt::Display| format!("{flag} {value}: {e}");
+        let value = it.next().ok_or(format!("{flag:?} needs a value"))?;
+        let bad = |e: &dyn std::fmt::Display| format!("{flag} {value:?}: {e}");
         match flag.as_str() {
             "--links" => a.links = value.parse().map_err(|e| bad(&e))?,
             "--seconds" => a.seconds = value.parse().map_err(|e| bad(&e))?,
@@ -97,7 +97,7 @@ fn parse_args() -> Result<Args, String> {
             }
             "--gateway" => a.gateway = value.into(),
             "--messages" => a.messages = value.into(),
-            _ => return Err(format!("unknown option {flag}")),
+            _ => return Err(format!("unknown option {flag:?}")),
         }
     }
     if !((1..=2).contains(&a.links) && a.seconds > 0.0 && a.seconds <= 60.0) {

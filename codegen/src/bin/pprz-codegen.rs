@@ -277,7 +277,7 @@ fn settings(args: &Args) -> Result<(), pprz_codegen::Error> {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let args: Args = pprz_codegen::cli::parse();
     if let Err(e) = args.check_crate_paths() {
         eprintln!("{e}");
         return ExitCode::from(2);

@@ -11,7 +11,6 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use clap::Parser;
 use pprz_ground::bus::Bus;
 use pprz_ground::device::Source;
 use pprz_ground::device::Uplink;
@@ -104,7 +103,7 @@ impl Input {
 }
 
 fn main() -> ExitCode {
-    let args = GatewayArgs::parse();
+    let args: GatewayArgs = pprz_codegen::cli::parse();
     let links = match args.links() {
         Ok(l) => l,
         Err(e) => {

@@ -17,7 +17,6 @@ use std::time::{Duration, Instant};
 mod bus;
 mod record;
 
-use clap::Parser;
 use pprz_ground::cli::{Args, SettingValue};
 use pprz_ground::device::{self, Source, Uplink as UplinkSink};
 use pprz_ground::escape;
@@ -326,7 +325,7 @@ fn prepare(args: &Args) -> Result<Prepared, String> {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
+    let args: Args = pprz_codegen::cli::parse();
     if let Err(e) = args.check() {
         eprintln!("error: {e}");
         return ExitCode::from(2);
