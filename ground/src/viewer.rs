@@ -388,7 +388,10 @@ impl Viewer {
     ///
     /// The viewer listens at `addr` itself and relays each client to the SDK's server
     /// (on a loopback port of its own): at most [`max_clients`](Self::max_clients) at
-    /// once, each message from a client at most [`MAX_CLIENT_MESSAGE`] bytes.
+    /// once, each message from a client at most [`MAX_CLIENT_MESSAGE`] bytes. A program
+    /// on the same machine can reach the SDK's port directly, past these bounds (the SDK
+    /// has no setting to authenticate the relay): the bounds protect against clients on
+    /// the network, not against the machine's own users.
     ///
     /// # Errors
     /// The server could not bind or start.
