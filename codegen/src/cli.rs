@@ -1,11 +1,12 @@
 //! Command-line parsing for the project's tools (feature `cli`): clap, with its error
 //! messages escaped.
 //!
-//! clap quotes the offending value in an error ("invalid value '…' for '--duration'").
-//! A value holding an escape sequence (from a script, a copied line, a file name) would
-//! reach the terminal as is: clap strips escape sequences only when standard error is
-//! not a terminal. [`parse`] writes the message with every unsafe character escaped as
-//! [`escape::text`](crate::escape::text) does, line breaks kept.
+//! clap quotes the offending value in an error ("invalid value '…' for '--duration'"),
+//! and an option's validator often repeats it. A value holding control characters (from
+//! a script, a copied line, a file name) would reach the terminal as is: clap strips
+//! 7-bit escape sequences only, and only when standard error is not a terminal. [`parse`]
+//! writes the message with every unsafe character escaped as [`escape::text`] does; a
+//! line break inside a quoted value is escaped too, so it cannot forge a line.
 //!
 //! ```
 //! use clap::Parser;
