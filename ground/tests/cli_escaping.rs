@@ -156,8 +156,14 @@ fn invalid_values_on_the_command_line_are_shown_escaped() {
         assert_eq!(code, Some(2), "{args:?}: {stderr}");
         assert_escaped(&stderr, &[shown]);
         assert!(stderr.starts_with("error: "), "{stderr}");
-        assert_eq!(stderr.matches("error: ").count(), 1 + stderr.matches(shown).count());
-        assert!(!stderr.lines().any(|l| l.starts_with("error: forged")), "{stderr}");
+        assert_eq!(
+            stderr.matches("error: ").count(),
+            1 + stderr.matches(shown).count()
+        );
+        assert!(
+            !stderr.lines().any(|l| l.starts_with("error: forged")),
+            "{stderr}"
+        );
     }
 }
 

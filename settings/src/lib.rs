@@ -23,7 +23,7 @@ pub use file_flash::{FileFlash, FileFlashError};
 pub use flash::{FlashError, RamFlash};
 pub use record::{Entry, Record, RecordError};
 pub use store::{
-    ConfigError, ErrorKind, LoadReport, PageCache, PersistentStore, SaveReport, StoreError,
-    buffer_len, page_cache,
+    ConfigError, ErrorKind, LoadReport, PageCache, PersistentStore, SNAPSHOT_KEY, SaveReport,
+    SnapshotKey, StoreError, buffer_len, page_cache,
 };
 pub use task::{FlagState, Outcome, Refused, Request, StoreControl, StoreStats, run};

@@ -29,10 +29,15 @@ use crate::record::{
     RecordWriter, VERSION, record_len,
 };
 
+/// The key type of the store's map: no bytes. The map holds one item, the snapshot, so
+/// its key says nothing; and an item of length 0 in flash (crafted: its checksums must
+/// match) then reads as an empty record, a typed error, where sequential-storage 8
+/// subtracts a one-byte key from the zero length and panics.
+pub type SnapshotKey = [u8; 0];
 /// The map key the snapshot is stored under.
-pub const SNAPSHOT_KEY: u8 = 0;
+pub const SNAPSHOT_KEY: SnapshotKey = [];
 /// Bytes of the key in a stored item.
-const KEY_LEN: usize = 1;
+const KEY_LEN: usize = core::mem::size_of::<SnapshotKey>();
 /// The largest flash word sequential-storage supports (STM32H7: 256 bits); buffers are
 /// aligned and rounded to it.
 const MAX_WORD: usize = 32;
@@ -45,10 +50,14 @@ pub const fn buffer_len(max_settings: usize) -> usize {
 }
 
 /// A cache of sequential-storage for a range of `PAGES` pages: page states, page pointers
-/// and the snapshot's location (`9 * PAGES + 9` bytes). It saves flash reads; the store
+/// and the snapshot's location (32 bytes for 3 pages, about 9 more a page). It saves flash reads; the store
 /// also works without one ([`Cache::new_uncached`]).
-pub type PageCache<const PAGES: usize> =
-    Cache<ArrayPageStates<PAGES>, ArrayPagePointers<PAGES>, ArrayKeyPointers<u8, 1>, u8>;
+pub type PageCache<const PAGES: usize> = Cache<
+    ArrayPageStates<PAGES>,
+    ArrayPagePointers<PAGES>,
+    ArrayKeyPointers<SnapshotKey, 1>,
+    SnapshotKey,
+>;
 
 /// A new, empty [`PageCache`] (what [`PersistentStore::with_page_cache`] uses).
 pub fn page_cache<const PAGES: usize>() -> PageCache<PAGES> {
@@ -124,8 +133,17 @@ pub enum StoreError<E> {
     Corrupted,
     /// No room left for the snapshot (the range is too small for it).
     Full,
-    /// The snapshot does not fit in one flash page.
+    /// The snapshot does not fit in one flash page, or, in a range of two pages, in
+    /// half a page (the map copies the current snapshot beside the new one when it
+    /// changes pages): nothing is written. Give the range a third page.
     TooBig,
+    /// Two persistent settings of different variables have the same key (FNV-1a of the
+    /// variable's name): nothing is written. The code generator refuses such tables; a
+    /// table built by hand must rename one of the variables.
+    KeyCollision {
+        /// The key.
+        key: u32,
+    },
     /// The table has more persistent settings than the store's buffer holds.
     TooManySettings {
         /// Persistent settings of the table.
@@ -159,6 +177,7 @@ impl<E> StoreError<E> {
             StoreError::Corrupted => ErrorKind::Corrupted,
             StoreError::Full => ErrorKind::Full,
             StoreError::TooBig => ErrorKind::TooBig,
+            StoreError::KeyCollision { .. } => ErrorKind::KeyCollision,
             StoreError::TooManySettings { .. } => ErrorKind::TooManySettings,
             StoreError::BufferTooSmall { .. } => ErrorKind::BufferTooSmall,
             StoreError::Record(_) => ErrorKind::Record,
@@ -186,7 +205,11 @@ impl<E: fmt::Debug> fmt::Display for StoreError<E> {
             StoreError::Flash(e) => write!(f, "settings flash error: {e:?}"),
             StoreError::Corrupted => f.write_str("stored settings corrupted beyond repair"),
             StoreError::Full => f.write_str("settings flash full"),
-            StoreError::TooBig => f.write_str("settings snapshot larger than a flash page"),
+            StoreError::TooBig => f.write_str("settings snapshot too large for the flash pages"),
+            StoreError::KeyCollision { key } => write!(
+                f,
+                "two persistent settings of different variables have the key {key:#010x}"
+            ),
             StoreError::TooManySettings {
                 persistent,
                 capacity,
@@ -222,6 +245,8 @@ pub enum ErrorKind {
     Full,
     /// [`StoreError::TooBig`].
     TooBig,
+    /// [`StoreError::KeyCollision`].
+    KeyCollision,
     /// [`StoreError::TooManySettings`].
     TooManySettings,
     /// [`StoreError::BufferTooSmall`].
@@ -280,7 +305,7 @@ struct AlignedBuf<const N: usize>([u8; N]);
 /// operation works with the cache it takes out of the store, and puts it back when it
 /// finishes: an operation dropped mid-way leaves the store with an empty cache, which is
 /// always correct.
-pub struct PersistentStore<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> {
+pub struct PersistentStore<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize> {
     flash: S,
     range: Range<u32>,
     cache: C,
@@ -290,12 +315,12 @@ pub struct PersistentStore<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> {
 
 /// The map over the store's flash, with the store's cache (an empty one is left in its
 /// place until [`close`] puts it back).
-fn open<'f, S: NorFlash, C: CacheImpl<u8>>(
+fn open<'f, S: NorFlash, C: CacheImpl<SnapshotKey>>(
     flash: &'f mut S,
     range: &Range<u32>,
     cache: &mut C,
     new_cache: fn() -> C,
-) -> Result<MapStorage<u8, &'f mut S, C>, StoreError<S::Error>> {
+) -> Result<MapStorage<SnapshotKey, &'f mut S, C>, StoreError<S::Error>> {
     // The range was accepted when the store was made.
     let config = MapConfig::try_new(range.clone()).map_err(|_| StoreError::Internal)?;
     Ok(MapStorage::new(
@@ -306,11 +331,14 @@ fn open<'f, S: NorFlash, C: CacheImpl<u8>>(
 }
 
 /// Puts the map's cache back into the store.
-fn close<S: NorFlash, C: CacheImpl<u8>>(map: MapStorage<u8, &mut S, C>, cache: &mut C) {
+fn close<S: NorFlash, C: CacheImpl<SnapshotKey>>(
+    map: MapStorage<SnapshotKey, &mut S, C>,
+    cache: &mut C,
+) {
     *cache = map.destroy().1;
 }
 
-impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF> {
+impl<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize> PersistentStore<S, C, BUF> {
     /// A store over `range` of `flash` (page-aligned, at least two pages). `new_cache`
     /// makes an empty cache, now and whenever the cache cannot follow the flash (after
     /// [`erase`](Self::erase), or an operation dropped mid-way): e.g.
@@ -323,7 +351,7 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
     /// [`ConfigError::Map`] for a range sequential-storage refuses, or
     /// [`ConfigError::Buffer`] for a buffer too small for an empty snapshot.
     pub fn new(flash: S, range: Range<u32>, new_cache: fn() -> C) -> Result<Self, ConfigError> {
-        MapConfig::<S>::try_new(range.clone()).map_err(ConfigError::Map)?;
+        map_config::<S>(&range)?;
         let min = (KEY_LEN + HEADER_LEN).next_multiple_of(word::<S>());
         if BUF < min {
             return Err(ConfigError::Buffer { len: BUF, min });
@@ -350,8 +378,18 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
 
     /// Bytes a snapshot of `entries` entries takes in this store's flash.
     pub fn flash_bytes(entries: usize) -> usize {
-        MapStorage::<u8, S, C>::item_overhead_size() as usize
-            + (KEY_LEN + record_len(entries)).next_multiple_of(word::<S>())
+        Self::record_flash_bytes(record_len(entries))
+    }
+
+    /// Bytes a record of `len` bytes takes in this store's flash.
+    fn record_flash_bytes(len: usize) -> usize {
+        MapStorage::<SnapshotKey, S, C>::item_overhead_size() as usize
+            + (KEY_LEN + len).next_multiple_of(word::<S>())
+    }
+
+    /// Pages of the range.
+    fn pages(&self) -> usize {
+        (self.range.end - self.range.start) as usize / S::ERASE_SIZE
     }
 
     /// The stored snapshot, if any.
@@ -415,10 +453,20 @@ impl<S: NorFlash, C: CacheImpl<u8>, const BUF: usize> PersistentStore<S, C, BUF>
             .0
             .get_mut(KEY_LEN..KEY_LEN + record_len(capacity))
             .ok_or(StoreError::Internal)?;
-        encode_table(table, area).map_err(|_| StoreError::TooManySettings {
-            persistent: persistent_count(table),
-            capacity,
+        let record_bytes = encode_table(table, area).map_err(|e| match e {
+            EncodeError::DuplicateKey { key } => StoreError::KeyCollision { key },
+            EncodeError::Full { .. } => StoreError::TooManySettings {
+                persistent: persistent_count(table),
+                capacity,
+            },
         })?;
+        // In a range of two pages, the map copies the current snapshot into the page the
+        // new one goes to when it changes pages: two must fit in one, or every store
+        // after the first fails (each failure erasing pages).
+        let usable = S::ERASE_SIZE.saturating_sub(2 * word::<S>());
+        if self.pages() == 2 && 2 * Self::record_flash_bytes(record_bytes) > usable {
+            return Err(StoreError::TooBig);
+        }
         let item = TableRecord {
             table,
             capacity,
@@ -549,7 +597,7 @@ impl<S: NorFlash, const PAGES: usize, const BUF: usize> PersistentStore<S, PageC
     /// As [`new`](Self::new), and [`ConfigError::PageCount`] if the range does not have
     /// `PAGES` pages.
     pub fn with_page_cache(flash: S, range: Range<u32>) -> Result<Self, ConfigError> {
-        MapConfig::<S>::try_new(range.clone()).map_err(ConfigError::Map)?;
+        map_config::<S>(&range)?;
         let pages = (range.end - range.start) as usize / S::ERASE_SIZE;
         if pages != PAGES {
             return Err(ConfigError::PageCount {
@@ -559,6 +607,17 @@ impl<S: NorFlash, const PAGES: usize, const BUF: usize> PersistentStore<S, PageC
         }
         Self::new(flash, range, page_cache::<PAGES>)
     }
+}
+
+/// Checks `range` as sequential-storage does, and first that it is not reversed (which
+/// sequential-storage does not check).
+fn map_config<S: NorFlash>(range: &Range<u32>) -> Result<(), ConfigError> {
+    if range.start >= range.end {
+        return Err(ConfigError::Map(MapConfigError::RangeTooSmall));
+    }
+    MapConfig::<S>::try_new(range.clone())
+        .map(|_| ())
+        .map_err(ConfigError::Map)
 }
 
 /// The flash word sequential-storage writes in: the larger of the read and write sizes
@@ -575,6 +634,20 @@ const fn word<S: NorFlash>() -> usize {
 /// The description of `entry` if it is persistent.
 fn persistent<'a>(entry: &SettingEntry<'a>) -> Option<&'a SettingDesc<'a>> {
     entry.desc.filter(|d| d.persistent)
+}
+
+/// The variable of the first persistent setting of `table` with key `key`.
+fn first_var<'a, M: RawMutex, const N: usize>(
+    table: &Settings<'a, M, N>,
+    key: u32,
+) -> Option<&'a str> {
+    let mut var = None;
+    table.for_each(|_, setting| {
+        if let Some(desc) = persistent(&setting).filter(|d| var.is_none() && d.key() == key) {
+            var = Some(desc.var);
+        }
+    });
+    var
 }
 
 /// Persistent settings of `table` (a variable bound twice counts twice).
@@ -655,8 +728,9 @@ fn encode_table<M: RawMutex, const N: usize>(
             value: setting.get(),
         };
         match writer.push(entry) {
+            Ok(()) => {}
             // A variable bound to two settings is stored once.
-            Ok(()) | Err(EncodeError::DuplicateKey { .. }) => {}
+            Err(EncodeError::DuplicateKey { key }) if first_var(table, key) == Some(desc.var) => {}
             Err(e) => result = Err(e),
         }
     });

@@ -51,7 +51,7 @@ use embedded_storage_async::nor_flash::NorFlash;
 use pprz_telemetry::settings::Settings;
 use sequential_storage::cache::CacheImpl;
 
-use crate::store::{ErrorKind, LoadReport, PersistentStore, StoreError};
+use crate::store::{ErrorKind, LoadReport, PersistentStore, SnapshotKey, StoreError};
 
 /// What a flag shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -332,7 +332,7 @@ impl<M: RawMutex> StoreControl<M> {
     /// As [`PersistentStore::load`].
     pub async fn load<
         S: NorFlash,
-        C: CacheImpl<u8>,
+        C: CacheImpl<SnapshotKey>,
         const BUF: usize,
         TM: RawMutex,
         const N: usize,
@@ -401,7 +401,7 @@ pub async fn run<S, C, const BUF: usize, M, TM, const N: usize>(
 ) -> !
 where
     S: NorFlash,
-    C: CacheImpl<u8>,
+    C: CacheImpl<SnapshotKey>,
     M: RawMutex,
     TM: RawMutex,
 {

@@ -82,7 +82,7 @@ fn ram() {
     let task = size_of_val(&run(&mut store, &control, &t16));
     println!("futures, 16 settings: save {save} B, load {load} B, run {task} B");
 
-    assert_eq!(size_of::<PageCache<3>>(), 36);
+    assert_eq!(size_of::<PageCache<3>>(), 32);
     assert_eq!((buffer_len(16), buffer_len(100)), (160, 928));
     #[cfg(target_pointer_width = "64")]
     {
@@ -186,5 +186,5 @@ fn flash() {
         );
         erases.push((f4.0, f4.2, h7.0, h7.2));
     }
-    assert_eq!(erases, [(160, 8, 192, 1), (916, 57, 960, 7)]);
+    assert_eq!(erases, [(156, 8, 192, 1), (912, 57, 960, 7)]);
 }

@@ -224,10 +224,11 @@ fn cut_during_the_first_store() {
         (Seen::Nothing, Seen::Values(A)),
         every,
     );
-    // Page marker (4 bytes), item header (8), key and record (1 + 49, padded to 52).
+    // Page marker (4 bytes), item header (8), record (49, padded to 52; the key has no
+    // bytes).
     assert_eq!(cuts.points, 4 + 8 + 52 + 1);
     // The snapshot counts once its last byte is written (the padding does not matter).
-    assert_eq!(cuts.committed_at, 4 + 8 + 50);
+    assert_eq!(cuts.committed_at, 4 + 8 + 49);
 }
 
 #[test]
@@ -241,7 +242,7 @@ fn cut_during_a_store_over_a_snapshot() {
         every,
     );
     assert_eq!(cuts.points, 8 + 52 + 1);
-    assert_eq!(cuts.committed_at, 8 + 50);
+    assert_eq!(cuts.committed_at, 8 + 49);
 }
 
 #[test]
@@ -311,8 +312,8 @@ fn cut_during_a_clear() {
     let (base, stored) = save_on(base, &B);
     stored.unwrap();
     let cuts = cut_points(&base, Op::Clear, (Seen::Values(B), Seen::Cleared), every);
-    // Header and a 5-byte item padded to 8.
-    assert_eq!(cuts.points, 8 + 8 + 1);
+    // Header and a 4-byte item (the empty record).
+    assert_eq!(cuts.points, 8 + 4 + 1);
     // Over a page change too.
     let base = filled_until_page_change::<3, 4, 256>();
     cut_points(&base, Op::Clear, (Seen::Values(A), Seen::Cleared), every);

@@ -9,7 +9,8 @@ use pprz_settings::record::{ENTRY_LEN, HEADER_LEN, Record, RecordError};
 use pprz_settings::sequential_storage::cache::Cache;
 use pprz_settings::sequential_storage::map::{MapConfig, MapConfigError, MapStorage};
 use pprz_settings::{
-    ConfigError, LoadReport, PageCache, PersistentStore, RamFlash, StoreError, buffer_len,
+    ConfigError, LoadReport, PageCache, PersistentStore, RamFlash, SNAPSHOT_KEY, SnapshotKey,
+    StoreError, buffer_len,
 };
 
 const SIZE: usize = 3 * 1024;
@@ -26,8 +27,9 @@ fn a_snapshot_survives_a_reboot() {
     let report = save(&mut store(&mut mem), &A).unwrap();
     assert_eq!(report.entries, 5);
     assert_eq!(report.record_bytes, HEADER_LEN + 5 * ENTRY_LEN);
-    // 8-byte item header, then key and record padded to the 4-byte word.
-    assert_eq!(report.flash_bytes, 8 + (1 + 49usize).next_multiple_of(4));
+    // 8-byte item header, then the record padded to the 4-byte word (the key has no
+    // bytes).
+    assert_eq!(report.flash_bytes, 8 + 49usize.next_multiple_of(4));
 
     let (report, values) = load(&mut store(&mut mem));
     assert_eq!(
@@ -148,7 +150,7 @@ fn too_many_settings_for_the_buffer_writes_nothing() {
         0..SIZE as u32,
     )
     .unwrap();
-    // buffer_len(2) = 32 bytes: 32 - 5 = 27 = three entries.
+    // buffer_len(2) = 32 bytes: 32 - 4 = 28 = three entries.
     assert_eq!(
         PersistentStore::<Flash<'_>, PageCache<3>, { buffer_len(2) }>::capacity(),
         3
@@ -193,14 +195,14 @@ fn a_snapshot_larger_than_the_buffer_is_a_typed_error() {
 #[test]
 fn stored_bytes_that_are_not_a_record_are_a_typed_error() {
     let mut mem = [0xFF; SIZE];
-    let mut map = MapStorage::<u8, _, _>::new(
+    let mut map = MapStorage::<SnapshotKey, _, _>::new(
         Flash::new(&mut mem),
         MapConfig::new(0..SIZE as u32),
         Cache::new_uncached(),
     );
     let mut buf = [0u8; 64];
     let garbage: &[u8] = b"XY\x01\x00";
-    block_on(map.store_item(&mut buf, &0u8, &garbage)).unwrap();
+    block_on(map.store_item(&mut buf, &SNAPSHOT_KEY, &garbage)).unwrap();
     let _ = map.destroy();
     let (report, values) = load(&mut store(&mut mem));
     assert_eq!(
@@ -276,11 +278,26 @@ fn bad_configurations_are_refused() {
         Err(ConfigError::PageCount { pages: 3, cache: 2 })
     ));
     assert!(matches!(
-        PersistentStore::<Flash<'_>, PageCache<3>, 4>::with_page_cache(
+        PersistentStore::<Flash<'_>, PageCache<3>, 2>::with_page_cache(
             Flash::new(&mut mem),
             0..SIZE as u32
         ),
-        Err(ConfigError::Buffer { len: 4, min: 8 })
+        Err(ConfigError::Buffer { len: 2, min: 4 })
+    ));
+    // A reversed range (sequential-storage's own check would underflow).
+    #[allow(clippy::reversed_empty_ranges)]
+    let reversed = 2048..0;
+    assert!(matches!(
+        Store::with_page_cache(Flash::new(&mut mem), reversed.clone()),
+        Err(ConfigError::Map(MapConfigError::RangeTooSmall))
+    ));
+    assert!(matches!(
+        PersistentStore::<_, _, { buffer_len(8) }>::new(
+            Flash::new(&mut mem),
+            reversed,
+            Cache::new_uncached
+        ),
+        Err(ConfigError::Map(MapConfigError::RangeTooSmall))
     ));
     // Without a cache.
     let mut s = PersistentStore::<_, _, { buffer_len(8) }>::new(
@@ -344,4 +361,98 @@ fn erase_empties_the_range_and_the_store_keeps_working_with_its_cache() {
     // The range holds the last two snapshots only.
     let used = mem.iter().filter(|b| **b != 0xFF).count();
     assert!(used < 2 * 64, "{used} bytes used");
+}
+
+#[test]
+fn an_empty_item_in_flash_is_a_typed_error_and_clear_recovers() {
+    // An item of length 0 with matching checksums, newest in the map (after a real
+    // snapshot): sequential-storage hands back a buffer that was never written for it.
+    let mut mem = [0xFF; SIZE];
+    save(&mut store(&mut mem), &A).unwrap();
+    let mut map = MapStorage::<SnapshotKey, _, _>::new(
+        Flash::new(&mut mem),
+        MapConfig::new(0..SIZE as u32),
+        Cache::new_uncached(),
+    );
+    let mut buf = [0u8; 64];
+    let empty: &[u8] = &[];
+    block_on(map.store_item(&mut buf, &SNAPSHOT_KEY, &empty)).unwrap();
+    let _ = map.destroy();
+    let (report, values) = load(&mut store(&mut mem));
+    assert_eq!(
+        report,
+        Err(StoreError::Record(RecordError::TooShort { len: 0 }))
+    );
+    assert_eq!(values, DEFAULTS);
+    block_on(store(&mut mem).clear()).unwrap();
+    assert_eq!(load(&mut store(&mut mem)).1, DEFAULTS);
+    save(&mut store(&mut mem), &B).unwrap();
+    assert_eq!(load(&mut store(&mut mem)).1, loaded(B));
+}
+
+/// Thirteen persistent floats, `s0` to `s12`.
+static MANY: [SettingDesc<'static>; 13] = {
+    const NAMES: [&str; 13] = [
+        "s0", "s1", "s2", "s3", "s4", "s5", "s6", "s7", "s8", "s9", "s10", "s11", "s12",
+    ];
+    let mut descs = [SettingDesc::new(0, "", 0.0, 1.0); 13];
+    let mut i = 0;
+    while i < 13 {
+        descs[i] = SettingDesc::new(i as u8, NAMES[i], -100.0, 100.0).persistent(true);
+        i += 1;
+    }
+    descs
+};
+
+#[test]
+fn in_two_pages_a_snapshot_over_half_a_page_is_refused_before_writing() {
+    // Two pages of 256 bytes, 4-byte words: 248 usable bytes a page. Twelve settings
+    // take 8 + 112 = 120 bytes in flash, two fit in a page; thirteen take 132.
+    const TWO: usize = 512;
+    type Two<'m> = PersistentStore<RamFlash<'m, TWO, 4, 256>, PageCache<2>, { buffer_len(13) }>;
+    for n in [12, 13] {
+        let mut mem = [0xFF; TWO];
+        let values: Vec<f32> = (0..n).map(|i| i as f32).collect();
+        let vars = Vars::new(&values);
+        let outcomes: Vec<_> = with_table_of(&MANY[..n], &vars, |t| {
+            (0..20)
+                .map(|round| {
+                    vars.set(0, round as f32);
+                    let mut s =
+                        Two::with_page_cache(RamFlash::new(&mut mem), 0..TWO as u32).unwrap();
+                    block_on(s.save(t)).map(|r| r.flash_bytes)
+                })
+                .collect()
+        });
+        if n == 12 {
+            assert!(outcomes.iter().all(|o| *o == Ok(120)), "{outcomes:?}");
+        } else {
+            assert!(
+                outcomes.iter().all(|o| *o == Err(StoreError::TooBig)),
+                "{outcomes:?}"
+            );
+            assert!(mem.iter().all(|b| *b == 0xFF), "nothing written");
+        }
+    }
+}
+
+/// Two variables whose names have the same FNV-1a key.
+static COLLIDING: [SettingDesc<'static>; 2] = [
+    SettingDesc::new(0, "liquid", 0.0, 100.0).persistent(true),
+    SettingDesc::new(1, "costarring", 0.0, 100.0).persistent(true),
+];
+
+#[test]
+fn two_variables_with_one_key_are_refused_before_writing() {
+    assert_eq!(COLLIDING[0].key(), COLLIDING[1].key());
+    let mut mem = [0xFF; SIZE];
+    let vars = Vars::new(&[11.0, 22.0]);
+    let report = with_table_of(&COLLIDING, &vars, |t| block_on(store(&mut mem).save(t)));
+    assert_eq!(
+        report,
+        Err(StoreError::KeyCollision {
+            key: COLLIDING[0].key()
+        })
+    );
+    assert!(mem.iter().all(|b| *b == 0xFF), "nothing written");
 }

@@ -11,8 +11,8 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use pprz_messages::settings::{SettingDesc, SettingType};
 use pprz_settings::sequential_storage::mock_flash::MockFlashBase;
 use pprz_settings::{
-    ErrorKind, FlagState, Outcome, PageCache, PersistentStore, RamFlash, Request, StoreControl,
-    StoreStats, buffer_len, run,
+    ErrorKind, FlagState, Outcome, PageCache, PersistentStore, RamFlash, Request, SnapshotKey,
+    StoreControl, StoreStats, buffer_len, run,
 };
 use pprz_telemetry::settings::Binding;
 
@@ -34,7 +34,7 @@ fn with_task<S, C, const BUF: usize, R>(
 ) -> R
 where
     S: embedded_storage_async::nor_flash::NorFlash,
-    C: pprz_settings::sequential_storage::cache::CacheImpl<u8>,
+    C: pprz_settings::sequential_storage::cache::CacheImpl<SnapshotKey>,
 {
     let vars = Vars::new(values);
     with_table(&vars, |table| {

@@ -74,7 +74,7 @@ fn finish<F: Future>(future: F) -> F::Output {
 /// The main loop of a firmware with persistence: the boot load, then the table served
 /// and the store task polled; a store is asked when an input says so (as the store flag
 /// setting does).
-pub fn run_store<S: NorFlash, C: CacheImpl<u8>, const BUF: usize, const N: usize>(
+pub fn run_store<S: NorFlash, C: CacheImpl<pprz_settings::SnapshotKey>, const BUF: usize, const N: usize>(
     table: &'static Settings<'static, Mutex, N>,
     control: &'static StoreControl<Mutex>,
     store: &'static mut PersistentStore<S, C, BUF>,

@@ -82,7 +82,7 @@ use pprz_transports::PprzV2;
 
 use pprz_settings::embedded_storage_async::nor_flash::NorFlash;
 use pprz_settings::sequential_storage::cache::CacheImpl;
-use pprz_settings::{PersistentStore, StoreControl};
+use pprz_settings::{PersistentStore, SnapshotKey, StoreControl};
 
 use crate::persist::{NoStore, Persistence, WithStore};
 use crate::vehicle::{Mode, Vehicle};
@@ -234,7 +234,7 @@ pub async fn run_aircraft_with_store<R, S, C, const BUF: usize>(
 where
     R: Read,
     S: NorFlash,
-    C: CacheImpl<u8>,
+    C: CacheImpl<SnapshotKey>,
 {
     let persistence = WithStore { store, control };
     let extra = core::future::pending();
@@ -336,7 +336,7 @@ where
     R: Read,
     G: pprz_secure::rand_core::CryptoRng,
     S: NorFlash,
-    C: CacheImpl<u8>,
+    C: CacheImpl<SnapshotKey>,
 {
     let extra = secure_tasks(radio, secure, &mut responder, &mut rng);
     let persistence = WithStore { store, control };

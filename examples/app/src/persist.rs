@@ -12,7 +12,7 @@ use embassy_futures::join::join;
 use pprz_default::messages::telemetry::DlValue;
 use pprz_settings::embedded_storage_async::nor_flash::NorFlash;
 use pprz_settings::sequential_storage::cache::CacheImpl;
-use pprz_settings::{ErrorKind, PersistentStore, Request, StoreControl};
+use pprz_settings::{ErrorKind, PersistentStore, Request, SnapshotKey, StoreControl};
 use pprz_telemetry::settings::Settings;
 
 use crate::{M, Out, settings};
@@ -50,12 +50,12 @@ impl Persistence<'static> for NoStore {
 }
 
 /// A store in flash and the control its store flag is bound to.
-pub(crate) struct WithStore<'c, S: NorFlash, C: CacheImpl<u8>, const BUF: usize> {
+pub(crate) struct WithStore<'c, S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize> {
     pub(crate) store: &'c mut PersistentStore<S, C, BUF>,
     pub(crate) control: &'c StoreControl<M>,
 }
 
-impl<'c, S: NorFlash, C: CacheImpl<u8>, const BUF: usize> Persistence<'c>
+impl<'c, S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize> Persistence<'c>
     for WithStore<'c, S, C, BUF>
 {
     fn control(&self) -> Option<&'c StoreControl<M>> {

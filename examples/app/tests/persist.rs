@@ -15,7 +15,8 @@ use pprz_example_app::{AC_ID, Config, M, run_aircraft_with_store};
 use pprz_settings::embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use pprz_settings::sequential_storage::cache::CacheImpl;
 use pprz_settings::{
-    FlagState, FlashError, PageCache, PersistentStore, RamFlash, StoreControl, buffer_len,
+    FlagState, FlashError, PageCache, PersistentStore, RamFlash, SnapshotKey, StoreControl,
+    buffer_len,
 };
 use pprz_telemetry::{DeviceConfig, Downlink, FrameArena, run_writer};
 use pprz_transports::PprzV2;
@@ -55,7 +56,7 @@ impl embedded_io_async::Read for Ground {
 /// Boots the aircraft with `store` and `control` on a fresh mock clock, the ground
 /// sending `frames`, until `until_ms`; returns every DL_VALUE it sent (time, index,
 /// value).
-fn boot<S: NorFlash, C: CacheImpl<u8>, const BUF: usize>(
+fn boot<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize>(
     store: &mut PersistentStore<S, C, BUF>,
     control: &StoreControl<M>,
     frames: Vec<(u64, Vec<u8>)>,

@@ -10,7 +10,7 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embedded_storage_async::nor_flash::NorFlash;
 use pprz_messages::settings::{SettingDesc, SettingType};
 use pprz_settings::sequential_storage::cache::CacheImpl;
-use pprz_settings::{LoadReport, PersistentStore, SaveReport, StoreError};
+use pprz_settings::{LoadReport, PersistentStore, SaveReport, SnapshotKey, StoreError};
 use pprz_telemetry::settings::{Binding, Settings};
 
 /// Settings of the table.
@@ -102,7 +102,7 @@ pub fn with_table<R>(vars: &Vars, f: impl FnOnce(&Table<'_>) -> R) -> R {
 }
 
 /// Stores a snapshot of the table holding `values`.
-pub fn save<S: NorFlash, C: CacheImpl<u8>, const BUF: usize>(
+pub fn save<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize>(
     store: &mut PersistentStore<S, C, BUF>,
     values: &[f32; K],
 ) -> Result<SaveReport, StoreError<S::Error>> {
@@ -111,7 +111,7 @@ pub fn save<S: NorFlash, C: CacheImpl<u8>, const BUF: usize>(
 }
 
 /// Loads into a table at its defaults; the values after the load.
-pub fn load<S: NorFlash, C: CacheImpl<u8>, const BUF: usize>(
+pub fn load<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize>(
     store: &mut PersistentStore<S, C, BUF>,
 ) -> (Result<LoadReport, StoreError<S::Error>>, [f32; K]) {
     let vars = Vars::new(&DEFAULTS);
