@@ -636,18 +636,17 @@ fn persistent<'a>(entry: &SettingEntry<'a>) -> Option<&'a SettingDesc<'a>> {
     entry.desc.filter(|d| d.persistent)
 }
 
-/// The variable of the first persistent setting of `table` with key `key`.
-fn first_var<'a, M: RawMutex, const N: usize>(
-    table: &Settings<'a, M, N>,
-    key: u32,
-) -> Option<&'a str> {
-    let mut var = None;
-    table.for_each(|_, setting| {
-        if let Some(desc) = persistent(&setting).filter(|d| var.is_none() && d.key() == key) {
-            var = Some(desc.var);
-        }
-    });
-    var
+/// Whether a persistent setting of `table` before `index` is bound to the variable `var`.
+fn bound_before<M: RawMutex, const N: usize>(
+    table: &Settings<'_, M, N>,
+    index: u8,
+    var: &str,
+) -> bool {
+    (0..index).any(|i| {
+        table
+            .entry(i)
+            .is_some_and(|e| persistent(&e).is_some_and(|d| d.var == var))
+    })
 }
 
 /// Persistent settings of `table` (a variable bound twice counts twice).
@@ -715,7 +714,7 @@ fn encode_table<M: RawMutex, const N: usize>(
 ) -> Result<usize, EncodeError> {
     let mut writer = RecordWriter::new(buf)?;
     let mut result = Ok(());
-    table.for_each(|_, setting| {
+    table.for_each(|index, setting| {
         let Some(desc) = persistent(&setting) else {
             return;
         };
@@ -730,7 +729,7 @@ fn encode_table<M: RawMutex, const N: usize>(
         match writer.push(entry) {
             Ok(()) => {}
             // A variable bound to two settings is stored once.
-            Err(EncodeError::DuplicateKey { key }) if first_var(table, key) == Some(desc.var) => {}
+            Err(EncodeError::DuplicateKey { .. }) if bound_before(table, index, desc.var) => {}
             Err(e) => result = Err(e),
         }
     });
