@@ -60,12 +60,21 @@
 //! Errors are embedded-sdmmc's own ([`embedded_sdmmc::Error`], which implements
 //! `embedded_io::Error`), counted in [`SdLogStats::errors`]. A write that fails
 //! accepted no byte; a full block that could not be written stays buffered and is
-//! written again by the next call, so a transient card error loses nothing, and a
-//! dead card or a full disk makes every later write fail fast.
+//! written again by the next call, so a transient card error loses nothing.
+//!
+//! A full disk, or a file at its length limit ([`SdLogConfig::max_len`], by default
+//! FAT's 4 GiB - 1 byte; embedded-sdmmc would take the bytes past it and drop them),
+//! makes the log *full* ([`SdLogStats::full`]): from then on every write fails at once
+//! with [`Error::NotEnoughSpace`], counted. At the length limit the bytes accepted
+//! before it are still stored by `flush` and [`close`](SdLog::close). On a full disk
+//! nothing more is written to the card, not even the bytes still buffered (each
+//! attempt would make embedded-sdmmc read the whole FAT in search of a free cluster,
+//! blocking the executor); `flush` and `close` still record the length of what is
+//! stored. Start a new file (on another card) to log again.
 
 use embedded_io_async::{ErrorType, Write};
 use embedded_sdmmc::{
-    Block, BlockDevice, Error, Mode, RawFile, RawVolume, TimeSource, VolumeManager,
+    Block, BlockDevice, Error, MAX_FILE_SIZE, Mode, RawFile, RawVolume, TimeSource, VolumeManager,
 };
 
 /// Block size of the file system (bytes).
@@ -78,18 +87,23 @@ pub struct SdLogConfig {
     /// Update the directory entry (file length) after this many data blocks; 0: only on
     /// `flush` and `close`.
     pub sync_every_blocks: u32,
+    /// The longest the file may grow, in bytes (at most FAT's limit, 4 GiB - 1 byte,
+    /// which is also the default): the log is full there (see the [module
+    /// docs](self#errors)).
+    pub max_len: u32,
 }
 
 impl Default for SdLogConfig {
-    /// A sync every 8 blocks (4 KiB).
+    /// A sync every 8 blocks (4 KiB), files up to FAT's limit.
     fn default() -> Self {
         Self {
             sync_every_blocks: 8,
+            max_len: MAX_FILE_SIZE,
         }
     }
 }
 
-/// Counters of an [`SdLog`]. All wrap around.
+/// Counters of an [`SdLog`] (all wrap around), and whether it is full.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SdLogStats {
@@ -101,8 +115,12 @@ pub struct SdLogStats {
     pub block_writes: u32,
     /// Directory entry updates (the data before them survives a power cut).
     pub syncs: u32,
-    /// Failed card or file-system operations.
+    /// Failed card or file-system operations, and writes refused because the log is
+    /// full.
     pub errors: u32,
+    /// Whether the log is full (the disk, or the file at its length limit): every
+    /// later write fails at once.
+    pub full: bool,
 }
 
 /// The PPRZLOG log sink; see the [module docs](self).
@@ -125,6 +143,8 @@ pub struct SdLog<
     len: usize,
     offset: u32,
     blocks_since_sync: u32,
+    /// The card reported no free cluster: nothing more is written to it.
+    disk_full: bool,
     config: SdLogConfig,
     stats: SdLogStats,
 }
@@ -157,6 +177,7 @@ where
             len: 0,
             offset,
             blocks_since_sync: 0,
+            disk_full: false,
             config,
             stats: SdLogStats::default(),
         })
@@ -284,16 +305,29 @@ where
         result
     }
 
+    /// Refuses an operation of a full log (counted).
+    fn refuse_full<R>(&mut self) -> Result<R, Error<D::Error>> {
+        self.count_error(Err(Error::NotEnoughSpace))
+    }
+
     /// Writes the buffered bytes to the file (no directory update).
     fn store(&mut self) -> Result<(), Error<D::Error>> {
         if self.len == 0 {
             return Ok(());
         }
+        if self.disk_full {
+            return self.refuse_full();
+        }
         let file = self.file()?;
         let written = self.volumes.write(file, &self.buf[..self.len]);
+        if matches!(written, Err(Error::NotEnoughSpace | Error::DiskFull)) {
+            self.disk_full = true;
+            self.stats.full = true;
+        }
         self.count_error(written)?;
         let n = crate::len_u32(self.len);
-        self.offset = self.offset.wrapping_add(n);
+        // No overflow: `write` keeps the file within `max_len`.
+        self.offset = self.offset.saturating_add(n);
         self.stats.bytes_stored = self.stats.bytes_stored.wrapping_add(n);
         self.stats.block_writes = self.stats.block_writes.wrapping_add(1);
         self.len = 0;
@@ -321,10 +355,12 @@ where
         Ok(())
     }
 
-    /// Stores the buffer (a partial block too) and updates the directory entry.
+    /// Stores the buffer (a partial block too) and updates the directory entry (also
+    /// when the store failed: what is stored becomes durable).
     fn sync(&mut self) -> Result<(), Error<D::Error>> {
-        self.store()?;
-        self.update_entry()
+        let stored = self.store();
+        let updated = self.update_entry();
+        stored.and(updated)
     }
 }
 
@@ -363,12 +399,20 @@ where
             return Ok(0);
         }
         self.file()?;
+        if self.disk_full {
+            return self.refuse_full();
+        }
         if self.room() == 0 {
             // A full block left by an earlier failure: nothing is accepted until it is
             // stored.
             self.store_block()?;
         }
-        let n = buf.len().min(self.room());
+        let left = self.config.max_len.saturating_sub(self.len());
+        if left == 0 {
+            self.stats.full = true;
+            return self.refuse_full();
+        }
+        let n = buf.len().min(self.room()).min(left as usize);
         self.buf[self.len..self.len + n].copy_from_slice(&buf[..n]);
         self.len += n;
         self.stats.bytes_accepted = self.stats.bytes_accepted.wrapping_add(crate::len_u32(n));

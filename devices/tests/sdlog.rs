@@ -27,9 +27,10 @@ impl std::fmt::Display for CardError {
 
 impl std::error::Error for CardError {}
 
-/// An SD card in RAM that counts block writes and can be made to fail.
+/// An SD card in RAM that counts block reads and writes and can be made to fail.
 struct RamCard {
     image: RefCell<Vec<u8>>,
+    reads: Cell<u32>,
     writes: Cell<u32>,
     fail_writes: Cell<bool>,
 }
@@ -42,6 +43,7 @@ impl BlockDevice for RamCard {
         for (i, block) in blocks.iter_mut().enumerate() {
             let at = (start.0 as usize + i) * Block::LEN;
             block.copy_from_slice(image.get(at..at + Block::LEN).ok_or(CardError)?);
+            self.reads.set(self.reads.get() + 1);
         }
         Ok(())
     }
@@ -97,6 +99,7 @@ fn card(fat32: bool) -> RamCard {
     image[511] = 0xAA;
     RamCard {
         image: RefCell::new(image),
+        reads: Cell::new(0),
         writes: Cell::new(0),
         fail_writes: Cell::new(false),
     }
@@ -219,6 +222,7 @@ fn power_cut_loses_at_most_the_unsynced_tail() {
     let volume = volumes.open_raw_volume(VolumeIdx(0)).unwrap();
     let config = SdLogConfig {
         sync_every_blocks: 4,
+        ..SdLogConfig::default()
     };
     let mut log = SdLog::open_in_root(
         &volumes,
@@ -379,4 +383,94 @@ fn flush_per_record_loses_nothing_and_costs_a_few_writes() {
         );
         drop(log);
     }
+}
+
+/// Block reads and writes of the card so far.
+fn card_io(volumes: &VolumeManager<RamCard, Clock>) -> (u32, u32) {
+    volumes.device(|c| (c.reads.get(), c.writes.get()))
+}
+
+#[test]
+fn at_its_length_limit_the_log_is_full_and_keeps_what_it_took() {
+    let volumes = VolumeManager::new(card(false), Clock);
+    let volume = volumes.open_raw_volume(VolumeIdx(0)).unwrap();
+    let config = SdLogConfig {
+        max_len: 3000,
+        ..SdLogConfig::default()
+    };
+    let mut log =
+        SdLog::open_in_root(&volumes, volume, "MAX.LOG", Mode::ReadWriteCreate, config).unwrap();
+    let refused = block_on(async {
+        for i in 0..1000 {
+            let (meta, fields) = record(i);
+            if let Err(e) = write_frame(&mut log, &PprzLog::TELEMETRY, &meta, &fields).await {
+                return Some(e);
+            }
+        }
+        None
+    });
+    assert!(refused.is_some(), "the limit stops the log");
+    assert_eq!(log.len(), 3000);
+    let stats = log.stats();
+    assert!(stats.full);
+    assert_eq!(stats.bytes_accepted, 3000);
+    // Every later write fails at once, counted, without a card access.
+    let io = card_io(&volumes);
+    for _ in 0..3 {
+        assert!(matches!(
+            block_on(log.write(&[0x99; 30])),
+            Err(embedded_sdmmc::Error::NotEnoughSpace)
+        ));
+    }
+    assert_eq!(card_io(&volumes), io);
+    assert_eq!(log.stats().errors, stats.errors + 3);
+    // What was accepted is stored.
+    log.close().unwrap();
+    assert_eq!(read_back(&snapshot(&volumes), "MAX.LOG").len(), 3000);
+}
+
+#[test]
+fn on_a_full_card_later_writes_fail_without_touching_it() {
+    let card = card(false);
+    {
+        // Fill the card with another file.
+        let mut image = card.image.borrow_mut();
+        let fs = fatfs::FileSystem::new(
+            Cursor::new(&mut image[START * 512..]),
+            fatfs::FsOptions::new(),
+        )
+        .unwrap();
+        let mut fill = fs.root_dir().create_file("FILL.BIN").unwrap();
+        let chunk = [0x11u8; 4096];
+        while std::io::Write::write(&mut fill, &chunk).is_ok_and(|n| n > 0) {}
+    }
+    let volumes = VolumeManager::new(card, Clock);
+    let volume = volumes.open_raw_volume(VolumeIdx(0)).unwrap();
+    let mut log = SdLog::open_in_root(
+        &volumes,
+        volume,
+        "FULL.LOG",
+        Mode::ReadWriteCreate,
+        SdLogConfig::default(),
+    )
+    .unwrap();
+    // A whole block: accepted, then its store finds no free cluster (counted).
+    assert_eq!(block_on(log.write(&[0xAB; 512])).unwrap(), 512);
+    let stats = log.stats();
+    assert!(stats.full);
+    assert_eq!((stats.errors, stats.bytes_stored), (1, 0));
+    let io = card_io(&volumes);
+    for _ in 0..3 {
+        assert!(matches!(
+            block_on(log.write(&[0x99; 30])),
+            Err(embedded_sdmmc::Error::NotEnoughSpace)
+        ));
+    }
+    assert_eq!(card_io(&volumes), io, "no FAT scan per refused write");
+    assert_eq!(log.stats().errors, 4);
+    assert_eq!(
+        log.buffered(),
+        512,
+        "the block that found no room stays counted"
+    );
 }

@@ -837,3 +837,22 @@ fn xbee_plain_uplink_passes_bytes_unchanged() {
     let s = link.stats(Direction::BToA);
     assert_eq!((s.bytes_sent, s.frames_sent, s.discarded_bytes), (13, 0, 0));
 }
+
+#[test]
+fn an_ack_delay_of_forever_at_the_highest_rates_does_not_overflow() {
+    let _t = mock_time();
+    // The ACK wait alone is near 2^128 time units: the modem's schedule saturates.
+    let modem = XBeeModem::new(XBeeVariant::XBee24)
+        .ack_delay(Duration::MAX)
+        .retries(0);
+    let config = SimConfig::new(u32::MAX).serial_rate(u32::MAX).xbee(modem);
+    let link = SimLink::<NoopRawMutex, 1024>::new(config);
+    let (mut a, _b) = link.endpoints();
+    let mut frame = [0u8; 32];
+    let tx16 = [0x01, 0x00, 0x01, 0x00, 0x00, 7, 0, 1, 2];
+    let n = xbee::api_frame(&tx16, &mut frame).unwrap();
+    for _ in 0..2 {
+        run(a.write_all(&frame[..n]), Duration::from_micros(1), 1000).unwrap();
+    }
+    assert_eq!(link.stats(Direction::AToB).frames_sent, 2);
+}

@@ -37,12 +37,16 @@ impl InModem {
         weight: 0,
     };
 
+    // Saturating: an ACK delay of `Duration::MAX` ("never") at high rates is near the
+    // top of `u128`; such a frame then ends at the end of time.
     pub(super) fn period(&self, ack_wait: u128) -> u128 {
-        self.air + if self.acked { ack_wait } else { 0 }
+        self.air
+            .saturating_add(if self.acked { ack_wait } else { 0 })
     }
 
     pub(super) fn end(&self, ack_wait: u128) -> u128 {
-        self.start + u128::from(self.attempts) * self.period(ack_wait)
+        self.start
+            .saturating_add(u128::from(self.attempts).saturating_mul(self.period(ack_wait)))
     }
 
     /// Air time after `now`.
@@ -50,10 +54,10 @@ impl InModem {
         let period = self.period(ack_wait);
         (0..u128::from(self.attempts))
             .map(|i| {
-                let from = self.start + i * period;
-                (from + self.air).saturating_sub(from.max(now))
+                let from = self.start.saturating_add(i.saturating_mul(period));
+                from.saturating_add(self.air).saturating_sub(from.max(now))
             })
-            .sum()
+            .fold(0, u128::saturating_add)
     }
 }
 

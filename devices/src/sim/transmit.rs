@@ -155,7 +155,10 @@ impl<const N: usize> Dir<N> {
         let period = frame.period(t.ack_wait);
         let mut received = false;
         while frame.attempts < max_attempts && !received {
-            let ends = frame.start + u128::from(frame.attempts) * period + frame.air;
+            let ends = frame
+                .start
+                .saturating_add(u128::from(frame.attempts).saturating_mul(period))
+                .saturating_add(frame.air);
             frame.attempts += 1;
             received = self.attempt(air_bytes, t);
             if self.outages.cover(ends, t.scale) {
@@ -166,7 +169,9 @@ impl<const N: usize> Dir<N> {
         let attempts = frame.attempts;
         let end = frame.end(t.ack_wait);
         self.tx_end = end;
-        self.air_total += u128::from(attempts) * frame.air;
+        self.air_total = self
+            .air_total
+            .saturating_add(u128::from(attempts).saturating_mul(frame.air));
         self.frames[(self.frames_head + self.frames_len) % MODEM_FRAMES] = frame;
         self.frames_len += 1;
         let s = &mut self.stats;
