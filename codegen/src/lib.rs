@@ -221,7 +221,9 @@
 //! - inputs beyond the [`limits`]: size, attributes per element, entity declarations
 //!   and expansion, nodes.
 //!
-//! A command-line front end, `pprz-codegen`, is built with the `cli` feature (default).
+//! A command-line front end, `pprz-codegen`, is built with the `cli` feature (default),
+//! which also provides the `cli` module: clap parsing with escaped error messages,
+//! shared by the project's tools.
 
 #![warn(missing_docs)]
 #![deny(unsafe_code)]

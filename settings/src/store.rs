@@ -50,8 +50,8 @@ pub const fn buffer_len(max_settings: usize) -> usize {
 }
 
 /// A cache of sequential-storage for a range of `PAGES` pages: page states, page pointers
-/// and the snapshot's location (32 bytes for 3 pages, about 9 more a page). It saves flash reads; the store
-/// also works without one ([`Cache::new_uncached`]).
+/// and the snapshot's location (32 bytes for 3 pages, about 9 more a page). It saves
+/// flash reads; the store also works without one ([`Cache::new_uncached`]).
 pub type PageCache<const PAGES: usize> = Cache<
     ArrayPageStates<PAGES>,
     ArrayPagePointers<PAGES>,
