@@ -158,6 +158,7 @@ fn relay_figures() -> RelayFigures {
         no_route: r.no_route,
         reverse_path: r.reverse_path,
         own_source: r.own_source,
+        broadcast_source: r.broadcast_source,
         malformed: r.malformed,
     }
 }

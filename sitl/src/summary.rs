@@ -255,6 +255,8 @@ pub struct RelayFigures {
     pub reverse_path: u32,
     /// Refused: they claimed the relay's own id as their source.
     pub own_source: u32,
+    /// Refused: they claimed the broadcast id as their source.
+    pub broadcast_source: u32,
     /// Refused: their fields do not match their message's definition.
     pub malformed: u32,
 }
@@ -741,10 +743,11 @@ impl FleetFigures {
         };
         let _ = writeln!(
             s,
-            "  relay {} refused {} (own source {}, reverse path {}, no route {}, malformed {}); forwarded {}, broadcast {}",
+            "  relay {} refused {} (own source {}, broadcast source {}, reverse path {}, no route {}, malformed {}); forwarded {}, broadcast {}",
             r.ac_id,
             r.refused,
             r.own_source,
+            r.broadcast_source,
             r.reverse_path,
             r.no_route,
             r.malformed,
@@ -753,7 +756,7 @@ impl FleetFigures {
         );
         let _ = writeln!(
             s,
-            "  (submitted, sent, shed: on the aircraft's own radio, its replies included; forwarded,\n   shed by relay: its frames at the relay, towards the ground; received: at the ground;\n   relay refused: frames it would not forward, by rule: own source: claiming its id; reverse\n   path: not from its route back to their source; no route: nowhere to go but back;\n   malformed: fields that do not match their message)"
+            "  (submitted, sent, shed: on the aircraft's own radio, its replies included; forwarded,\n   shed by relay: its frames at the relay, towards the ground; received: at the ground;\n   relay refused: frames it would not forward, by rule: own source: claiming its id; broadcast\n   source: claiming 0xFF; reverse path: not from its route back to their source; no route:\n   nowhere to go but back; malformed: fields that do not match their message)"
         );
     }
 }

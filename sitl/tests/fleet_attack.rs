@@ -27,10 +27,10 @@ const NOWHERE: u8 = 42;
 /// Datagrams of the attack; each carries one frame of every kind below.
 const DATAGRAMS: usize = 750;
 /// Kinds of spoofed frames in each datagram.
-const KINDS: usize = 4;
+const KINDS: usize = 5;
 /// Datagrams sent before the test waits for the relay to have read them (a PING's PONG):
 /// their bytes stay well inside the radio bridge's 4 KiB UDP input, so none is dropped.
-const BATCH: usize = 75;
+const BATCH: usize = 50;
 
 /// A PPRZ v2 frame: source, destination, class (component 0), message id and fields.
 fn frame(source: u8, destination: u8, class: u8, id: u8, fields: &[u8]) -> Vec<u8> {
@@ -53,13 +53,14 @@ fn frame(source: u8, destination: u8, class: u8, id: u8, fields: &[u8]) -> Vec<u
 }
 
 /// One datagram of the attack: a BLOCK claiming the relay's own id as its source, one
-/// for the ground "from aircraft 8" arriving from the ground's side (a forged source: 8
-/// is behind the relay), one for a destination no route leads to, and one for 8 whose
-/// fields are cut short.
+/// claiming the broadcast id, one for the ground "from aircraft 8" arriving from the
+/// ground's side (a forged source: 8 is behind the relay), one for a destination no route
+/// leads to, and one for 8 whose fields are cut short.
 fn spoofed() -> Vec<u8> {
     let block = |src, dst, fields: &[u8]| frame(src, dst, Block::CLASS_ID, Block::ID, fields);
     [
         block(RELAY, SECOND, &[1, SECOND]),
+        block(0xFF, 0xFF, &[1, 0xFF]),
         block(SECOND, GROUND, &[1, GROUND]),
         block(GROUND, NOWHERE, &[1, NOWHERE]),
         block(GROUND, SECOND, &[1]),
@@ -189,7 +190,7 @@ fn number_after(out: &str, line: &str, label: &str) -> u64 {
         .unwrap_or_else(|| panic!("no number after {label:?} on a line {line:?}:\n{out}"))
 }
 
-/// 3000 spoofed frames (750 of each kind) on the ground's uplink of `--fleet 2 --relay`: the
+/// 3750 spoofed frames (750 of each kind) on the ground's uplink of `--fleet 2 --relay`: the
 /// relay refuses every one, and the summary and its JSON say how many for each reason.
 /// The SITL's peak RSS is printed before and after the attack.
 #[test]
@@ -251,7 +252,13 @@ fn spoofed_frames_at_the_relay_are_counted_per_reason() {
         .unwrap_or_else(|| panic!("no relay figures in the summary:\n{json:#}\n{out}"));
     let n = DATAGRAMS as u64;
     assert_eq!(uint(relay, "/ac_id"), u64::from(RELAY));
-    for reason in ["own_source", "reverse_path", "no_route", "malformed"] {
+    for reason in [
+        "own_source",
+        "broadcast_source",
+        "reverse_path",
+        "no_route",
+        "malformed",
+    ] {
         assert_eq!(uint(relay, &format!("/{reason}")), n, "{reason}: {relay:#}");
     }
     assert_eq!(uint(relay, "/refused"), n * KINDS as u64, "{relay:#}");
@@ -272,7 +279,13 @@ fn spoofed_frames_at_the_relay_are_counted_per_reason() {
     // The printed summary says the same.
     let line = format!("relay {RELAY} refused ");
     assert_eq!(number_after(&out, &line, &line), n * KINDS as u64, "{out}");
-    for label in ["own source ", "reverse path ", "no route ", "malformed "] {
+    for label in [
+        "own source ",
+        "broadcast source ",
+        "reverse path ",
+        "no route ",
+        "malformed ",
+    ] {
         assert_eq!(number_after(&out, &line, label), n, "{label}:\n{out}");
     }
     // The attack costs no memory that stays: a bounded growth at most.

@@ -126,16 +126,18 @@ impl HealthConfig {
         }
     }
 
-    /// Lost after `timeout` of silence. If `degraded_after` is not shorter, the link goes
-    /// from Up to Lost directly.
+    /// Lost after `timeout` of silence (at least one tick: with 0 the link would never
+    /// be anything but Lost). If `degraded_after` is not shorter, the link goes from Up
+    /// to Lost directly.
     pub const fn lost_after(mut self, timeout: Duration) -> Self {
-        self.lost_after = timeout;
+        self.lost_after = at_least_a_tick(timeout);
         self
     }
 
-    /// Degraded after `timeout` of silence.
+    /// Degraded after `timeout` of silence (at least one tick: with 0 the link would
+    /// never be Up).
     pub const fn degraded_after(mut self, timeout: Duration) -> Self {
-        self.degraded_after = timeout;
+        self.degraded_after = at_least_a_tick(timeout);
         self
     }
 
@@ -170,6 +172,15 @@ impl HealthConfig {
             Some(s) if s < self.lost_after => Health::Degraded,
             _ => Health::Lost,
         }
+    }
+}
+
+/// `timeout`, or one tick if it is zero.
+const fn at_least_a_tick(timeout: Duration) -> Duration {
+    if timeout.as_ticks() == 0 {
+        Duration::from_ticks(1)
+    } else {
+        timeout
     }
 }
 
@@ -242,9 +253,13 @@ impl Kept {
 
     fn hear(&mut self, config: &HealthConfig, now: Instant, rssi: Option<u8>) {
         let lost = self.state(config, now) == Health::Lost;
-        let in_run = self
-            .last
-            .is_some_and(|l| now.saturating_duration_since(l) <= config.recover_gap);
+        // A silence long enough to lose the link ends the run, even within the recovery
+        // gap: frames from before the loss do not count towards recovering from it.
+        let timed_out = lost && !self.recovering;
+        let in_run = !timed_out
+            && self
+                .last
+                .is_some_and(|l| now.saturating_duration_since(l) <= config.recover_gap);
         self.streak = if in_run {
             self.streak.saturating_add(1)
         } else {

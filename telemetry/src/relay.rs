@@ -55,8 +55,12 @@
 //!    on the loop would need its route to the source to point backwards along the loop:
 //!    the routes to that source would themselves be a loop. With routes that reach
 //!    their destinations, every frame is delivered at most once and stops.
-//! 3. **Not from us**: a frame claiming our own id as its source is either ours come
-//!    back or forged, and is dropped ([`RelayStats::own_source`]).
+//! 3. **Not from us, not from everyone**: a frame claiming our own id as its source is
+//!    either ours come back or forged, and is dropped ([`RelayStats::own_source`]). So is
+//!    a frame claiming the broadcast id 0xFF as its source: no aircraft sends as 0xFF,
+//!    and the route back to 0xFF is the broadcast route, so rule 2 would let such a frame
+//!    in from every device and it would circulate on any loop of links
+//!    ([`RelayStats::broadcast_source`]; it is not delivered to us either).
 //!
 //! Routes must therefore be symmetric: the device that leads to an aircraft is the
 //! device its frames come from. A frame that breaks a rule is counted, never forwarded.
@@ -177,6 +181,10 @@ impl<'d, M: RawMutex, I: Inbox<'d> + ?Sized> Inbox<'d> for Relay<'_, M, I> {
             self.count(|s| s.own_source = s.own_source.wrapping_add(1));
             return;
         }
+        if frame.source() == BROADCAST_ID {
+            self.count(|s| s.broadcast_source = s.broadcast_source.wrapping_add(1));
+            return;
+        }
         if destination == ac_id {
             return self.inner.deliver(rx);
         }
@@ -211,6 +219,8 @@ pub struct RelayStats {
     pub reverse_path: u32,
     /// Frames claiming our own id as their source.
     pub own_source: u32,
+    /// Frames claiming the broadcast id as their source (not delivered to us either).
+    pub broadcast_source: u32,
     /// Frames whose fields do not match their message's definition.
     pub malformed: u32,
 }
@@ -223,6 +233,7 @@ impl RelayStats {
         no_route: 0,
         reverse_path: 0,
         own_source: 0,
+        broadcast_source: 0,
         malformed: 0,
     };
 
@@ -231,6 +242,7 @@ impl RelayStats {
         self.no_route
             .wrapping_add(self.reverse_path)
             .wrapping_add(self.own_source)
+            .wrapping_add(self.broadcast_source)
             .wrapping_add(self.malformed)
     }
 }

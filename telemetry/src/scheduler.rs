@@ -43,7 +43,9 @@
 //! `&(dyn Fn() + Sync)`, typically calling `downlink.send(&msg)` (which never blocks).
 //! On a tick, they are called in process order, then in the order of the mode's messages,
 //! then in registration order; no lock is held while they run, so they may call any
-//! method of the scheduler.
+//! method of the scheduler but [`tick`](Scheduler::tick) and [`run`](Scheduler::run)
+//! (a tick inside a tick would run the next ticks early, and recurse without end for a
+//! message due every tick).
 //!
 //! # Example
 //! ```

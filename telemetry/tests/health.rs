@@ -278,6 +278,53 @@ fn lost_link_recovers_after_the_configured_run_of_frames() {
     assert_eq!(HEALTH.state_at(at(10_000)), Health::Up);
 }
 
+/// A silence that loses the link ends a run even when it is within the recovery gap:
+/// the frames before the loss do not count towards recovering from it.
+#[test]
+fn frames_before_a_loss_do_not_count_towards_recovering_from_it() {
+    let _clock = mock_time();
+    static HEALTH: LinkHealth<M> = LinkHealth::new(
+        HealthConfig::new()
+            .degraded_after(Duration::from_millis(200))
+            .lost_after(Duration::from_millis(500))
+            .recover_frames(3, Duration::from_secs(1)),
+    );
+    let t0 = Instant::now();
+    let at = |ms: u64| t0 + Duration::from_millis(ms);
+    for ms in [0, 100, 200] {
+        HEALTH.heard(0, at(ms));
+    }
+    assert_eq!(HEALTH.state_at(at(200)), Health::Up);
+    assert_eq!(HEALTH.state_at(at(900)), Health::Lost);
+    // 700 ms after the last frame: within the recovery gap, but after a loss.
+    HEALTH.heard(0, at(900));
+    assert_eq!(HEALTH.state_at(at(900)), Health::Lost);
+    HEALTH.heard(0, at(1_000));
+    assert_eq!(HEALTH.state_at(at(1_000)), Health::Lost);
+    HEALTH.heard(0, at(1_100));
+    assert_eq!(HEALTH.state_at(at(1_100)), Health::Up);
+    assert_eq!(HEALTH.device_at(0, at(1_100)).unwrap().losses, 1);
+}
+
+/// Zero timeouts are one tick: a frame makes the link Up for the tick it is heard in
+/// (with 0 the link was never Up, and a failsafe waiting for Up never armed).
+#[test]
+fn zero_timeouts_are_one_tick() {
+    let _clock = mock_time();
+    static HEALTH: LinkHealth<M> = LinkHealth::new(
+        HealthConfig::new()
+            .degraded_after(Duration::from_ticks(0))
+            .lost_after(Duration::from_ticks(0)),
+    );
+    assert_eq!(HEALTH.config().lost_timeout(), Duration::from_ticks(1));
+    assert_eq!(HEALTH.config().degraded_timeout(), Duration::from_ticks(1));
+    let t0 = Instant::now();
+    HEALTH.heard(0, t0);
+    assert_eq!(HEALTH.state_at(t0), Health::Up);
+    assert_eq!(HEALTH.device_at(0, t0).unwrap().losses, 0);
+    assert_eq!(HEALTH.state_at(t0 + Duration::from_ticks(1)), Health::Lost);
+}
+
 /// The one-link facade: its reader drives `Link::health`; frames for another aircraft do
 /// not.
 #[test]

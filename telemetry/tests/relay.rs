@@ -699,6 +699,45 @@ fn broadcast_is_delivered_once_and_a_loop_does_not_circulate() {
 }
 
 #[test]
+fn a_broadcast_source_is_refused_so_nothing_circulates_on_a_ring() {
+    // Three aircraft in a triangle of links, each with its two neighbours routed
+    // directly: 7 (0: to 8, 1: to 9), 8 (0: to 7, 1: to 9), 9 (0: to 7, 1: to 8).
+    static TABLE_7: [(u8, Targets); 2] = [(8, Targets::only(0)), (9, Targets::only(1))];
+    static TABLE_8: [(u8, Targets); 2] = [(7, Targets::only(0)), (9, Targets::only(1))];
+    static TABLE_9: [(u8, Targets); 2] = [(7, Targets::only(0)), (8, Targets::only(1))];
+    let a7 = aircraft(7, &TABLE_7, Targets::only(0), Targets::ALL, 8192);
+    let a8 = aircraft(8, &TABLE_8, Targets::only(0), Targets::ALL, 8192);
+    let a9 = aircraft(9, &TABLE_9, Targets::only(0), Targets::ALL, 8192);
+    let mut fleet = Pumped::new(&[&a7, &a8, &a9]);
+    let ring: [Radio; 3] = [((0, 0), (1, 0)), ((1, 1), (2, 1)), ((2, 0), (0, 1))];
+
+    // A broadcast PING from 8, arriving at 7 from 8: delivered to 7, and the copy 7
+    // forwards to 9 stops there at the reverse-path rule (9 hears 8 directly).
+    fleet.receive(0, 0, &v2_frame(&Ping, 8, BROADCAST_ID));
+    let crossed = fleet.pump(&ring, 20);
+    assert_eq!(count(&a7, 8, (Ping::CLASS_ID, Ping::ID)), 1);
+    assert_eq!(count(&a9, 8, (Ping::CLASS_ID, Ping::ID)), 0);
+    assert_eq!(a9.relay.stats().reverse_path, 1);
+    assert_eq!(crossed[2], 1, "7 -> 9 once");
+
+    // The same frame claiming the broadcast id as its source: every route leads back to
+    // 0xFF, so without the rule it would go round forever (and be answered on each lap).
+    for ac in [&a7, &a8, &a9] {
+        ac.delivered.lock().unwrap().clear();
+    }
+    fleet.receive(0, 0, &v2_frame(&Ping, BROADCAST_ID, BROADCAST_ID));
+    fleet.receive(0, 0, &v2_frame(&Ping, BROADCAST_ID, 7));
+    let crossed = fleet.pump(&ring, 20);
+    assert_eq!(crossed, [0, 0, 0], "nothing forwarded, nothing answered");
+    assert_eq!(a7.relay.stats().broadcast_source, 2);
+    assert_eq!(a7.relay.stats().refused(), 2);
+    assert!(
+        a7.delivered.lock().unwrap().is_empty(),
+        "not delivered to 7"
+    );
+}
+
+#[test]
 fn a_ring_of_misconfigured_defaults_stops_every_frame() {
     // Three relays in a ring, each with the next as its default route for everything
     // (the ground included): 7 -> 8 -> 9 -> 7. Device 0 of each leads to the next, device
@@ -807,7 +846,7 @@ fn random_frames_never_panic_and_are_all_accounted_for() {
     let a8 = leaf_8();
     let mut fleet = Pumped::new(&[&a7, &a8]);
     let mut rng = pprz_test_support::rng::Rng::new(15);
-    let mut for_others = 0u32; // for others, or from "us"
+    let mut for_others = 0u32; // for others, or from "us" or from "everyone"
     for _ in 0..5_000 {
         let source = [0, 7, 8, 9, 255][rng.below(5)];
         let dest = [0, 7, 8, 9, 255][rng.below(5)];
@@ -821,7 +860,7 @@ fn random_frames_never_panic_and_are_all_accounted_for() {
         ][rng.below(5)];
         let len = rng.below(40);
         let fields: Vec<u8> = (0..len).map(|_| rng.below(256) as u8).collect();
-        if dest != 7 || source == 7 {
+        if dest != 7 || source == 7 || source == 255 {
             for_others += 1;
         }
         fleet.receive(0, rng.below(2), &raw_v2(source, dest, class, id, &fields));
@@ -833,11 +872,12 @@ fn random_frames_never_panic_and_are_all_accounted_for() {
     let s = a7.datalink.stats();
     let r = a7.relay.stats();
     println!("{s:?}");
-    // Every frame for another aircraft or broadcast (or claiming to be ours) was
+    // Every frame for another aircraft or broadcast (or claiming to be ours or 0xFF's) was
     // forwarded or refused, by reason, exactly once (a broadcast always has another
     // device to go to here).
     assert_eq!(r.forwarded + r.refused(), for_others, "{r:?}");
     assert!(r.forwarded > 0 && r.no_route > 0 && r.reverse_path > 0 && r.malformed > 0);
+    assert!(r.own_source > 0 && r.broadcast_source > 0);
     for d in 0..D {
         assert!(a7.downlink.stats(d).unwrap().is_balanced());
     }

@@ -689,10 +689,10 @@ const SETTINGS: usize = settings::COUNT;
 /// `DATALINK_LOST_TIME`. It stays in HOME until the ground sets the `ap_mode` setting
 /// back to NAV (13).
 async fn failsafe(health: &LinkHealth<M>, vehicle: &Mutex<M, RefCell<Vehicle>>) -> Infallible {
-    // Not before the ground was heard once: a vehicle waiting for its ground on the
-    // field does not take off for home.
-    health.wait_for(Health::Up).await;
-    let mut state = Health::Up;
+    // Not before the ground was heard (the link out of Lost: Up, or Degraded at once if
+    // its timeout is that short): a vehicle waiting for its ground on the field does not
+    // take off for home.
+    let mut state = health.changed(Health::Lost).await;
     loop {
         state = health.changed(state).await;
         if state == Health::Lost {
