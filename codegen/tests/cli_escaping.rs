@@ -6,19 +6,9 @@ mod common;
 
 use common::run;
 
-type Temp = pprz_test_support::temp::TempFile;
+use pprz_test_support::shown::assert_escaped;
 
-/// Checks `out` has no control character but its line breaks, and quotes each of
-/// `escaped`.
-fn assert_escaped(out: &str, escaped: &[&str]) {
-    assert!(
-        !out.chars().any(|c| c.is_control() && c != '\n'),
-        "raw control character in {out:?}"
-    );
-    for e in escaped {
-        assert!(out.contains(e), "{e} not in {out:?}");
-    }
-}
+type Temp = pprz_test_support::temp::TempFile;
 
 #[test]
 fn names_and_types_of_a_messages_xml_are_escaped() {

@@ -249,7 +249,10 @@ where
 
     /// The counters.
     pub fn stats(&self) -> SdLogStats {
-        self.stats
+        SdLogStats {
+            full: self.disk_full || self.len() >= self.config.max_len,
+            ..self.stats
+        }
     }
 
     /// The configuration.
@@ -322,7 +325,6 @@ where
         let written = self.volumes.write(file, &self.buf[..self.len]);
         if matches!(written, Err(Error::NotEnoughSpace | Error::DiskFull)) {
             self.disk_full = true;
-            self.stats.full = true;
         }
         self.count_error(written)?;
         let n = crate::len_u32(self.len);
@@ -409,7 +411,6 @@ where
         }
         let left = self.config.max_len.saturating_sub(self.len());
         if left == 0 {
-            self.stats.full = true;
             return self.refuse_full();
         }
         let n = buf.len().min(self.room()).min(left as usize);

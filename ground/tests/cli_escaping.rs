@@ -56,13 +56,7 @@ const BAD_SETTINGS_SHOWN: &str = "attribute `min` = `0\\u{9b}[2J` is not a finit
 /// Checks `out` has no control character but its line breaks, quotes each of
 /// `escaped`, and escapes nothing twice.
 fn assert_escaped(out: &str, escaped: &[&str]) {
-    assert!(
-        !out.chars().any(|c| c.is_control() && c != '\n'),
-        "raw control character in {out:?}"
-    );
-    for e in escaped {
-        assert!(out.contains(e), "{e} not in {out:?}");
-    }
+    pprz_test_support::shown::assert_escaped(out, escaped);
     assert!(!out.contains("\\\\"), "escaped twice: {out:?}");
 }
 

@@ -387,11 +387,6 @@ impl<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize> PersistentStore<S
             + (KEY_LEN + len).next_multiple_of(word::<S>())
     }
 
-    /// Pages of the range.
-    fn pages(&self) -> usize {
-        (self.range.end - self.range.start) as usize / S::ERASE_SIZE
-    }
-
     /// The stored snapshot, if any.
     ///
     /// # Errors
@@ -464,7 +459,7 @@ impl<S: NorFlash, C: CacheImpl<SnapshotKey>, const BUF: usize> PersistentStore<S
         // new one goes to when it changes pages: two must fit in one, or every store
         // after the first fails (each failure erasing pages).
         let usable = S::ERASE_SIZE.saturating_sub(2 * word::<S>());
-        if self.pages() == 2 && 2 * Self::record_flash_bytes(record_bytes) > usable {
+        if pages::<S>(&self.range) == 2 && 2 * Self::record_flash_bytes(record_bytes) > usable {
             return Err(StoreError::TooBig);
         }
         let item = TableRecord {
@@ -598,7 +593,7 @@ impl<S: NorFlash, const PAGES: usize, const BUF: usize> PersistentStore<S, PageC
     /// `PAGES` pages.
     pub fn with_page_cache(flash: S, range: Range<u32>) -> Result<Self, ConfigError> {
         map_config::<S>(&range)?;
-        let pages = (range.end - range.start) as usize / S::ERASE_SIZE;
+        let pages = pages::<S>(&range);
         if pages != PAGES {
             return Err(ConfigError::PageCount {
                 pages,
@@ -618,6 +613,11 @@ fn map_config<S: NorFlash>(range: &Range<u32>) -> Result<(), ConfigError> {
     MapConfig::<S>::try_new(range.clone())
         .map(|_| ())
         .map_err(ConfigError::Map)
+}
+
+/// Pages of `range` (checked by [`map_config`]: not reversed).
+fn pages<S: NorFlash>(range: &Range<u32>) -> usize {
+    (range.end - range.start) as usize / S::ERASE_SIZE
 }
 
 /// The flash word sequential-storage writes in: the larger of the read and write sizes
